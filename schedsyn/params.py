@@ -1,0 +1,124 @@
+"""Model parameters and chamber/device limits: frozen, validated, units in every name.
+
+The planning model (paper, eq. 1)::
+
+    tau * dT/dt + T = Tk(t) + dT0        internal temperature T lags the chamber Tk
+    dTk/dt = U(t)                        U piecewise constant, U_min <= U <= U_max
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+
+from .errors import ParameterError
+
+
+def _finite(name: str, value: float) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(v):
+        raise ParameterError(f"{name} must be finite, got {value!r}")
+    return v
+
+
+def _check_range(name: str, value: float, lo: float | None, hi: float | None, unit: str) -> None:
+    v = _finite(name, value)
+    if (lo is not None and v <= lo) or (hi is not None and v > hi):
+        lo_s = f"> {lo}" if lo is not None else ""
+        hi_s = f"<= {hi}" if hi is not None else ""
+        rng = " and ".join(s for s in (lo_s, hi_s) if s)
+        raise ParameterError(f"{name} must be {rng} {unit}, got {value!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class ThermalParams:
+    """First-order lag of the device: ``tau_s * dT/dt + T = Tk + dt0_c``.
+
+    Parameters
+    ----------
+    tau_s : float
+        Time constant, s, in (0, 1e6]. Default 2400 s: the paper's device settles in about
+        2 h (~3 tau) after a step.
+    dt0_c : float
+        Self-heating offset of the running device, degC, in [-50, 50]. The paper gives no
+        value; 3.0 degC is schedsyn's assumption.
+    """
+
+    tau_s: float = 2400.0
+    dt0_c: float = 3.0
+
+    def __post_init__(self) -> None:
+        _check_range("tau_s", self.tau_s, 0.0, 1e6, "s")
+        v = _finite("dt0_c", self.dt0_c)
+        if abs(v) > 50:
+            raise ParameterError(f"dt0_c must be within -50 .. 50 degC, got {self.dt0_c!r}")
+
+    @property
+    def tau_min(self) -> float:
+        """Time constant in minutes (the programme's time unit)."""
+        return self.tau_s / 60.0
+
+    def to_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+
+@dataclass(frozen=True, slots=True)
+class Limits:
+    """Chamber, device and experiment limits.
+
+    Defaults: ESPEC SET-Z-032U rates -1 .. +3 degC/min (paper); chamber air -70 .. +80 degC
+    (a cascade-refrigerated chamber, assumption); device internal -52 .. +62 degC (the
+    approximation regions of the paper plus 2 degC); at most 540 min (9 h); chamber and
+    device start at 20 degC and the chamber ends at 20 +- 0.5 degC.
+    """
+
+    rate_min_c_per_min: float = -1.0
+    rate_max_c_per_min: float = 3.0
+    chamber_min_c: float = -70.0
+    chamber_max_c: float = 80.0
+    device_min_c: float = -52.0
+    device_max_c: float = 62.0
+    duration_max_min: float = 540.0
+    start_c: float = 20.0
+    end_c: float = 20.0
+    end_tol_c: float = 0.5
+    t_init_c: float = 20.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            _finite(f.name, getattr(self, f.name))
+        if not self.rate_min_c_per_min < self.rate_max_c_per_min:
+            raise ParameterError(
+                "rate_min_c_per_min must be < rate_max_c_per_min, got "
+                f"{self.rate_min_c_per_min} .. {self.rate_max_c_per_min} degC/min"
+            )
+        if not (self.rate_min_c_per_min <= 0.0 <= self.rate_max_c_per_min):
+            raise ParameterError(
+                "the rate limits must include 0 degC/min (a hold), got "
+                f"{self.rate_min_c_per_min} .. {self.rate_max_c_per_min} degC/min"
+            )
+        if not self.chamber_min_c < self.chamber_max_c:
+            raise ParameterError(
+                f"chamber_min_c must be < chamber_max_c, got {self.chamber_min_c} .. "
+                f"{self.chamber_max_c} degC"
+            )
+        if not self.device_min_c < self.device_max_c:
+            raise ParameterError(
+                f"device_min_c must be < device_max_c, got {self.device_min_c} .. "
+                f"{self.device_max_c} degC"
+            )
+        _check_range("duration_max_min", self.duration_max_min, 0.0, 10080.0, "min")
+        _check_range("end_tol_c", self.end_tol_c, 0.0, 50.0, "degC")
+        for name in ("start_c", "end_c"):
+            v = getattr(self, name)
+            if not self.chamber_min_c <= v <= self.chamber_max_c:
+                raise ParameterError(
+                    f"{name} = {v} degC lies outside the chamber limits "
+                    f"{self.chamber_min_c} .. {self.chamber_max_c} degC"
+                )
+
+    def to_dict(self) -> dict[str, float]:
+        return asdict(self)

@@ -1,0 +1,101 @@
+"""Step tables: export, read back, validation errors that name the row."""
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from schedsyn import Limits, Programme, StepTableError, read_steps, simulate
+from schedsyn.programme import STEP_COLUMNS
+
+
+def test_round_trip_is_identity(tmp_path):
+    prog = Programme([30, 15, 60], [-1.0, 0.0, 0.5])
+    path = prog.to_csv(tmp_path / "s.csv")
+    frame = pd.read_csv(path)
+    assert tuple(frame.columns[:6]) == STEP_COLUMNS
+    assert frame["segment_type"].tolist() == ["RAMP", "HOLD", "RAMP"]
+    assert frame["duration_hhmm"].tolist() == ["00:30", "00:15", "01:00"]
+    back = read_steps(path)
+    np.testing.assert_allclose(back.durations_min, prog.durations_min)
+    np.testing.assert_allclose(back.rates_c_per_min, prog.rates_c_per_min)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.integers(1, 120), st.floats(-1.0, 3.0)), min_size=1, max_size=12))
+def test_rounded_programme_is_typable_and_close(segs):
+    prog = Programme([d for d, _ in segs], [r for _, r in segs])
+    lim = Limits(chamber_min_c=-1000, chamber_max_c=1000, duration_max_min=5000)
+    r = prog.rounded(lim)
+    assert np.allclose(r.durations_min, np.round(r.durations_min))
+    tk = r.boundary_temps_c
+    assert np.allclose(tk * 10, np.round(tk * 10), atol=1e-6)
+    assert np.all(r.rates_c_per_min <= 3.0 + 1e-9) and np.all(r.rates_c_per_min >= -1.0 - 1e-9)
+    assert np.all(np.abs(np.diff(r.rates_c_per_min)) > 1e-9)  # merged
+    assert r.total_min == pytest.approx(prog.total_min)
+    # the chamber path moves by at most a rounding step
+    t = np.linspace(0, prog.total_min, 200)
+    assert np.max(np.abs(r.chamber_at(t) - prog.chamber_at(t))) < 0.1 * len(segs) + 3.0 * 1.0
+
+
+def test_merge_keeps_path():
+    prog = Programme([10, 5, 5, 10], [1.0, 1.0, 1.0, 0.0])
+    m = prog.merged()
+    assert m.n_segments == 2
+    t = np.linspace(0, 30, 61)
+    np.testing.assert_allclose(simulate(m, times_min=t).t_c, simulate(prog, times_min=t).t_c,
+                               atol=1e-10)
+
+
+def _table(tmp_path, edit):
+    prog = Programme([30, 30, 50], [-1.0, 0.0, 0.6])
+    frame = prog.to_frame()
+    edit(frame)
+    path = tmp_path / "bad.csv"
+    frame.to_csv(path, index=False)
+    return path
+
+
+@pytest.mark.parametrize(
+    "edit, match",
+    [
+        (lambda f: f.__delitem__("tk_end_c"), "missing column.*tk_end_c"),
+        (lambda f: f.__setitem__("tk_start_c", [20, -5, -10]), "step 2.*continue"),
+        (lambda f: f.__setitem__("rate_c_per_min", [-1, 0, 0.9]), "step 3.*rate_c_per_min"),
+        (lambda f: f.__setitem__("duration_min", [30, 0, 50]), "step 2.*duration_min"),
+        (lambda f: f.__setitem__("tk_start_c", [25, -10, -10]), "starts at 25"),
+        (lambda f: f.__setitem__("step", [1, 3, 2]), "row 2.*step"),
+        (lambda f: f.__setitem__("duration_min", ["30", "abc", "50"]), "row 2.*duration_min"),
+    ],
+)
+def test_bad_tables_name_row_and_problem(tmp_path, edit, match):
+    with pytest.raises(StepTableError, match=match):
+        read_steps(_table(tmp_path, edit))
+
+
+def test_rate_over_limit_is_refused(tmp_path):
+    path = Programme([10], [4.0]).to_csv(tmp_path / "fast.csv")
+    with pytest.raises(StepTableError, match="step 1.*outside the chamber limits"):
+        read_steps(path)
+
+
+def test_too_long_is_refused(tmp_path):
+    path = Programme([300, 300], [0.0, 0.0]).to_csv(tmp_path / "long.csv")
+    with pytest.raises(StepTableError, match="600 min.*540"):
+        read_steps(path)
+
+
+def test_not_a_csv(tmp_path):
+    p = tmp_path / "x.csv"
+    p.write_bytes(b"\xff\xfe\x00garbage")
+    with pytest.raises(StepTableError):
+        read_steps(p)
+    with pytest.raises(StepTableError, match="does not exist"):
+        read_steps(tmp_path / "missing.csv")
+
+
+def test_violations_report_end_temperature_and_device():
+    prog = Programme([10.0], [1.0])
+    v = prog.violations(Limits())
+    assert any("ends at 30.00" in s for s in v)
