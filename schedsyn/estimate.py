@@ -1,0 +1,601 @@
+"""Gradient estimation from a measured log: Kalman filter + Rauch-Tung-Striebel smoother.
+
+Two state-space models share one filter. Time runs in minutes, temperatures in degC, the
+gradient ``g = dT/dt`` in degC/min; ``y_k`` is the internal sensor at time ``t_k``.
+
+**Kinematic** (no model, any log): state ``x = (T, g)``, the gradient a random walk
+(white-noise acceleration, an integrated random walk)::
+
+    dT/dt = g,   dg/dt = w(t),   E[w(t) w(s)] = q delta(t - s)      q: (degC/min^2)^2/min
+    y_k = T(t_k) + v_k,          var v_k = r                        r: degC^2
+
+exact over a step ``h = t_{k+1} - t_k`` of any length (irregular sampling, gaps)::
+
+    F = [[1, h], [0, 1]],   Q = q [[h^3/3, h^2/2], [h^2/2, h]]
+
+**Model-based** (the chamber temperature ``Tk`` logged): the thermal model of
+:mod:`schedsyn.model` drives ``T``, and a random-walk correction ``d`` (degC/min) absorbs
+what the model misses::
+
+    dT/dt = (Tk(t) + dT0 - T)/tau + d,   dd/dt = w(t),   g = (Tk + dT0 - T)/tau + d
+
+with ``Tk`` linear between samples; exactly, with ``e = exp(-h/tau)``::
+
+    T' = e T + tau (1 - e) d + u,   u = (1 - e)(Tk_k + dT0) + s R(h)   (s: Tk slope)
+    Q11 = q tau^3 (x - 2(1 - e) + (1 - e^2)/2),  Q12 = q tau R(h),  Q22 = q h,  x = h/tau
+
+where ``R(h) = h - tau (1 - e)`` is the model's unit-ramp response
+(:meth:`schedsyn.model.FirstOrderLag.ramp`; ``u`` comes from the same model object).
+
+Both have ``F = [[a, b], [0, 1]]`` and measure the first state, so one scalar filter
+serves both. The noise levels ``(q, r)`` maximise the likelihood of the innovations
+(``r`` is at least the quantisation floor ``step^2/12``); a user may fix either. A NaN
+reading only skips the measurement update: the row still gets an estimate.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from scipy.optimize import minimize
+
+from .errors import LogFormatError, ParameterError
+from .logs import MeasuredLog
+from .model import FirstOrderLag
+from .params import ThermalParams
+
+#: Initial (diffuse) standard deviations of the state: T (degC) and g or d (degC/min).
+PRIOR_T_STD_C = 10.0
+PRIOR_G_STD_C_PER_MIN = 3.0
+#: The first finite measurements mostly fix the diffuse prior; they are left out of the
+#: likelihood (their terms would depend on the prior, not on q and r).
+N_DIFFUSE = 2
+#: The noise search runs on at most this many rows (an evenly strided copy of the log).
+MAX_ML_ROWS = 1500
+#: Bounds of the search, in natural log of q ((degC/min^2)^2/min) and of r (degC^2).
+LOG_Q_BOUNDS = (math.log(1e-14), math.log(1e4))
+LOG_R_BOUNDS = (math.log(1e-12), math.log(1e2))
+
+
+# -- discretisation (pure, vectorised) --------------------------------------------------
+def kinematic_transition(h_min: np.ndarray, q: float):
+    """``(a, b, q11, q12, q22)`` of the integrated random walk over steps ``h_min``.
+
+    ``F = [[1, h], [0, 1]]``, ``Q = q [[h^3/3, h^2/2], [h^2/2, h]]``.
+    """
+    h = np.asarray(h_min, dtype=float)
+    return np.ones_like(h), h, q * h**3 / 3.0, q * h**2 / 2.0, q * h
+
+
+def lag_transition(h_min: np.ndarray, tau_min: float, q: float):
+    """``(a, b, q11, q12, q22)`` of the first-order lag with a random-walk correction.
+
+    ``a = e = exp(-h/tau)``, ``b = tau (1 - e)``; ``Q`` as in the module docstring, with a
+    series for ``Q11`` at small ``x = h/tau`` (``x^3/3 - x^4/4 + 7 x^5/60``) where the
+    closed form cancels.
+    """
+    h = np.asarray(h_min, dtype=float)
+    x = h / tau_min
+    one_minus_e = -np.expm1(-x)
+    closed = x - 2.0 * one_minus_e - 0.5 * np.expm1(-2.0 * x)
+    series = x**3 / 3.0 - x**4 / 4.0 + 7.0 * x**5 / 60.0
+    q11 = q * tau_min**3 * np.where(x < 1e-2, series, closed)
+    ramp = h - tau_min * one_minus_e  # R(h)
+    return 1.0 - one_minus_e, tau_min * one_minus_e, q11, q * tau_min * ramp, q * h
+
+
+def lag_input(
+    h_min: np.ndarray, tk_start_c: np.ndarray, tk_end_c: np.ndarray, model: FirstOrderLag
+) -> np.ndarray:
+    """Chamber-driven part ``u`` of ``T'`` over each step (``Tk`` linear within a step).
+
+    ``u = (1 - e)(Tk_k + dT0) + s R(h)``, ``s = (Tk_{k+1} - Tk_k)/h``: the model's free
+    response from ``T = 0`` plus its ramp response (one copy of the model maths).
+    """
+    h = np.asarray(h_min, dtype=float)
+    free_t, _ = model.free(h, np.asarray(tk_start_c, dtype=float), 0.0)
+    slope = (np.asarray(tk_end_c, dtype=float) - tk_start_c) / h
+    return free_t + model.gain * slope * model.ramp(h)
+
+
+# -- the filter and the smoother (scalar 2x2 maths; fast in plain Python) ----------------
+def kalman_filter(y, a, b, u, q11, q12, q22, r, x0, p0, *, store=True):
+    """Kalman filter for ``x' = [[a, b], [0, 1]] x + [u, 0] + w``, ``y = x[0] + v``.
+
+    Row ``k`` of ``a, b, u, q..`` is the transition from row ``k-1`` to ``k`` (row 0 is
+    unused). ``x0 = (T, d)`` and ``p0 = (p11, p12, p22)`` are the prior at row 0. A NaN
+    ``y`` skips the update. Returns ``(filtered, predicted, innovations, innovation
+    variances, -2 log-likelihood)``; ``filtered``/``predicted`` are 5-tuples of lists
+    ``(x1, x2, p11, p12, p22)`` (empty when ``store`` is False).
+
+    Equations (``P`` symmetric)::
+
+        predict  x1- = a x1 + b x2 + u          P11- = a^2 P11 + 2ab P12 + b^2 P22 + Q11
+                 x2- = x2                       P12- = a P12 + b P22 + Q12
+                                                P22- = P22 + Q22
+        update   e = y - x1-,  S = P11- + r,  K = (P11-, P12-)/S
+                 x+ = x- + K e,  P+ = P- - K K^T S
+        -2 log L = sum over finite y (after the first N_DIFFUSE) of log(2 pi S) + e^2/S
+    """
+    n = len(y)
+    x1, x2 = float(x0[0]), float(x0[1])
+    p11, p12, p22 = (float(v) for v in p0)
+    fx1, fx2, fp11, fp12, fp22 = [], [], [], [], []
+    px1, px2, pp11, pp12, pp22 = [], [], [], [], []
+    innov = [math.nan] * n
+    svar = [math.nan] * n
+    m2ll = 0.0
+    seen = 0
+    log2pi = math.log(2.0 * math.pi)
+    isnan = math.isnan
+    log = math.log
+    for k in range(n):
+        if k:
+            ak, bk = a[k], b[k]
+            x1 = ak * x1 + bk * x2 + u[k]
+            t = ak * p12 + bk * p22
+            p11 = ak * (ak * p11 + bk * p12) + bk * t + q11[k]
+            p12 = t + q12[k]
+            p22 = p22 + q22[k]
+        if store:
+            px1.append(x1)
+            px2.append(x2)
+            pp11.append(p11)
+            pp12.append(p12)
+            pp22.append(p22)
+        yk = y[k]
+        if not isnan(yk):
+            s = p11 + r
+            e = yk - x1
+            k1 = p11 / s
+            k2 = p12 / s
+            x1 += k1 * e
+            x2 += k2 * e
+            p22 -= k2 * p12
+            p12 -= k1 * p12
+            p11 -= k1 * p11
+            innov[k] = e
+            svar[k] = s
+            if seen >= N_DIFFUSE:
+                m2ll += log2pi + log(s) + e * e / s
+            seen += 1
+        if store:
+            fx1.append(x1)
+            fx2.append(x2)
+            fp11.append(p11)
+            fp12.append(p12)
+            fp22.append(p22)
+    return (fx1, fx2, fp11, fp12, fp22), (px1, px2, pp11, pp12, pp22), innov, svar, m2ll
+
+
+def rts_smoother(filtered, predicted, a, b):
+    """Rauch-Tung-Striebel smoother over the output of :func:`kalman_filter`.
+
+    Backwards from the last row, with ``F = [[a, b], [0, 1]]`` of the step ``k -> k+1``::
+
+        C_k = P_k|k F^T (P_k+1|k)^-1
+        x_k|N = x_k|k + C_k (x_k+1|N - x_k+1|k)
+        P_k|N = P_k|k + C_k (P_k+1|N - P_k+1|k) C_k^T
+
+    Returns arrays ``(x1, x2, p11, p12, p22)`` of the smoothed states and covariances.
+    """
+    fx1, fx2, fp11, fp12, fp22 = filtered
+    px1, px2, pp11, pp12, pp22 = predicted
+    n = len(fx1)
+    sx1, sx2 = [0.0] * n, [0.0] * n
+    s11, s12, s22 = [0.0] * n, [0.0] * n, [0.0] * n
+    x1, x2 = fx1[-1], fx2[-1]
+    p11, p12, p22 = fp11[-1], fp12[-1], fp22[-1]
+    sx1[-1], sx2[-1], s11[-1], s12[-1], s22[-1] = x1, x2, p11, p12, p22
+    for k in range(n - 2, -1, -1):
+        ak, bk = a[k + 1], b[k + 1]
+        f11, f12, f22 = fp11[k], fp12[k], fp22[k]
+        # M = P_k|k F^T
+        m11 = f11 * ak + f12 * bk
+        m12 = f12
+        m21 = f12 * ak + f22 * bk
+        m22 = f22
+        # (P_k+1|k)^-1
+        q11_, q12_, q22_ = pp11[k + 1], pp12[k + 1], pp22[k + 1]
+        det = q11_ * q22_ - q12_ * q12_
+        i11, i12, i22 = q22_ / det, -q12_ / det, q11_ / det
+        c11 = m11 * i11 + m12 * i12
+        c12 = m11 * i12 + m12 * i22
+        c21 = m21 * i11 + m22 * i12
+        c22 = m21 * i12 + m22 * i22
+        d1 = x1 - px1[k + 1]
+        d2 = x2 - px2[k + 1]
+        x1 = fx1[k] + c11 * d1 + c12 * d2
+        x2 = fx2[k] + c21 * d1 + c22 * d2
+        e11 = p11 - q11_
+        e12 = p12 - q12_
+        e22 = p22 - q22_
+        # C E C^T
+        t11 = c11 * e11 + c12 * e12
+        t12 = c11 * e12 + c12 * e22
+        t21 = c21 * e11 + c22 * e12
+        t22 = c21 * e12 + c22 * e22
+        p11 = f11 + t11 * c11 + t12 * c12
+        p12 = f12 + t11 * c21 + t12 * c22
+        p22 = f22 + t21 * c21 + t22 * c22
+        sx1[k], sx2[k], s11[k], s12[k], s22[k] = x1, x2, p11, p12, p22
+    return tuple(np.asarray(v) for v in (sx1, sx2, s11, s12, s22))
+
+
+# -- quantisation and noise levels ---------------------------------------------------------
+def quantisation_step(values_c: np.ndarray) -> float:
+    """The sensor's resolution if the readings lie on a grid, else 0.
+
+    The step is the 5th percentile of the spacings of the distinct readings (robust to
+    a stray off-grid value); the readings count as
+    quantised when at least 90 % of those spacings are within 10 % of a whole multiple of
+    it (a real ADC grid, e.g. TCLab's ~0.32 degC, is not perfectly even).
+    """
+    v = np.asarray(values_c, dtype=float)
+    v = np.unique(np.round(v[np.isfinite(v)], 9))
+    if v.size < 3:
+        return 0.0
+    d = np.diff(v)
+    step = float(np.percentile(d, 5))
+    if step <= 0:
+        return 0.0
+    ratio = d / step
+    near = np.abs(ratio - np.round(ratio)) <= 0.1
+    return step if near.mean() >= 0.9 else 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class NoiseLevels:
+    """Process and measurement noise of the filter.
+
+    ``q``: spectral density of the gradient's random walk, (degC/min^2)^2/min;
+    ``r``: measurement variance, degC^2 (includes the quantisation floor ``quant_c^2/12``);
+    ``quant_c``: sensor resolution used for the floor, degC; ``fitted``: names of the
+    levels chosen by maximum likelihood (the others were given by the user).
+    """
+
+    q: float
+    r: float
+    quant_c: float
+    fitted: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        for name in ("q", "r"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ParameterError(f"{name} must be a finite number > 0, got {v!r}")
+
+
+def _check_level(name: str, value: float | None, unit: str) -> float | None:
+    if value is None:
+        return None
+    v = float(value)
+    if not (math.isfinite(v) and v > 0):
+        raise ParameterError(f"{name} must be > 0 {unit}, got {value!r}")
+    return v
+
+
+# -- the models as transition builders -----------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class _Setup:
+    """Everything the filter needs except the noise levels (time in minutes)."""
+
+    t_min: np.ndarray
+    y: np.ndarray
+    h_min: np.ndarray  # h[k] = t[k] - t[k-1], h[0] = 0 (unused)
+    u: np.ndarray
+    tau_min: float | None  # None: kinematic model
+    x0: tuple[float, float]
+
+    def transition(self, q: float):
+        if self.tau_min is None:
+            return kinematic_transition(self.h_min, q)
+        return lag_transition(self.h_min, self.tau_min, q)
+
+    def stride(self, step: int) -> _Setup:
+        """Every ``step``-th row, with exact transitions over the merged steps."""
+        if step <= 1:
+            return self
+        idx = np.arange(0, self.t_min.size, step)
+        t = self.t_min[idx]
+        h = np.concatenate(([0.0], np.diff(t)))
+        u = np.zeros_like(t)
+        if self.tau_min is not None:
+            # compose T' = e T + u over the fine steps in each coarse step:
+            # u_c = sum_j u_j prod_{i > j} e_i  (exact for the chamber-driven part)
+            log_e = -self.h_min / self.tau_min
+            cum = np.cumsum(log_e)
+            for c in range(1, idx.size):
+                lo, hi = idx[c - 1] + 1, idx[c] + 1
+                u[c] = float(np.sum(self.u[lo:hi] * np.exp(cum[hi - 1] - cum[lo:hi])))
+        return _Setup(t, self.y[idx], h, u, self.tau_min, self.x0)
+
+
+def _prior(x0):
+    return x0, (PRIOR_T_STD_C**2, 0.0, PRIOR_G_STD_C_PER_MIN**2)
+
+
+def _run(setup: _Setup, q: float, r: float, store: bool):
+    a, b, q11, q12, q22 = setup.transition(q)
+    x0, p0 = _prior(setup.x0)
+    args = [v.tolist() for v in (a, b, setup.u, q11, q12, q22)]
+    return kalman_filter(setup.y.tolist(), *args, r, x0, p0, store=store), a, b
+
+
+def _fit_noise(setup: _Setup, q: float | None, r: float | None, quant_c: float) -> NoiseLevels:
+    """Maximum likelihood of the innovations over the free levels (log-parametrised)."""
+    floor = quant_c**2 / 12.0
+    fitted = tuple(n for n, v in (("q", q), ("r", r)) if v is None)
+    if not fitted:
+        return NoiseLevels(q, r, quant_c, ())
+    n_fin = int(np.isfinite(setup.y).sum())
+    step = max(1, int(math.ceil(setup.y.size / MAX_ML_ROWS)))
+    coarse = setup.stride(step)
+    if int(np.isfinite(coarse.y).sum()) < max(20, N_DIFFUSE + 3):
+        coarse = setup
+    # starting point: white noise dominates second differences, var(d2 y) ~ 6 r
+    yf = setup.y[np.isfinite(setup.y)]
+    r_start = max(float(np.var(np.diff(yf, 2))) / 6.0, 1e-8) if n_fin > 3 else 1e-4
+    r_extra_start = max(r_start - floor, 1e-3 * r_start)
+
+    def levels(theta):
+        i = 0
+        qq = q
+        if q is None:
+            qq = math.exp(theta[i])
+            i += 1
+        rr = r if r is not None else floor + math.exp(theta[i])
+        return qq, rr
+
+    def cost(theta):
+        qq, rr = levels(theta)
+        (_, _, _, _, m2ll), _, _ = _run(coarse, qq, rr, store=False)
+        return m2ll if math.isfinite(m2ll) else 1e300
+
+    bounds = []
+    if q is None:
+        # coarse scan of q (the likelihood is often flat far from the optimum)
+        grid = np.arange(-12.0, 3.0, 1.5) * math.log(10.0)
+        best = None
+        for lq in grid:
+            theta = [lq] + ([] if r is not None else [math.log(r_extra_start)])
+            c = cost(theta)
+            if best is None or c < best[0]:
+                best = (c, lq)
+        start = [best[1]]
+        bounds.append(LOG_Q_BOUNDS)
+    else:
+        start = []
+    if r is None:
+        start.append(math.log(r_extra_start))
+        bounds.append(LOG_R_BOUNDS)
+    res = minimize(cost, np.array(start), method="Nelder-Mead",
+                   options={"xatol": 0.02, "fatol": 0.01, "maxiter": 400})
+    theta = np.clip(res.x, [lo for lo, _ in bounds], [hi for _, hi in bounds])
+    qq, rr = levels(theta)
+    return NoiseLevels(qq, rr, quant_c, fitted)
+
+
+# -- results --------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class GradientEstimate:
+    """Smoothed internal temperature and gradient, one row per log row.
+
+    Attributes
+    ----------
+    time_s : array
+        Log times, s.
+    t_est_c, t_std_c : array
+        Smoothed internal temperature and its standard deviation, degC.
+    g_est_c_per_min, g_std_c_per_min : array
+        Smoothed gradient dT/dt and its standard deviation, degC/min.
+    innovation_c, innovation_std_c : array
+        Filter innovations ``y_k - T_k|k-1`` and their predicted standard deviations
+        ``sqrt(S_k)``, degC (NaN on rows without a reading).
+    noise : NoiseLevels
+        ``q``, ``r`` and which of them were fitted.
+    minus2_log_likelihood : float
+        ``-2 log L`` of the innovations at the chosen noise levels (full-rate pass).
+    method : str
+        ``"kinematic"`` or ``"model"`` (thermal model with the chamber as input).
+    params : ThermalParams or None
+        The thermal model of the model-based variant.
+    """
+
+    time_s: np.ndarray
+    t_est_c: np.ndarray
+    t_std_c: np.ndarray
+    g_est_c_per_min: np.ndarray
+    g_std_c_per_min: np.ndarray
+    innovation_c: np.ndarray
+    innovation_std_c: np.ndarray
+    noise: NoiseLevels
+    minus2_log_likelihood: float
+    method: str
+    params: ThermalParams | None = None
+
+    @property
+    def q(self) -> float:
+        return self.noise.q
+
+    @property
+    def r(self) -> float:
+        return self.noise.r
+
+    @property
+    def log_likelihood(self) -> float:
+        return -0.5 * self.minus2_log_likelihood
+
+    @property
+    def time_min(self) -> np.ndarray:
+        return self.time_s / 60.0
+
+    @property
+    def normalised_innovations(self) -> np.ndarray:
+        """``e_k / sqrt(S_k)``: about N(0, 1) when the model and noise levels are right."""
+        return self.innovation_c / self.innovation_std_c
+
+    def to_frame(self) -> pd.DataFrame:
+        return pd.DataFrame(
+            {
+                "time_s": self.time_s,
+                "t_est_c": self.t_est_c,
+                "g_est_c_per_min": self.g_est_c_per_min,
+                "g_std_c_per_min": self.g_std_c_per_min,
+                "t_std_c": self.t_std_c,
+                "innovation_c": self.innovation_c,
+                "innovation_std_c": self.innovation_std_c,
+            }
+        )
+
+    def summary(self) -> str:
+        fitted = ", ".join(self.noise.fitted) or "none"
+        z = self.normalised_innovations
+        z = z[np.isfinite(z)]
+        return (
+            f"{self.method} Kalman smoother: q = {self.q:.3g} (degC/min^2)^2/min, "
+            f"r = {self.r:.3g} degC^2 (sigma {math.sqrt(self.r):.3g} degC; quantisation "
+            f"{self.noise.quant_c:g} degC; fitted by ML: {fitted}); median gradient std "
+            f"{np.nanmedian(self.g_std_c_per_min):.3g} degC/min; normalised innovations "
+            f"std {np.std(z):.2f} (1 if consistent)"
+        )
+
+
+def _setup_time(log: MeasuredLog) -> tuple[np.ndarray, np.ndarray]:
+    t = np.asarray(log.time_s, dtype=float) / 60.0
+    return t, np.concatenate(([0.0], np.diff(t)))
+
+
+def _first_finite(y: np.ndarray) -> float:
+    return float(y[np.flatnonzero(np.isfinite(y))[0]])
+
+
+def _finish(setup: _Setup, noise: NoiseLevels, method: str, grad, params) -> GradientEstimate:
+    (filtered, predicted, innov, svar, m2ll), a, b = _run(setup, noise.q, noise.r, store=True)
+    x1, x2, p11, p12, p22 = rts_smoother(filtered, predicted, a.tolist(), b.tolist())
+    g, g_var = grad(x1, x2, p11, p12, p22)
+    innov = np.asarray(innov)
+    return GradientEstimate(
+        time_s=setup.t_min * 60.0,
+        t_est_c=x1,
+        t_std_c=np.sqrt(np.maximum(p11, 0.0)),
+        g_est_c_per_min=g,
+        g_std_c_per_min=np.sqrt(np.maximum(g_var, 0.0)),
+        innovation_c=innov,
+        innovation_std_c=np.sqrt(np.asarray(svar)),
+        noise=noise,
+        minus2_log_likelihood=float(m2ll),
+        method=method,
+        params=params,
+    )
+
+
+def _resolve_quant(log: MeasuredLog, quant_c: float | None) -> float:
+    if quant_c is None:
+        return quantisation_step(log.t_int_c)
+    v = float(quant_c)
+    if not (math.isfinite(v) and v >= 0):
+        raise ParameterError(f"quant_c must be >= 0 degC, got {quant_c!r}")
+    return v
+
+
+def estimate_gradient(
+    log: MeasuredLog,
+    *,
+    q: float | None = None,
+    r: float | None = None,
+    quant_c: float | None = None,
+) -> GradientEstimate:
+    """Kinematic Kalman smoother: ``(T, g)`` with the gradient a random walk.
+
+    Parameters
+    ----------
+    log : MeasuredLog
+        The run (NaN readings are skipped, gaps handled exactly).
+    q : float, optional
+        Gradient random-walk density, (degC/min^2)^2/min; fitted by ML when None.
+    r : float, optional
+        Measurement variance, degC^2 (total, including quantisation); ML when None.
+    quant_c : float, optional
+        Sensor resolution, degC, for the floor ``r >= quant_c^2/12`` of the ML search;
+        detected from the readings when None (see :func:`quantisation_step`).
+    """
+    q, r = _check_level("q", q, "(degC/min^2)^2/min"), _check_level("r", r, "degC^2")
+    t, h = _setup_time(log)
+    y = np.asarray(log.t_int_c, dtype=float)
+    setup = _Setup(t, y, h, np.zeros_like(t), None, (_first_finite(y), 0.0))
+    noise = _fit_noise(setup, q, r, _resolve_quant(log, quant_c))
+
+    def grad(x1, x2, p11, p12, p22):
+        return x2, p22
+
+    return _finish(setup, noise, "kinematic", grad, None)
+
+
+def estimate_gradient_model(
+    log: MeasuredLog,
+    params: ThermalParams | None = None,
+    *,
+    chamber: str = "tk_set_c",
+    q: float | None = None,
+    r: float | None = None,
+    quant_c: float | None = None,
+) -> GradientEstimate:
+    """Model-based Kalman smoother: the thermal model driven by the logged chamber.
+
+    State ``(T, d)``; the gradient is ``g = (Tk + dT0 - T)/tau + d`` where ``d`` is a
+    random-walk correction for what the model misses (see the module docstring). With a
+    correct model, ``d`` stays near 0 and the gradient follows the chamber without lag.
+
+    Parameters
+    ----------
+    params : ThermalParams, optional
+        ``tau_s`` and ``dt0_c`` of the device (default :class:`ThermalParams`).
+    chamber : {"tk_set_c", "tk_air_c"}
+        Which logged chamber temperature drives the model (it must have no NaN).
+    q, r, quant_c
+        As in :func:`estimate_gradient`; ``q`` is the density of the correction ``d``.
+    """
+    params = ThermalParams() if params is None else params
+    if chamber not in ("tk_set_c", "tk_air_c"):
+        raise ParameterError(f"chamber must be 'tk_set_c' or 'tk_air_c', got {chamber!r}")
+    tk = getattr(log, chamber)
+    if tk is None:
+        raise LogFormatError(
+            f"{log.source}: the model-based estimate needs the chamber column {chamber}, "
+            "which the log does not have; use the kinematic estimate instead"
+        )
+    if np.isnan(tk).any():
+        rows = np.flatnonzero(np.isnan(tk))
+        raise LogFormatError(
+            f"{log.source}: column {chamber} has {rows.size} NaN row(s) (first: row "
+            f"{rows[0] + 1}); the model needs the chamber temperature on every row"
+        )
+    q, r = _check_level("q", q, "(degC/min^2)^2/min"), _check_level("r", r, "degC^2")
+    model = FirstOrderLag(params)
+    t, h = _setup_time(log)
+    u = np.zeros_like(t)
+    if t.size > 1:
+        u[1:] = lag_input(h[1:], tk[:-1], tk[1:], model)
+    y = np.asarray(log.t_int_c, dtype=float)
+    setup = _Setup(t, y, h, u, params.tau_min, (_first_finite(y), 0.0))
+    noise = _fit_noise(setup, q, r, _resolve_quant(log, quant_c))
+    tau, offset = params.tau_min, (tk + params.dt0_c) / params.tau_min
+
+    def grad(x1, x2, p11, p12, p22):
+        # g = (Tk + dT0 - T)/tau + d ;  var g = P11/tau^2 - 2 P12/tau + P22
+        return offset - x1 / tau + x2, p11 / tau**2 - 2.0 * p12 / tau + p22
+
+    return _finish(setup, noise, "model", grad, params)
+
+
+def finite_difference_gradient(time_s: np.ndarray, t_c: np.ndarray) -> np.ndarray:
+    """Plain central finite difference of the samples, degC/min (the baseline).
+
+    ``g_k = (y_{k+1} - y_{k-1}) / (t_{k+1} - t_{k-1})`` (one-sided at the ends, via
+    ``numpy.gradient``); NaN readings propagate.
+    """
+    return np.gradient(np.asarray(t_c, dtype=float), np.asarray(time_s, dtype=float) / 60.0)

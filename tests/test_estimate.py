@@ -1,0 +1,320 @@
+"""Kalman gradient estimation: discretisation vs scipy, filter/smoother vs batch Gaussian
+conditioning, accuracy on synthetic logs with known truth, real TCLab logs."""
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.linalg import expm
+
+from schedsyn.errors import LogFormatError, ParameterError
+from schedsyn.estimate import (
+    MAX_ML_ROWS,
+    N_DIFFUSE,
+    estimate_gradient,
+    estimate_gradient_model,
+    finite_difference_gradient,
+    kalman_filter,
+    kinematic_transition,
+    lag_input,
+    lag_transition,
+    quantisation_step,
+    rts_smoother,
+)
+from schedsyn.logs import log_from_frame
+from schedsyn.model import FirstOrderLag
+from schedsyn.params import ThermalParams
+from schedsyn.programme import read_steps
+from schedsyn.synth import synth_log
+
+TCLAB = Path(__file__).resolve().parents[2] / "shared" / "data" / "tclab"
+BASELINE = "data/baseline_exp1_steps.csv"
+
+
+def _van_loan(a_cont, g_vec, q, h):
+    """Exact (F, Q) of dx = A x dt + G dW (density q) over h, by Van Loan's matrix exponential."""
+    n = a_cont.shape[0]
+    big = np.zeros((2 * n, 2 * n))
+    big[:n, :n] = -a_cont
+    big[:n, n:] = q * np.outer(g_vec, g_vec)
+    big[n:, n:] = a_cont.T
+    e = expm(big * h)
+    f = e[n:, n:].T
+    return f, f @ e[:n, n:]
+
+
+@pytest.mark.parametrize("h", [1 / 60, 1 / 6, 1.0, 37.0])
+def test_kinematic_discretisation_matches_van_loan(h):
+    q = 2.5e-3
+    f, qd = _van_loan(np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([0.0, 1.0]), q, h)
+    a, b, q11, q12, q22 = kinematic_transition(np.array([h]), q)
+    np.testing.assert_allclose([a[0], b[0]], [f[0, 0], f[0, 1]], rtol=1e-12)
+    np.testing.assert_allclose([q11[0], q12[0], q22[0]], [qd[0, 0], qd[0, 1], qd[1, 1]],
+                               rtol=1e-9)
+
+
+@pytest.mark.parametrize("h", [1 / 60, 1 / 6, 0.39, 5.0, 120.0])
+def test_lag_discretisation_matches_van_loan(h):
+    q, tau = 3e-4, 40.0
+    a_cont = np.array([[-1.0 / tau, 1.0], [0.0, 0.0]])
+    f, qd = _van_loan(a_cont, np.array([0.0, 1.0]), q, h)
+    a, b, q11, q12, q22 = lag_transition(np.array([h]), tau, q)
+    np.testing.assert_allclose([a[0], b[0]], [f[0, 0], f[0, 1]], rtol=1e-11)
+    np.testing.assert_allclose([q11[0], q12[0], q22[0]], [qd[0, 0], qd[0, 1], qd[1, 1]],
+                               rtol=1e-6)
+
+
+def test_lag_input_matches_ode():
+    params = ThermalParams(tau_s=1800.0, dt0_c=2.0)
+    model = FirstOrderLag(params)
+    h, tk0, tk1, t_start = 7.5, -10.0, 5.0, 3.0
+    u = lag_input(np.array([h]), np.array([tk0]), np.array([tk1]), model)[0]
+    a, *_ = lag_transition(np.array([h]), params.tau_min, 1.0)
+
+    def rhs(t, x):
+        tk = tk0 + (tk1 - tk0) * t / h
+        return [(tk + params.dt0_c - x[0]) / params.tau_min]
+
+    sol = solve_ivp(rhs, (0.0, h), [t_start], rtol=1e-11, atol=1e-12)
+    assert a[0] * t_start + u == pytest.approx(sol.y[0, -1], abs=1e-9)
+
+
+def _batch_posterior(y, a, b, u, q11, q12, q22, r, x0, p0):
+    """Smoothed mean/cov and -2 log L of y[N_DIFFUSE:] | y[:N_DIFFUSE] by dense algebra."""
+    n = len(y)
+    # x = M (z) + c with z = (x0 - prior, w_1..w_{n-1}) all independent Gaussians
+    mean = np.zeros((n, 2))
+    mean[0] = x0
+    blocks = [np.array([[p0[0], p0[1]], [p0[1], p0[2]]])]
+    trans = [np.eye(2)]
+    for k in range(1, n):
+        fk = np.array([[a[k], b[k]], [0.0, 1.0]])
+        mean[k] = fk @ mean[k - 1] + [u[k], 0.0]
+        trans.append(fk)
+        blocks.append(np.array([[q11[k], q12[k]], [q12[k], q22[k]]]))
+    big = np.zeros((2 * n, 2 * n))  # x_k = sum_{j<=k} Phi(k, j) z_j
+    for k in range(n):
+        phi = np.eye(2)
+        for j in range(k, -1, -1):
+            big[2 * k:2 * k + 2, 2 * j:2 * j + 2] = phi
+            phi = phi @ trans[j]
+    cz = np.zeros((2 * n, 2 * n))
+    for j in range(n):
+        cz[2 * j:2 * j + 2, 2 * j:2 * j + 2] = blocks[j]
+    cov_x = big @ cz @ big.T
+    obs = np.flatnonzero(np.isfinite(y))
+    hsel = np.zeros((obs.size, 2 * n))
+    hsel[np.arange(obs.size), 2 * obs] = 1.0
+    s = hsel @ cov_x @ hsel.T + r * np.eye(obs.size)
+    gain = cov_x @ hsel.T @ np.linalg.inv(s)
+    resid = y[obs] - mean.ravel()[2 * obs]
+    post_mean = mean.ravel() + gain @ resid
+    post_cov = cov_x - gain @ hsel @ cov_x
+
+    def m2ll(idx):
+        ss = s[np.ix_(idx, idx)]
+        rr = resid[idx]
+        return idx.size * np.log(2 * np.pi) + np.linalg.slogdet(ss)[1] + rr @ np.linalg.solve(ss, rr)
+
+    full = m2ll(np.arange(obs.size))
+    head = m2ll(np.arange(N_DIFFUSE))
+    return post_mean.reshape(n, 2), post_cov, full - head
+
+
+@pytest.mark.parametrize("kind", ["kinematic", "lag"])
+def test_filter_and_smoother_equal_batch_conditioning(kind, rng):
+    n = 25
+    t = np.cumsum(rng.uniform(0.05, 0.5, n))
+    t[15:] += 3.0  # a gap
+    h = np.concatenate(([0.0], np.diff(t)))
+    y = 20.0 + 0.3 * t + 0.05 * rng.standard_normal(n)
+    y[[4, 5, 20]] = np.nan
+    q, r = 0.02, 0.003
+    if kind == "kinematic":
+        a, b, q11, q12, q22 = kinematic_transition(h, q)
+        u = np.zeros(n)
+    else:
+        a, b, q11, q12, q22 = lag_transition(h, 2.0, q)
+        tk = 25.0 + 3.0 * np.sin(t)
+        u = np.concatenate(([0.0], lag_input(h[1:], tk[:-1], tk[1:],
+                                             FirstOrderLag(ThermalParams(tau_s=120.0)))))
+    x0, p0 = (19.0, 0.1), (4.0, 0.3, 0.5)
+    args = [v.tolist() for v in (a, b, u, q11, q12, q22)]
+    filt, pred, innov, svar, m2ll = kalman_filter(y.tolist(), *args, r, x0, p0)
+    sm = rts_smoother(filt, pred, a.tolist(), b.tolist())
+    mean, cov, m2ll_batch = _batch_posterior(y, a, b, u, q11, q12, q22, r, x0, p0)
+    np.testing.assert_allclose(sm[0], mean[:, 0], atol=1e-9)
+    np.testing.assert_allclose(sm[1], mean[:, 1], atol=1e-9)
+    np.testing.assert_allclose(sm[2], np.diag(cov)[0::2], rtol=1e-6)
+    np.testing.assert_allclose(sm[3], np.diag(cov, 1)[0::2], rtol=1e-5, atol=1e-12)
+    np.testing.assert_allclose(sm[4], np.diag(cov)[1::2], rtol=1e-6)
+    assert m2ll == pytest.approx(m2ll_batch, rel=1e-9)
+    assert np.isnan(innov[4]) and np.isnan(svar[20]) and np.isfinite(innov[3])
+
+
+@pytest.fixture(scope="module")
+def baseline():
+    return read_steps(BASELINE)
+
+
+@pytest.fixture(scope="module")
+def synth10(baseline):
+    return synth_log(baseline, sample_s=10.0, noise_c=0.02, quant_c=0.01, seed=11)
+
+
+def _rms(x):
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+def test_smoother_accuracy_on_synthetic_log(synth10):
+    """Acceptance: RMS error < 0.01 degC/min and >= 5x better than a finite difference."""
+    log = log_from_frame(synth10)
+    truth = synth10["g_true_c_per_min"].to_numpy()
+    est = estimate_gradient(log)
+    err = _rms(est.g_est_c_per_min - truth)
+    fd = _rms(finite_difference_gradient(log.time_s, log.t_int_c) - truth)
+    assert err < 0.01
+    assert fd >= 5 * err
+    # ML finds the sensor noise: 0.02^2 + 0.01^2/12 (quantisation)
+    assert est.noise.quant_c == pytest.approx(0.01)
+    assert est.r == pytest.approx(0.02**2 + 0.01**2 / 12, rel=0.15)
+    assert set(est.noise.fitted) == {"q", "r"}
+    # the reported uncertainty is not overconfident, and the innovations are ~ N(0, 1)
+    z = (est.g_est_c_per_min - truth) / est.g_std_c_per_min
+    assert _rms(z) < 1.5
+    zi = est.normalised_innovations[np.isfinite(est.normalised_innovations)]
+    assert 0.9 < np.std(zi) < 1.1
+    frame = est.to_frame()
+    assert list(frame.columns[:4]) == ["time_s", "t_est_c", "g_est_c_per_min", "g_std_c_per_min"]
+    assert len(frame) == len(synth10)
+
+
+def test_model_based_beats_kinematic_with_right_model(synth10):
+    log = log_from_frame(synth10)
+    truth = synth10["g_true_c_per_min"].to_numpy()
+    kin = estimate_gradient(log)
+    mod = estimate_gradient_model(log)
+    assert mod.method == "model" and mod.params == ThermalParams()
+    assert _rms(mod.g_est_c_per_min - truth) < 0.2 * _rms(kin.g_est_c_per_min - truth)
+    # the two agree within their stated uncertainty
+    diff = mod.g_est_c_per_min - kin.g_est_c_per_min
+    assert _rms(diff / np.hypot(kin.g_std_c_per_min, mod.g_std_c_per_min)) < 1.5
+    # the same data are better explained (higher likelihood) by the right model
+    assert mod.log_likelihood > kin.log_likelihood
+
+
+def test_model_based_with_wrong_model_falls_back_on_the_correction(synth10):
+    """tau 25 % too small: the correction d takes up the error, estimate stays usable."""
+    log = log_from_frame(synth10)
+    truth = synth10["g_true_c_per_min"].to_numpy()
+    right = estimate_gradient_model(log)
+    wrong = estimate_gradient_model(log, ThermalParams(tau_s=1800.0))
+    kin = estimate_gradient(log)
+    assert wrong.q > 100 * right.q  # the fit notices the mismatch
+    assert wrong.log_likelihood < right.log_likelihood
+    assert _rms(wrong.g_est_c_per_min - truth) < 1.5 * _rms(kin.g_est_c_per_min - truth)
+
+
+def test_nan_rows_and_gaps_keep_every_row(baseline):
+    df = synth_log(baseline, sample_s=10.0, seed=5)
+    df.loc[1000:1011, "t_int_c"] = np.nan  # two minutes without readings
+    df = df.drop(index=range(2000, 2090)).reset_index(drop=True)  # 15 min gap
+    log = log_from_frame(df)
+    assert log.gaps and log.nan_counts["t_int_c"] == 12
+    est = estimate_gradient(log)
+    assert len(est.to_frame()) == len(df)
+    assert np.all(np.isfinite(est.g_est_c_per_min)) and np.all(np.isfinite(est.t_est_c))
+    assert np.isnan(est.innovation_c[1000:1012]).all()
+    # uncertainty grows inside the NaN span and across the gap
+    std = est.g_std_c_per_min
+    assert std[1006] > 1.1 * std[970]
+    i_gap = int(np.searchsorted(log.time_s, log.gaps[0][0]))
+    assert std[i_gap] > 1.5 * np.median(std)
+    truth = df["g_true_c_per_min"].to_numpy()
+    assert _rms((est.g_est_c_per_min - truth) / std) < 1.5
+
+
+def test_user_overrides_noise_levels(synth10):
+    log = log_from_frame(synth10)
+    est = estimate_gradient(log, q=1e-3, r=5e-4)
+    assert (est.q, est.r, est.noise.fitted) == (1e-3, 5e-4, ())
+    only_r = estimate_gradient(log, q=1e-3)
+    assert only_r.noise.fitted == ("r",) and only_r.q == 1e-3
+    # a smaller q smooths more: lower stated gradient uncertainty
+    smooth = estimate_gradient(log, q=1e-5, r=5e-4)
+    assert np.median(smooth.g_std_c_per_min) < np.median(est.g_std_c_per_min)
+    with pytest.raises(ParameterError, match="q must be > 0"):
+        estimate_gradient(log, q=0.0)
+    with pytest.raises(ParameterError, match="r must be > 0"):
+        estimate_gradient(log, r=float("nan"))
+
+
+def test_model_based_needs_chamber_column():
+    t = 10.0 * np.arange(50)
+    log = log_from_frame(pd.DataFrame({"time_s": t, "t_int_c": 20 + 0.001 * t}), source="a.csv")
+    with pytest.raises(LogFormatError, match="a.csv.*tk_set_c"):
+        estimate_gradient_model(log)
+    tk = np.full(50, 20.0)
+    tk[7] = np.nan
+    log2 = log_from_frame(pd.DataFrame({"time_s": t, "t_int_c": 20 + 0.001 * t, "tk_set_c": tk}))
+    with pytest.raises(LogFormatError, match="tk_set_c has 1 NaN row.*row 8"):
+        estimate_gradient_model(log2)
+    with pytest.raises(ParameterError, match="chamber"):
+        estimate_gradient_model(log2, chamber="tk")
+
+
+def test_long_log_uses_a_strided_search_and_still_fits(baseline):
+    """A 1 s log (32 400 rows): noise search on a strided copy, final pass at full rate."""
+    df = synth_log(baseline, sample_s=1.0, noise_c=0.02, quant_c=0.01, seed=2)
+    assert len(df) > 10 * MAX_ML_ROWS
+    log = log_from_frame(df)
+    est = estimate_gradient(log)
+    truth = df["g_true_c_per_min"].to_numpy()
+    assert est.r == pytest.approx(0.02**2 + 0.01**2 / 12, rel=0.15)
+    assert _rms(est.g_est_c_per_min - truth) < 0.01
+    mod = estimate_gradient_model(log)
+    assert _rms(mod.g_est_c_per_min - truth) < 0.002
+
+
+def test_quantisation_step_detection(rng):
+    grid = 0.01 * np.round(rng.normal(0, 1, 500) / 0.01)
+    assert quantisation_step(grid) == pytest.approx(0.01)
+    assert quantisation_step(rng.normal(0, 1, 500)) == 0.0
+    uneven = np.cumsum(rng.choice([0.32, 0.33], 200))  # TCLab-like ADC grid
+    assert quantisation_step(uneven) == pytest.approx(0.32)
+
+
+def test_finite_difference_is_exact_on_a_line():
+    t = np.array([0.0, 30.0, 45.0, 100.0, 160.0])
+    np.testing.assert_allclose(finite_difference_gradient(t, 5.0 + 0.02 * t), 1.2)
+
+
+def _tclab_logs():
+    if not TCLAB.is_dir():
+        return []
+    return sorted(TCLAB.glob("*step_50_run_*.csv")) + sorted(TCLAB.glob("*sin_5_50_run_1.csv"))
+
+
+@pytest.mark.skipif(not TCLAB.is_dir(), reason="../shared/data/tclab not present")
+@pytest.mark.parametrize("path", _tclab_logs(), ids=lambda p: p.name)
+def test_real_tclab_logs(path):
+    """Real, coarsely quantised (~0.32 degC) logs: sensible estimates, r near step^2/12."""
+    raw = pd.read_csv(path)
+    log = log_from_frame(pd.DataFrame({"time_s": raw["Time"], "t_int_c": raw["T1"]}),
+                         source=str(path))
+    est = estimate_gradient(log)
+    step = est.noise.quant_c
+    assert step == pytest.approx(0.32, abs=0.01)
+    assert step**2 / 12 <= est.r < 1.3 * step**2 / 12
+    assert np.all(np.isfinite(est.g_std_c_per_min)) and np.all(est.g_std_c_per_min > 0)
+    # the smoothed temperature stays within one quantisation step of every reading
+    assert np.max(np.abs(est.t_est_c - log.t_int_c)) < step
+    # far smoother than a finite difference of the raw readings
+    fd = finite_difference_gradient(log.time_s, log.t_int_c)
+    assert np.std(np.diff(est.g_est_c_per_min)) < 0.1 * np.std(np.diff(fd))
+    # heated from room temperature: the mean gradient equals the net rise over the run
+    net = (log.t_int_c[-1] - log.t_int_c[0]) / (log.time_min[-1] - log.time_min[0])
+    mean_g = np.trapezoid(est.g_est_c_per_min, log.time_min) / (log.time_min[-1])
+    assert mean_g == pytest.approx(net, abs=0.05)
