@@ -1,0 +1,150 @@
+"""``schedsyn sweep STEPS.csv``: coverage of a plan over a tau x dT0 grid (or re-plan there).
+
+Writes ``DIR/sweep.csv`` (one row per grid point) and ``DIR/sweep.png`` (heatmaps with
+the nominal point marked) and prints a summary. Runs in parallel on the local cores by
+default, or on a Dask cluster with ``--dask tcp://HOST:PORT``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+from dataclasses import dataclass
+
+from ..errors import ParameterError, SchedsynError
+from ..io import write_frame_atomic
+from ..params import Limits, ThermalParams
+from ..programme import read_steps
+from ..sweep import parse_grid, sweep_fixed, sweep_replan
+from . import _common
+
+
+def register(sub) -> None:
+    p = sub.add_parser("sweep", help="coverage of a plan over a grid of tau and dT0 "
+                       "(or re-plan at every grid point)", description=__doc__,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("steps", metavar="STEPS.csv", nargs="?", default=None,
+                   help="chamber step table (not needed with --replan)")
+    _common.add_region_option(p)
+    p.add_argument("--tau-s", default="1800:3000:13", metavar="START:STOP:N",
+                   help="grid of time constants, s (default 1800:3000:13)")
+    p.add_argument("--dt0-c", default="0:6:13", metavar="START:STOP:N",
+                   help="grid of self-heating offsets, °C (default 0:6:13)")
+    p.add_argument("--out", default=None, help="output directory (default out/sweep)")
+    p.add_argument("--levels", type=int, default=6, help="required distinct gradient levels")
+    p.add_argument("--deltas-c-per-min", type=float, nargs="+", default=[0.05, 0.1],
+                   metavar="DELTA", help="gradient separations of distinct levels, °C/min; "
+                   "the first is the headline coverage (default 0.05 0.1)")
+    p.add_argument("--dt-min", type=float, default=0.1, help="simulation step, min")
+    p.add_argument("--nominal-tau-s", type=float, default=None,
+                   help="nominal time constant marked on the heatmap, s (default 2400)")
+    p.add_argument("--nominal-dt0-c", type=float, default=None,
+                   help="nominal offset marked on the heatmap, °C (default 3.0)")
+    p.add_argument("--replan", action="store_true",
+                   help="re-plan at every grid point (needs the planner) instead of "
+                   "sweeping a fixed plan")
+    p.add_argument("--dask", default=None, metavar="ADDR",
+                   help="run on the Dask scheduler at ADDR, e.g. tcp://HOST:PORT")
+    p.add_argument("--workers", type=int, default=None,
+                   help="local worker processes (default: all cores; 1 = in this process)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    p.set_defaults(func=run)
+
+
+@dataclass(frozen=True, slots=True)
+class PlanAtPoint:
+    """Picklable ``plan_fn`` for :func:`~schedsyn.sweep.sweep_replan`: plan with given params.
+
+    Calls ``schedsyn.planner.plan_experiment(params=..., region=..., levels_required=...,
+    limits=...)``; imported lazily so that the fixed-plan sweep works without a planner.
+    """
+
+    region: tuple[float, float]
+    levels_required: int
+    limits: Limits
+
+    def __call__(self, params: ThermalParams):
+        from ..planner import plan_experiment
+
+        return plan_experiment(params=params, region=self.region,
+                               levels_required=self.levels_required, limits=self.limits)
+
+
+def _planner_available() -> bool:
+    try:
+        return importlib.util.find_spec("schedsyn.planner") is not None
+    except (ImportError, ValueError):
+        return False
+
+
+def _backend(args: argparse.Namespace):
+    if args.workers is not None and args.workers < 1:
+        raise ParameterError(f"--workers must be >= 1, got {args.workers}")
+    return args.dask if args.dask else "local"
+
+
+def run(args: argparse.Namespace) -> int:
+    from .. import plots
+
+    taus = parse_grid(args.tau_s, "--tau-s", "s")
+    dt0s = parse_grid(args.dt0_c, "--dt0-c", "°C")
+    nominal = ThermalParams(
+        **{k: v for k, v in (("tau_s", args.nominal_tau_s), ("dt0_c", args.nominal_dt0_c))
+           if v is not None})
+    limits = Limits()
+    lo, hi = args.region
+    out = _common.out_dir(args.out, "out/sweep")
+    backend = _backend(args)
+    progress = not args.no_progress
+    inputs = [args.steps] if args.steps else []
+    marker = (nominal.tau_s, nominal.dt0_c)
+
+    if args.replan:
+        if not _planner_available():
+            raise SchedsynError("re-planning needs the planner (schedsyn.planner), which this "
+                                "installation lacks; run the sweep without --replan")
+        result = sweep_replan(PlanAtPoint((lo, hi), args.levels, limits), taus, dt0s,
+                              backend=backend, workers=args.workers, progress=progress)
+        frame = result.to_frame()
+        write_frame_atomic(out / "sweep.csv", frame, inputs)
+        numeric = [c for c in frame.columns
+                   if c not in ("tau_s", "dt0_c") and frame[c].dtype.kind in "if"]
+        preferred = [c for c in numeric if "duration" in c or "margin" in c] or numeric
+        if preferred:
+            ok = frame[frame["status"] == "ok"]
+            panels = [(ok, c, f"re-planned: {c}") for c in preferred[:2]]
+            plots.save_figure(plots.sweep_panels(panels, nominal=marker)[0],
+                              out / "sweep.png", inputs)
+        print(result.summary())
+        print(f"wrote {out}/sweep.csv" + (", sweep.png" if preferred else ""))
+        return 0
+
+    if args.steps is None:
+        raise ParameterError("give the step table STEPS.csv to sweep (or --replan to re-plan)")
+    programme = read_steps(args.steps, limits)
+    kw = dict(levels_required=args.levels, deltas_c_per_min=args.deltas_c_per_min,
+              dt_min=args.dt_min, t0_c=limits.t_init_c)
+    result = sweep_fixed(programme, (lo, hi), taus, dt0s, backend=backend,
+                         workers=args.workers, progress=progress, **kw)
+    at_nominal = sweep_fixed(programme, (lo, hi), [nominal.tau_s], [nominal.dt0_c], **kw)
+    frame = result.to_frame()
+    write_frame_atomic(out / "sweep.csv", frame, inputs)
+    d0 = result.deltas_c_per_min[0]
+    panels = [
+        (frame, "coverage", f"coverage (≥ {result.levels_required} levels, Δ {d0:g} °C/min)"),
+        (frame, "min_levels", f"fewest distinct levels of any bin (Δ {d0:g} °C/min)"),
+    ]
+    plots.save_figure(
+        plots.sweep_panels(panels, nominal=marker,
+                           suptitle=f"{args.steps}: working region [{lo:g}, {hi:g}] °C")[0],
+        out / "sweep.png", inputs)
+    print(f"programme: {programme.n_segments} steps, {programme.total_min:.1f} min")
+    print(f"at the nominal point (tau {nominal.tau_s:g} s, dT0 {nominal.dt0_c:g} °C): coverage "
+          f"{at_nominal.coverage_grid[0, 0]:.1%}, min {at_nominal.min_levels_grid[0, 0]} levels")
+    print(result.summary())
+    for j, d in enumerate(result.deltas_c_per_min[1:], start=1):
+        cov = result.coverage[:, :, j]
+        print(f"at delta {d:g} °C/min: coverage {cov.min():.1%} .. {cov.max():.1%}, min "
+              f"levels {result.min_levels[:, :, j].min()} .. {result.min_levels[:, :, j].max()}")
+    print(f"wrote {out}/sweep.csv, sweep.png")
+    return 0

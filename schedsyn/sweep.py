@@ -1,0 +1,707 @@
+"""Sensitivity sweeps over the model parameters ``tau`` and ``dT0``, and the backends that run them.
+
+Two kinds of sweep over a grid of ``(tau_s, dt0_c)`` points:
+
+* **fixed plan** (:func:`sweep_fixed`, :func:`verify_box`): how the coverage of one chamber
+  programme degrades when the device's ``tau`` and ``dT0`` are not the planned ones. The
+  metric is :func:`schedsyn.coverage.coverage_report`, unchanged.
+* **re-plan** (:func:`sweep_replan`): plan again at every point with a caller's ``plan_fn``
+  (how much the optimum itself moves).
+
+Vectorisation of the fixed-plan sweep. The model is affine in the rates (see
+:mod:`schedsyn.model`)::
+
+    T = A_T(tau) u + b_T(tau, dT0),   g = A_g(tau) u + b_g(tau, dT0)
+
+and ``dT0`` enters only through the free response (``T_free`` depends on ``Tk0 + dT0``
+and ``T0``)::
+
+    b_T = e T0 + (1 - e)(Tk0 + dT0),   b_g = e (Tk0 + dT0 - T0) / tau,   e = exp(-t/tau)
+
+so for one ``tau`` a single :func:`~schedsyn.model.affine_response` and one product
+``A u`` serve every ``dT0``; each ``dT0`` then costs one elementwise free response and the
+coverage metric. The grid is chunked by ``tau`` value for the parallel backends.
+
+Backends (:func:`run_map`): ``"serial"`` (in this process), ``"local"`` (a process pool on
+the local cores) or a Dask scheduler address such as ``"tcp://HOST:PORT"`` (needs the
+``dask`` extra). Every backend returns the same results in the same order.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from functools import partial
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .coverage import coverage_report
+from .errors import InfeasiblePlanError, ParameterError, SchedsynError
+from .grid import BinGrid
+from .model import FirstOrderLag, affine_response
+from .params import ThermalParams
+from .programme import Programme
+from .simulate import dense_times
+
+#: The issue's minimum density of a verification sweep over a box (tau x dT0 points).
+MIN_VERIFY_N_TAU = 9
+MIN_VERIFY_N_DT0 = 7
+
+__all__ = [
+    "ReplanResult",
+    "SweepResult",
+    "parse_grid",
+    "parse_range",
+    "run_map",
+    "sweep_fixed",
+    "sweep_replan",
+    "verify_box",
+]
+
+
+# ---------------------------------------------------------------------------------------
+# grid strings
+# ---------------------------------------------------------------------------------------
+def _number(text: str, what: str, name: str, spec: str, example: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise ParameterError(
+            f"{name}: {what} {text.strip()!r} in {spec!r} is not a number (expected {example})"
+        ) from None
+    if not math.isfinite(v):
+        raise ParameterError(f"{name}: {what} in {spec!r} must be finite (expected {example})")
+    return v
+
+
+def parse_grid(spec: str, name: str = "grid", unit: str = "") -> np.ndarray:
+    """Parse ``"START:STOP:N"`` (N evenly spaced values, both ends included) or ``"VALUE"``.
+
+    Examples: ``"1800:3000:13"`` gives 1800, 1900, ..., 3000; ``"2400"`` gives one value.
+
+    Raises
+    ------
+    ParameterError
+        One line naming ``name``, what is wrong and the expected form.
+    """
+    example = f"START:STOP:N such as 1800:3000:13{' ' + unit if unit else ''}, or one value"
+    text = str(spec).strip()
+    parts = text.split(":")
+    if len(parts) == 1:
+        return np.array([_number(parts[0], "value", name, text, example)])
+    if len(parts) != 3:
+        raise ParameterError(
+            f"{name}: {text!r} has {len(parts)} ':'-separated parts; expected {example}"
+        )
+    start = _number(parts[0], "START", name, text, example)
+    stop = _number(parts[1], "STOP", name, text, example)
+    try:
+        n = int(parts[2])
+    except ValueError:
+        raise ParameterError(
+            f"{name}: N {parts[2].strip()!r} in {text!r} is not a whole number of points "
+            f"(expected {example})"
+        ) from None
+    if n < 1:
+        raise ParameterError(f"{name}: N in {text!r} must be >= 1 point, got {n}")
+    if n > 10_000:
+        raise ParameterError(f"{name}: N in {text!r} is {n}; use at most 10000 points per axis")
+    if n == 1:
+        if start != stop:
+            raise ParameterError(
+                f"{name}: one point (N = 1) needs START = STOP, got {text!r}; give one value "
+                "instead or N >= 2"
+            )
+        return np.array([start])
+    if not start < stop:
+        raise ParameterError(f"{name}: START must be < STOP in {text!r}")
+    return np.linspace(start, stop, n)
+
+
+def parse_range(spec: str, name: str = "range") -> tuple[float, float]:
+    """Parse ``"LO:HI"`` (``LO <= HI``) into a pair of floats, e.g. ``"2000:2800"``."""
+    example = "LO:HI such as 2000:2800"
+    text = str(spec).strip()
+    parts = text.split(":")
+    if len(parts) != 2:
+        raise ParameterError(f"{name}: {text!r} is not {example}")
+    lo = _number(parts[0], "LO", name, text, example)
+    hi = _number(parts[1], "HI", name, text, example)
+    if lo > hi:
+        raise ParameterError(f"{name}: LO must be <= HI in {text!r}")
+    return lo, hi
+
+
+def _axis(values, name: str) -> np.ndarray:
+    v = np.atleast_1d(np.asarray(values, dtype=float))
+    if v.ndim != 1 or v.size == 0:
+        raise ParameterError(f"{name} must be a non-empty 1-D sequence of numbers")
+    if not np.all(np.isfinite(v)):
+        raise ParameterError(f"{name} must be finite numbers")
+    if v.size > 1 and not np.all(np.diff(v) > 0):
+        raise ParameterError(f"{name} must be strictly increasing, got {v.tolist()}")
+    return v
+
+
+def _check_params(tau_s_values: np.ndarray, dt0_c_values: np.ndarray) -> None:
+    # ThermalParams validates the ranges and words the message
+    for tau in (tau_s_values[0], tau_s_values[-1]):
+        for dt0 in (dt0_c_values[0], dt0_c_values[-1]):
+            ThermalParams(tau_s=float(tau), dt0_c=float(dt0))
+
+
+def _deltas(deltas_c_per_min) -> tuple[float, ...]:
+    d = tuple(float(x) for x in np.atleast_1d(np.asarray(deltas_c_per_min, dtype=float)))
+    if not d:
+        raise ParameterError("deltas_c_per_min needs at least one gradient separation, degC/min")
+    for x in d:
+        if not (math.isfinite(x) and x > 0):
+            raise ParameterError(f"every delta_c_per_min must be > 0 degC/min, got {x}")
+    if len(set(d)) != len(d):
+        raise ParameterError(f"deltas_c_per_min has repeated values: {d}")
+    return d
+
+
+def delta_tag(delta_c_per_min: float) -> str:
+    """Column suffix of a gradient separation: 0.05 -> ``delta_0p05``, 0.1 -> ``delta_0p1``."""
+    return "delta_" + f"{delta_c_per_min:g}".replace(".", "p").replace("-", "m")
+
+
+# ---------------------------------------------------------------------------------------
+# backends
+# ---------------------------------------------------------------------------------------
+def _progress_bar(total: int, progress: bool, desc: str | None):
+    from tqdm import tqdm
+
+    return tqdm(total=total, disable=not progress, file=sys.stderr, desc=desc, leave=False)
+
+
+def _is_dask_address(backend: str) -> bool:
+    return "://" in backend
+
+
+def _local_context():
+    # forkserver: no fork() of a multi-threaded parent (deadlock-prone; warns on 3.12+);
+    # the server imports schedsyn.sweep once, so each worker starts in milliseconds.
+    import multiprocessing as mp
+
+    if "forkserver" in mp.get_all_start_methods():
+        ctx = mp.get_context("forkserver")
+        ctx.set_forkserver_preload(["schedsyn.sweep"])
+        return ctx
+    return mp.get_context("spawn")
+
+
+def run_map(
+    func: Callable[[Any], Any],
+    items: Iterable[Any],
+    backend: Any = "local",
+    *,
+    workers: int | None = None,
+    progress: bool = True,
+    desc: str | None = None,
+) -> list[Any]:
+    """``[func(x) for x in items]`` on a backend, in the order of ``items``.
+
+    Parameters
+    ----------
+    func : callable
+        Picklable (a module-level function or a ``functools.partial`` of one) for every
+        backend but ``"serial"``.
+    items : iterable
+        Picklable arguments, one call each.
+    backend : str or distributed.Client
+        ``"serial"`` (this process), ``"local"`` (a process pool on this machine's cores;
+        ``workers=1`` runs serially) or a Dask scheduler address ``"tcp://HOST:PORT"``
+        (any ``scheme://...`` that :class:`distributed.Client` accepts), or a connected
+        ``distributed.Client``. The workers of a remote cluster need schedsyn installed.
+    workers : int, optional
+        Process count of the local pool (default: the number of cores, at most
+        ``len(items)``). Ignored by the other backends.
+    progress : bool
+        Show a tqdm progress bar on stderr.
+
+    Raises
+    ------
+    ParameterError
+        Unknown backend or bad worker count.
+    SchedsynError
+        The Dask backend without ``dask[distributed]`` installed, or an unreachable
+        scheduler. Exceptions raised by ``func`` propagate unchanged.
+    """
+    items = list(items)
+    if workers is not None and (int(workers) != workers or workers < 1):
+        raise ParameterError(f"workers must be a whole number >= 1, got {workers!r}")
+    if not items:
+        return []
+    if hasattr(backend, "submit") and hasattr(backend, "gather"):
+        return _run_dask_client(backend, func, items, progress, desc)
+    if not isinstance(backend, str):
+        raise ParameterError(
+            f"backend must be 'serial', 'local' or a Dask scheduler address, got {backend!r}"
+        )
+    if backend == "serial" or (backend == "local" and (workers == 1 or len(items) == 1)):
+        out = []
+        with _progress_bar(len(items), progress, desc) as bar:
+            for x in items:
+                out.append(func(x))
+                bar.update(1)
+        return out
+    if backend == "local":
+        return _run_local(func, items, workers, progress, desc)
+    if _is_dask_address(backend):
+        return _run_dask(backend, func, items, progress, desc)
+    raise ParameterError(
+        f"backend must be 'serial', 'local' or a Dask scheduler address like "
+        f"tcp://HOST:PORT, got {backend!r}"
+    )
+
+
+def _run_local(func, items, workers, progress, desc) -> list[Any]:
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
+
+    n = min(int(workers) if workers else (os.cpu_count() or 1), len(items))
+    out: list[Any] = [None] * len(items)
+    pool = ProcessPoolExecutor(max_workers=n, mp_context=_local_context())
+    try:
+        futures = {pool.submit(func, x): i for i, x in enumerate(items)}
+        with _progress_bar(len(items), progress, desc) as bar:
+            for fut in as_completed(futures):
+                out[futures[fut]] = fut.result()
+                bar.update(1)
+    except BrokenProcessPool as exc:
+        pool.shutdown(wait=True, cancel_futures=True)
+        raise SchedsynError(
+            f"a worker process of the local pool died ({exc}); when calling schedsyn from a "
+            "script, guard its entry point with `if __name__ == '__main__':`, or use the "
+            "serial backend"
+        ) from None
+    except BaseException:
+        pool.shutdown(wait=True, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
+    return out
+
+
+def _run_dask(address: str, func, items, progress, desc) -> list[Any]:
+    try:
+        from distributed import Client
+    except ImportError:
+        raise SchedsynError(
+            "the Dask backend needs dask[distributed]: pip install 'schedsyn[dask]' "
+            "(or run without --dask)"
+        ) from None
+    try:
+        client = Client(address, timeout="10s", set_as_default=False)
+    except (OSError, TimeoutError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise SchedsynError(
+            f"cannot reach the Dask scheduler at {address} ({first}); start one with "
+            "`dask scheduler` and workers with `dask worker ADDRESS`, or run without --dask"
+        ) from None
+    try:
+        return _run_dask_client(client, func, items, progress, desc)
+    finally:
+        client.close()
+
+
+def _run_dask_client(client, func, items, progress, desc) -> list[Any]:
+    from distributed import as_completed
+
+    futures = client.map(func, items, pure=False)
+    with _progress_bar(len(items), progress, desc) as bar:
+        for _ in as_completed(futures, loop=client.loop):
+            bar.update(1)
+    return client.gather(futures)
+
+
+# ---------------------------------------------------------------------------------------
+# fixed-plan sweep
+# ---------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class _TauChunk:
+    """One ``tau`` row of a fixed-plan sweep (the unit of parallel work; picklable)."""
+
+    programme: Programme
+    grid: BinGrid
+    tau_s: float
+    dt0_c_values: tuple[float, ...]
+    levels_required: int
+    deltas_c_per_min: tuple[float, ...]
+    dt_min: float
+    t0_c: float
+
+
+def _sweep_tau(chunk: _TauChunk) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Coverage and min levels ``(n_dt0, n_delta)`` and T range ``(n_dt0,)`` for one tau."""
+    prog = chunk.programme
+    times = dense_times(prog.total_min, chunk.dt_min)
+    # A(tau) does not depend on dT0: one affine response for the whole row
+    resp = affine_response(
+        FirstOrderLag(ThermalParams(tau_s=chunk.tau_s, dt0_c=0.0)),
+        prog.durations_min, times, prog.start_c, chunk.t0_c,
+    )
+    t_forced = resp.a_t @ prog.rates_c_per_min  # A_T u
+    g_forced = resp.a_g @ prog.rates_c_per_min  # A_g u
+    n_dt0, n_delta = len(chunk.dt0_c_values), len(chunk.deltas_c_per_min)
+    cov = np.empty((n_dt0, n_delta))
+    lev = np.empty((n_dt0, n_delta), dtype=np.int64)
+    t_lo = np.empty(n_dt0)
+    t_hi = np.empty(n_dt0)
+    for i, dt0 in enumerate(chunk.dt0_c_values):
+        # b(tau, dT0): the free response, the only place dT0 enters
+        b_t, b_g = FirstOrderLag(ThermalParams(tau_s=chunk.tau_s, dt0_c=dt0)).free(
+            times, prog.start_c, chunk.t0_c
+        )
+        temp = t_forced + b_t  # T = A_T u + b_T
+        grad = g_forced + b_g  # g = A_g u + b_g
+        t_lo[i], t_hi[i] = temp.min(), temp.max()
+        for j, delta in enumerate(chunk.deltas_c_per_min):
+            rep = coverage_report(temp, grad, chunk.grid, chunk.levels_required, delta)
+            cov[i, j] = rep.coverage
+            lev[i, j] = rep.min_levels
+    return cov, lev, t_lo, t_hi
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, slots=True)
+class SweepResult:
+    """Coverage of one programme over a ``tau_s`` x ``dt0_c`` grid.
+
+    Attributes
+    ----------
+    region_c : (float, float)
+        Working region, degC.
+    tau_s_values : array (n_tau,)
+        Time constants, s.
+    dt0_c_values : array (n_dt0,)
+        Self-heating offsets, degC.
+    levels_required : int
+        Distinct gradient levels a bin needs to count as covered.
+    deltas_c_per_min : tuple of float
+        Gradient separations, degC/min; the first one is *the* coverage (``coverage``,
+        ``min_levels`` columns).
+    coverage : array (n_tau, n_dt0, n_delta)
+        Fraction of bins covered, 0..1.
+    min_levels : array (n_tau, n_dt0, n_delta)
+        Fewest distinct levels of any bin.
+    t_min_c, t_max_c : array (n_tau, n_dt0)
+        Range of the internal temperature over the programme, degC.
+    bin_c : float
+        Bin width, degC.
+    """
+
+    region_c: tuple[float, float]
+    tau_s_values: np.ndarray
+    dt0_c_values: np.ndarray
+    levels_required: int
+    deltas_c_per_min: tuple[float, ...]
+    coverage: np.ndarray
+    min_levels: np.ndarray
+    t_min_c: np.ndarray
+    t_max_c: np.ndarray
+    bin_c: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("tau_s_values", "dt0_c_values", "coverage", "min_levels", "t_min_c",
+                     "t_max_c"):
+            object.__setattr__(self, name, _frozen(getattr(self, name)))
+
+    # -- views at the first (primary) delta ----------------------------------------------
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self.tau_s_values.size, self.dt0_c_values.size)
+
+    @property
+    def coverage_grid(self) -> np.ndarray:
+        """Coverage at the first delta, ``(n_tau, n_dt0)``."""
+        return self.coverage[:, :, 0]
+
+    @property
+    def min_levels_grid(self) -> np.ndarray:
+        """Min distinct levels at the first delta, ``(n_tau, n_dt0)``."""
+        return self.min_levels[:, :, 0]
+
+    def covered_mask(self, min_coverage: float = 1.0) -> np.ndarray:
+        """``(n_tau, n_dt0)`` True where coverage at the first delta >= ``min_coverage``."""
+        return self.coverage_grid >= min_coverage - 1e-12
+
+    def holds(self, min_coverage: float = 1.0) -> bool:
+        """Whether every grid point reaches ``min_coverage`` (at the first delta)."""
+        return bool(np.all(self.covered_mask(min_coverage)))
+
+    @property
+    def full_share(self) -> float:
+        """Share of grid points with complete coverage (at the first delta)."""
+        return float(np.mean(self.covered_mask(1.0)))
+
+    def worst(self) -> dict[str, float]:
+        """The grid point with the lowest coverage (then fewest levels) at the first delta."""
+        cov, lev = self.coverage_grid.ravel(), self.min_levels_grid.ravel()
+        k = int(np.lexsort((lev, cov))[0])
+        i, j = np.unravel_index(k, self.shape)
+        return {
+            "tau_s": float(self.tau_s_values[i]),
+            "dt0_c": float(self.dt0_c_values[j]),
+            "coverage": float(cov[k]),
+            "min_levels": int(lev[k]),
+        }
+
+    def to_frame(self) -> pd.DataFrame:
+        """One row per grid point (``tau_s`` outer, ``dt0_c`` inner).
+
+        Columns: ``tau_s, dt0_c, coverage, min_levels`` (at the first delta), then
+        ``coverage_delta_<d>, min_levels_delta_<d>`` for every delta (``0.05 -> 0p05``),
+        then ``t_min_c, t_max_c``.
+        """
+        tau, dt0 = np.meshgrid(self.tau_s_values, self.dt0_c_values, indexing="ij")
+        cols: dict[str, np.ndarray] = {
+            "tau_s": tau.ravel(),
+            "dt0_c": dt0.ravel(),
+            "coverage": self.coverage[:, :, 0].ravel(),
+            "min_levels": self.min_levels[:, :, 0].ravel(),
+        }
+        for j, d in enumerate(self.deltas_c_per_min):
+            cols[f"coverage_{delta_tag(d)}"] = self.coverage[:, :, j].ravel()
+            cols[f"min_levels_{delta_tag(d)}"] = self.min_levels[:, :, j].ravel()
+        cols["t_min_c"] = self.t_min_c.ravel()
+        cols["t_max_c"] = self.t_max_c.ravel()
+        return pd.DataFrame(cols)
+
+    def summary(self) -> str:
+        """Coverage range, worst point and the share of the grid with full coverage."""
+        w = self.worst()
+        cov = self.coverage_grid
+        lo, hi = self.region_c
+        return (
+            f"sweep of [{lo:g}, {hi:g}] degC over tau {self.tau_s_values[0]:g} .. "
+            f"{self.tau_s_values[-1]:g} s x dT0 {self.dt0_c_values[0]:g} .. "
+            f"{self.dt0_c_values[-1]:g} degC ({cov.size} points, >= {self.levels_required} "
+            f"levels {self.deltas_c_per_min[0]:g} degC/min apart): coverage "
+            f"{cov.min():.1%} .. {cov.max():.1%}; worst at tau {w['tau_s']:g} s, dT0 "
+            f"{w['dt0_c']:g} degC ({w['coverage']:.1%}, min {w['min_levels']} levels); full "
+            f"coverage on {self.full_share:.1%} of the grid"
+        )
+
+
+def sweep_fixed(
+    programme: Programme,
+    region: tuple[float, float],
+    tau_s_values: Sequence[float],
+    dt0_c_values: Sequence[float],
+    *,
+    levels_required: int = 6,
+    deltas_c_per_min: Sequence[float] = (0.05, 0.1),
+    dt_min: float = 0.1,
+    bin_c: float = 1.0,
+    t0_c: float = 20.0,
+    backend: Any = "serial",
+    workers: int | None = None,
+    progress: bool = False,
+) -> SweepResult:
+    """Coverage of a fixed ``programme`` at every ``(tau_s, dt0_c)`` grid point.
+
+    Each point is exactly ``coverage_report(simulate(programme, ThermalParams(tau, dt0),
+    dt_min=dt_min, t0_c=t0_c))`` on ``BinGrid(*region, bin_c)``, computed with one affine
+    response per ``tau`` (see the module doc).
+
+    Parameters
+    ----------
+    programme : Programme
+        The chamber programme under test.
+    region : (lo_c, hi_c)
+        Working region, degC.
+    tau_s_values, dt0_c_values : sequence of float
+        Strictly increasing grid axes: time constants (s, > 0) and offsets (degC).
+    levels_required : int
+        Distinct gradient levels per bin (default 6, the paper's redundancy).
+    deltas_c_per_min : sequence of float
+        Gradient separations of distinct levels, degC/min; the first is the primary one.
+    dt_min : float
+        Simulation step, min.
+    t0_c : float
+        Internal temperature at t = 0, degC.
+    backend, workers, progress :
+        See :func:`run_map`; the grid is split into one task per ``tau`` value. The result
+        does not depend on the backend.
+    """
+    if not isinstance(programme, Programme):
+        raise ParameterError(f"programme must be a Programme, got {type(programme).__name__}")
+    lo, hi = (float(x) for x in region)
+    grid = BinGrid(lo, hi, float(bin_c))
+    taus = _axis(tau_s_values, "tau_s_values")
+    dt0s = _axis(dt0_c_values, "dt0_c_values")
+    _check_params(taus, dt0s)
+    deltas = _deltas(deltas_c_per_min)
+    if int(levels_required) != levels_required or levels_required < 1:
+        raise ParameterError(f"levels_required must be a whole number >= 1, got {levels_required}")
+    dense_times(programme.total_min, dt_min)  # validates dt_min
+    chunks = [
+        _TauChunk(programme, grid, float(tau), tuple(float(x) for x in dt0s),
+                  int(levels_required), deltas, float(dt_min), float(t0_c))
+        for tau in taus
+    ]
+    rows = run_map(_sweep_tau, chunks, backend, workers=workers, progress=progress,
+                   desc="sweep (tau rows)")
+    return SweepResult(
+        region_c=(lo, hi),
+        tau_s_values=taus,
+        dt0_c_values=dt0s,
+        levels_required=int(levels_required),
+        deltas_c_per_min=deltas,
+        coverage=np.stack([r[0] for r in rows]),
+        min_levels=np.stack([r[1] for r in rows]),
+        t_min_c=np.stack([r[2] for r in rows]),
+        t_max_c=np.stack([r[3] for r in rows]),
+        bin_c=float(bin_c),
+    )
+
+
+def verify_box(
+    programme: Programme,
+    region: tuple[float, float],
+    tau_s_range: tuple[float, float],
+    dt0_c_range: tuple[float, float],
+    n_tau: int = MIN_VERIFY_N_TAU,
+    n_dt0: int = MIN_VERIFY_N_DT0,
+    *,
+    levels_required: int = 6,
+    deltas_c_per_min: Sequence[float] = (0.05, 0.1),
+    dt_min: float = 0.1,
+    bin_c: float = 1.0,
+    t0_c: float = 20.0,
+    backend: Any = "serial",
+    workers: int | None = None,
+    progress: bool = False,
+) -> SweepResult:
+    """Dense fixed-plan sweep over the box ``tau_s_range`` x ``dt0_c_range`` (ends included).
+
+    Used to check a robust plan everywhere in its box, not only at its design scenarios:
+    ``verify_box(...).holds()`` is True when every point has full coverage, and
+    ``.covered_mask()`` shows which part of the box is covered. At least
+    ``MIN_VERIFY_N_TAU`` x ``MIN_VERIFY_N_DT0`` (9 x 7) points; an axis whose range is a
+    single value (``lo == hi``) has one point.
+    """
+    axes = []
+    for name, rng, n, n_min, unit in (
+        ("tau_s_range", tau_s_range, n_tau, MIN_VERIFY_N_TAU, "s"),
+        ("dt0_c_range", dt0_c_range, n_dt0, MIN_VERIFY_N_DT0, "degC"),
+    ):
+        try:
+            lo, hi = (float(x) for x in rng)
+        except (TypeError, ValueError):
+            raise ParameterError(f"{name} must be a pair (lo, hi) in {unit}, got {rng!r}") from None
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
+            raise ParameterError(f"{name} must be finite with lo <= hi {unit}, got {rng!r}")
+        if int(n) != n or n < n_min:
+            raise ParameterError(
+                f"a verification sweep needs at least {n_min} points along {name}, got {n}"
+            )
+        axes.append(np.array([lo]) if lo == hi else np.linspace(lo, hi, int(n)))
+    return sweep_fixed(
+        programme, region, axes[0], axes[1], levels_required=levels_required,
+        deltas_c_per_min=deltas_c_per_min, dt_min=dt_min, bin_c=bin_c, t0_c=t0_c,
+        backend=backend, workers=workers, progress=progress,
+    )
+
+
+# ---------------------------------------------------------------------------------------
+# re-plan sweep
+# ---------------------------------------------------------------------------------------
+def _replan_point(plan_fn: Callable[[ThermalParams], Any], params: ThermalParams) -> dict:
+    """Summary row of one re-plan; a failed plan is a row, not the end of the sweep."""
+    row: dict[str, Any] = {"tau_s": params.tau_s, "dt0_c": params.dt0_c}
+    try:
+        result = plan_fn(params)
+    except InfeasiblePlanError as exc:
+        row.update(status="infeasible", message=str(exc))
+        if exc.best_coverage is not None:
+            row["best_coverage"] = exc.best_coverage
+        return row
+    except SchedsynError as exc:
+        row.update(status="failed", message=f"{type(exc).__name__}: {exc}")
+        return row
+    summary = dict(result.to_summary_dict())
+    for key in ("tau_s", "dt0_c"):
+        summary.pop(key, None)  # the grid point is authoritative
+    row.update(status="ok", message="")
+    row.update(summary)
+    return row
+
+
+@dataclass(frozen=True, slots=True)
+class ReplanResult:
+    """One re-plan per grid point: ``rows`` of plain summary dicts (``tau_s`` outer)."""
+
+    tau_s_values: np.ndarray
+    dt0_c_values: np.ndarray
+    rows: tuple[dict, ...]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "tau_s_values", _frozen(self.tau_s_values))
+        object.__setattr__(self, "dt0_c_values", _frozen(self.dt0_c_values))
+
+    @property
+    def n_ok(self) -> int:
+        return sum(r["status"] == "ok" for r in self.rows)
+
+    def to_frame(self) -> pd.DataFrame:
+        """Columns ``tau_s, dt0_c, status, message`` then the planner's summary keys."""
+        return pd.DataFrame(list(self.rows))
+
+    def summary(self) -> str:
+        """Plans found, and the range of each numeric summary column over the grid."""
+        frame = self.to_frame()
+        text = f"re-planned {len(self.rows)} points: {self.n_ok} plans found"
+        bad = len(self.rows) - self.n_ok
+        if bad:
+            text += f", {bad} infeasible or failed"
+        ok = frame[frame["status"] == "ok"]
+        parts = []
+        for col in ok.columns:
+            if col in ("tau_s", "dt0_c") or not pd.api.types.is_numeric_dtype(ok[col]):
+                continue
+            if pd.api.types.is_bool_dtype(ok[col]) or ok[col].isna().all():
+                continue
+            parts.append(f"{col} {ok[col].min():.4g} .. {ok[col].max():.4g}")
+        if parts:
+            text += "; " + "; ".join(parts)
+        return text
+
+
+def sweep_replan(
+    plan_fn: Callable[[ThermalParams], Any],
+    tau_s_values: Sequence[float],
+    dt0_c_values: Sequence[float],
+    *,
+    backend: Any = "serial",
+    workers: int | None = None,
+    progress: bool = False,
+) -> ReplanResult:
+    """Call ``plan_fn(ThermalParams(tau, dt0))`` at every grid point through :func:`run_map`.
+
+    ``plan_fn`` returns an object with ``.to_summary_dict()`` (plain numbers / strings,
+    e.g. duration and coverage margin). An :class:`InfeasiblePlanError` or other
+    :class:`SchedsynError` at a point becomes a row with ``status`` ``"infeasible"`` /
+    ``"failed"`` and the message; any other exception propagates. For the process and
+    Dask backends ``plan_fn`` must be picklable (module-level function, ``partial`` of
+    one, or an instance of a module-level class).
+    """
+    taus = _axis(tau_s_values, "tau_s_values")
+    dt0s = _axis(dt0_c_values, "dt0_c_values")
+    _check_params(taus, dt0s)
+    points = [ThermalParams(tau_s=float(t), dt0_c=float(d)) for t in taus for d in dt0s]
+    rows = run_map(partial(_replan_point, plan_fn), points, backend, workers=workers,
+                   progress=progress, desc="re-plan")
+    return ReplanResult(taus, dt0s, tuple(rows))
