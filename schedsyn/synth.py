@@ -100,3 +100,40 @@ def synth_log(
     cols["t_true_c"] = traj.t_c
     cols["g_true_c_per_min"] = traj.g_c_per_min
     return pd.DataFrame(cols)
+
+
+def synth_effect_log(
+    programme: Programme,
+    model,
+    *,
+    sample_s: float = 10.0,
+    noise_c: float = 0.02,
+    quant_c: float = 0.01,
+    seed: int = 0,
+    with_air: bool = True,
+    t0_c: float = 20.0,
+) -> pd.DataFrame:
+    """Like :func:`synth_log`, but the truth is an augmented model with a hidden effect.
+
+    ``model`` is a :class:`schedsyn.effects.ModelSpec` (base ``tau_s, dt0_c`` plus one
+    named effect and its parameters, e.g. ``ModelSpec(2400, 3, "chamber_lag",
+    {"tau_chamber_s": 300})``). Linear effects are simulated exactly through the affine
+    machinery, nonlinear ones on a grid of at most 1 s (see
+    :meth:`~schedsyn.effects.ModelSpec.predict`). ``tk_air_c`` is the model's chamber air
+    (lagged, rate-limited or cycling where the effect says so) read with the same noise.
+    The columns are those of :func:`synth_log`.
+    """
+    rng = np.random.default_rng(seed)
+    time_s = sample_times_s(programme.total_min * 60.0, sample_s)
+    t = time_s / 60.0
+    pred = model.predict(programme, t, t0_c=t0_c, grid_min=min(sample_s, 1.0) / 60.0)
+    cols = {
+        "time_s": time_s,
+        "t_int_c": measure(pred.t_c, noise_c, quant_c, rng),
+        "tk_set_c": programme.chamber_at(t),
+    }
+    if with_air:
+        cols["tk_air_c"] = measure(pred.tk_air_c, noise_c, quant_c, rng)
+    cols["t_true_c"] = pred.t_c
+    cols["g_true_c_per_min"] = pred.g_c_per_min
+    return pd.DataFrame(cols)

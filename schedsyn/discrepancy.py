@@ -1,0 +1,771 @@
+"""Model discrepancy: compare a measured log with the model, name the missing effect, augment.
+
+The workflow (data in, data out)::
+
+    log -> setpoint programme -> fit base (tau_s, dt0_c, t0_c)
+        -> residual analysis (where, when, heating/cooling, temperature, white, periodic)
+        -> fit every candidate of schedsyn.effects.EFFECTS
+        -> choose by BIC with a false-alarm guard -> held-out check -> Diagnosis
+
+Fits minimise the squared residuals of the internal temperature predicted from the
+setpoint programme (and, when the log has it, of the chamber air predicted from the
+setpoint) with :func:`scipy.optimize.least_squares`, on block means of the log over
+``fit_step_s`` (default: about 1500 blocks, at most 20 s), so a 9-hour log costs a few
+thousand model evaluations on ~1600 points. The information criterion is::
+
+    BIC = N ln(SSE / N) + k ln N      (N residuals, k fitted parameters incl. tau, dt0, T0)
+
+A candidate replaces ``none`` only if it lowers BIC by more than ``bic_margin`` AND
+lowers the RMS gap by at least ``min_rel_improvement`` (the false-alarm guard; both
+tuned on logs without an effect, see ``scripts/bench_diagnose.py``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+from scipy import optimize, stats
+from scipy.signal import lfilter
+
+from .effects import EFFECTS, Effect, LinearEffectModel, ModelSpec
+from .errors import LogFormatError, ParameterError, SolverFailedError
+from .model import affine_response
+from .programme import Programme
+
+#: Chamber-side effects that only the chamber-air channel can tell from device-side ones.
+_AIR_TWINS = {"chamber_lag": "second_time_constant"}
+
+
+# --------------------------------------------------------------------------------------
+# settings and input preparation
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class DiagnoseSettings:
+    """Knobs of :func:`diagnose` (defaults tuned on synthetic logs, see the benchmark).
+
+    Parameters
+    ----------
+    fit_step_s : float or None
+        Width of the averaging blocks the fit runs on, s (None: log length / 1500,
+        between the sampling period and 20 s).
+    bic_margin : float
+        A candidate must lower BIC by more than this to replace ``none``.
+    min_rel_improvement : float
+        ... and lower the RMS gap (fit data) by at least this fraction.
+    ambiguity_bic : float
+        Other candidates within this BIC of the winner are reported as not told apart.
+    holdout_fraction : float
+        Last fraction of the log kept out of the held-out fit, in (0, 0.9).
+    setpoint_tol_c : float
+        Tolerance of the piecewise-linear reconstruction of the setpoint, degC.
+    effects : tuple of str or None
+        Candidate names (None: the whole library).
+    """
+
+    fit_step_s: float | None = None
+    bic_margin: float = 25.0
+    min_rel_improvement: float = 0.05
+    ambiguity_bic: float = 10.0
+    holdout_fraction: float = 0.3
+    setpoint_tol_c: float = 0.05
+    effects: tuple[str, ...] | None = None
+
+    def __post_init__(self) -> None:
+        if self.fit_step_s is not None and not (
+            math.isfinite(self.fit_step_s) and self.fit_step_s > 0
+        ):
+            raise ParameterError(f"fit_step_s must be > 0 s, got {self.fit_step_s!r}")
+        if not 0.0 < self.holdout_fraction < 0.9:
+            raise ParameterError(
+                f"holdout_fraction must be in (0, 0.9), got {self.holdout_fraction!r}"
+            )
+        for name in ("bic_margin", "min_rel_improvement", "ambiguity_bic", "setpoint_tol_c"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ParameterError(f"{name} must be >= 0, got {v!r}")
+        if self.effects is not None:
+            bad = [e for e in self.effects if e not in EFFECTS]
+            if bad:
+                raise ParameterError(
+                    f"unknown effect(s) {', '.join(bad)}; known: {', '.join(EFFECTS)}"
+                )
+
+
+def setpoint_programme(time_s: np.ndarray, tk_set_c: np.ndarray, tol_c: float = 0.05) -> Programme:
+    """Piecewise-linear :class:`Programme` through a sampled setpoint (Douglas-Peucker).
+
+    Breakpoints are added where the setpoint leaves the chord between the current ones by
+    more than ``tol_c``; time zero is the first sample.
+    """
+    t = (np.asarray(time_s, dtype=float) - float(time_s[0])) / 60.0
+    y = np.asarray(tk_set_c, dtype=float)
+    keep = np.zeros(t.size, dtype=bool)
+    keep[[0, -1]] = True
+    stack = [(0, t.size - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j - i < 2:
+            continue
+        seg_t, seg_y = t[i : j + 1], y[i : j + 1]
+        chord = y[i] + (y[j] - y[i]) * (seg_t - t[i]) / (t[j] - t[i])
+        dev = np.abs(seg_y - chord)
+        k = int(np.argmax(dev))
+        if dev[k] > tol_c:
+            stack.append((i, i + k))
+            stack.append((i + k, j))
+            keep[i + k] = True
+    tb, yb = t[keep], y[keep]
+    d = np.diff(tb)
+    return Programme(d, np.diff(yb) / d, float(yb[0]))
+
+
+@dataclass(frozen=True, slots=True)
+class _Data:
+    """Block means the fit runs on (times in min from the log start)."""
+
+    programme: Programme
+    time_min: np.ndarray
+    t_c: np.ndarray
+    air_time_min: np.ndarray | None
+    air_c: np.ndarray | None
+    step_min: float
+
+    def subset(self, until_min: float) -> _Data:
+        m = self.time_min <= until_min
+        am = None if self.air_time_min is None else self.air_time_min <= until_min
+        return _Data(
+            self.programme, self.time_min[m], self.t_c[m],
+            None if am is None else self.air_time_min[am],
+            None if am is None else self.air_c[am], self.step_min,
+        )
+
+
+def _block_means(t: np.ndarray, v: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
+    ok = np.isfinite(v)
+    t, v = t[ok], v[ok]
+    if t.size == 0:
+        return t, v
+    idx = np.floor((t - t[0]) / width + 1e-9).astype(int)
+    starts = np.flatnonzero(np.r_[True, np.diff(idx) > 0])
+    counts = np.diff(np.r_[starts, t.size])
+    return np.add.reduceat(t, starts) / counts, np.add.reduceat(v, starts) / counts
+
+
+def _prepare(log, settings: DiagnoseSettings) -> tuple[_Data, dict]:
+    if log.tk_set_c is None:
+        raise LogFormatError(
+            f"{getattr(log, 'source', 'log')}: the log has no tk_set_c column; the diagnosis "
+            "predicts the internal temperature from the chamber setpoint programme, so add "
+            "the setpoint (degC) as tk_set_c"
+        )
+    time_s = np.asarray(log.time_s, dtype=float)
+    set_ok = np.isfinite(log.tk_set_c)
+    if set_ok.sum() < 2:
+        raise LogFormatError("column tk_set_c has fewer than 2 finite values")
+    t0_s = float(time_s[0])
+    sp_t = time_s[set_ok]
+    sp_y = np.asarray(log.tk_set_c, dtype=float)[set_ok]
+    if sp_t[0] > t0_s:  # the programme starts at the first row: hold the first setpoint
+        sp_t, sp_y = np.r_[t0_s, sp_t], np.r_[sp_y[0], sp_y]
+    programme = setpoint_programme(sp_t, sp_y, settings.setpoint_tol_c)
+    t_min = (time_s - t0_s) / 60.0
+    dt_s = float(np.median(np.diff(time_s)))
+    duration_s = float(time_s[-1] - t0_s)
+    step_s = settings.fit_step_s
+    if step_s is None:
+        step_s = min(max(duration_s / 1500.0, dt_s), 20.0)
+    step_min = max(step_s, dt_s) / 60.0
+    bt, bv = _block_means(t_min, np.asarray(log.t_int_c, dtype=float), step_min)
+    if bt.size < 20:
+        raise LogFormatError(
+            f"the log has {bt.size} usable blocks of {step_min * 60:g} s; at least 20 are "
+            "needed to fit the model (use a longer log or a smaller fit_step_s)"
+        )
+    at = av = None
+    if log.tk_air_c is not None and np.isfinite(log.tk_air_c).sum() >= 20:
+        at, av = _block_means(t_min, np.asarray(log.tk_air_c, dtype=float), step_min)
+    info = {"sample_s": dt_s, "duration_s": duration_s, "fit_step_s": step_min * 60.0,
+            "t_first_s": t0_s}
+    return _Data(programme, bt, bv, at, av, step_min), info
+
+
+# --------------------------------------------------------------------------------------
+# fitting
+# --------------------------------------------------------------------------------------
+_BASE_NAMES = ("tau_s", "dt0_c", "t0_c")
+
+
+@dataclass(frozen=True, slots=True)
+class CandidateFit:
+    """One fitted candidate (``effect == "none"`` is the base model).
+
+    ``score`` is the BIC (lower is better); ``rms_c`` the RMS gap of the internal
+    temperature on the fit data (block means), degC; ``stderr`` the standard errors of
+    the parameters from the Jacobian (white-residual assumption, so optimistic when the
+    residuals are correlated).
+    """
+
+    effect: str
+    model: ModelSpec
+    t0_c: float
+    values: Mapping[str, float]
+    stderr: Mapping[str, float]
+    n_params: int
+    n_residuals: int
+    sse: float
+    score: float
+    rms_c: float
+    rms_air_c: float | None
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        return dict(self.model.parameters)
+
+
+def _spec(effect: str, theta: np.ndarray, names: Sequence[str]) -> ModelSpec:
+    tau, dt0 = float(theta[0]), float(theta[1])
+    params = {n: float(v) for n, v in zip(names, theta[3:], strict=True)}
+    return ModelSpec(tau, dt0, effect, params)
+
+
+def _residuals(spec: ModelSpec, t0: float, data: _Data) -> tuple[np.ndarray, np.ndarray | None]:
+    times = data.time_min
+    if data.air_time_min is not None:
+        times = np.concatenate((times, data.air_time_min))
+    pred = spec.predict(data.programme, times, t0_c=t0, grid_min=min(data.step_min, 1 / 6))
+    n = data.time_min.size
+    r_t = pred.t_c[:n] - data.t_c
+    r_a = None if data.air_time_min is None else pred.tk_air_c[n:] - data.air_c
+    return r_t, r_a
+
+
+def _fit(effect: str, starts: Sequence[np.ndarray], lo: np.ndarray, hi: np.ndarray,
+         data: _Data, fixed: Mapping[str, float] | None = None) -> CandidateFit:
+    names = () if effect == "none" else EFFECTS[effect].param_names
+    fixed = dict(fixed or {})
+    free_idx = [i for i, n in enumerate(_BASE_NAMES + names) if n not in fixed]
+
+    def full(x: np.ndarray) -> np.ndarray:
+        theta = np.empty(len(_BASE_NAMES) + len(names))
+        for i, n in enumerate(_BASE_NAMES + names):
+            if n in fixed:
+                theta[i] = fixed[n]
+        theta[free_idx] = x
+        return theta
+
+    def fun(x: np.ndarray) -> np.ndarray:
+        theta = full(x)
+        r_t, r_a = _residuals(_spec(effect, theta, names), theta[2], data)
+        return r_t if r_a is None else np.concatenate((r_t, r_a))
+
+    best = None
+    for s in starts:
+        x0 = np.clip(np.asarray(s, dtype=float)[free_idx], lo[free_idx], hi[free_idx])
+        try:
+            res = optimize.least_squares(
+                fun, x0, bounds=(lo[free_idx], hi[free_idx]), x_scale="jac",
+                method="trf", diff_step=1e-4, max_nfev=300, xtol=1e-8, ftol=1e-10,
+            )
+        except (ValueError, np.linalg.LinAlgError) as exc:  # pragma: no cover - defensive
+            raise SolverFailedError(f"fitting {effect} failed: {exc}") from exc
+        if best is None or res.cost < best.cost:
+            best = res
+    theta = full(best.x)
+    r = best.fun
+    n = r.size
+    sse = float(r @ r)
+    k = len(free_idx)
+    # cov = s^2 (J^T J)^-1, s^2 = SSE/(N - k)
+    jac = best.jac
+    try:
+        cov = np.linalg.pinv(jac.T @ jac) * sse / max(n - k, 1)
+        se_free = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    except np.linalg.LinAlgError:  # pragma: no cover - defensive
+        se_free = np.full(k, np.nan)
+    se = dict.fromkeys(_BASE_NAMES + names, 0.0)
+    for j, i in enumerate(free_idx):
+        se[(_BASE_NAMES + names)[i]] = float(se_free[j])
+    spec = _spec(effect, theta, names)
+    r_t, r_a = _residuals(spec, theta[2], data)
+    score = n * math.log(max(sse, 1e-300) / n) + k * math.log(n)
+    return CandidateFit(
+        effect=effect,
+        model=spec,
+        t0_c=float(theta[2]),
+        values={n_: float(v) for n_, v in zip(_BASE_NAMES + names, theta, strict=True)},
+        stderr=se,
+        n_params=k,
+        n_residuals=n,
+        sse=sse,
+        score=score,
+        rms_c=float(np.sqrt(np.mean(r_t**2))),
+        rms_air_c=None if r_a is None else float(np.sqrt(np.mean(r_a**2))),
+    )
+
+
+def _base_bounds(data: _Data) -> tuple[np.ndarray, np.ndarray]:
+    lo = np.array([1.0, -50.0, float(data.t_c.min()) - 50.0])
+    hi = np.array([1e5, 50.0, float(data.t_c.max()) + 50.0])
+    return lo, hi
+
+
+def _base_start(data: _Data) -> np.ndarray:
+    """tau by a log-spaced scan; dt0 and T0 by linear least squares for each tau.
+
+    ``T = e T0 + (1 - e)(Tk0 + dt0) + R_u``: affine in (T0, dt0) for a fixed tau.
+    """
+    prog, t = data.programme, data.time_min
+    best = None
+    span_s = max(t[-1] * 60.0, 60.0)
+    for tau_s in np.geomspace(max(span_s / 2000.0, 1.0), span_s * 2.0, 40):
+        lin = LinearEffectModel(float(tau_s), 0.0)
+        resp = affine_response(lin, prog.durations_min, t, prog.start_c, 0.0)
+        forced = resp.a_t @ prog.rates_c_per_min
+        e = np.exp(-t / (tau_s / 60.0))
+        # T - forced - (1-e) Tk0 = T0 e + dt0 (1 - e)
+        a = np.column_stack((e, 1.0 - e))
+        y = data.t_c - forced - (1.0 - e) * prog.start_c
+        coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+        sse = float(np.sum((a @ coef - y) ** 2))
+        if best is None or sse < best[0]:
+            best = (sse, tau_s, coef)
+    _, tau_s, (t0, dt0) = best
+    return np.array([tau_s, float(np.clip(dt0, -49, 49)), t0])
+
+
+def fit_base(data: _Data) -> CandidateFit:
+    lo, hi = _base_bounds(data)
+    return _fit("none", [_base_start(data)], lo, hi, data)
+
+
+def _periodic_start(base: CandidateFit, data: _Data) -> list[np.ndarray]:
+    """Best periods by a scan with amplitude and phase solved linearly (variable projection).
+
+    For a period P the cycling adds ``a sin + b cos`` to the air; its effect on T is the
+    lag of that input, linear in (a, b).
+    """
+    r_t, r_a = _residuals(base.model, base.t0_c, data)
+    tau_min = base.values["tau_s"] / 60.0
+    span_s = data.time_min[-1] * 60.0
+    h = data.step_min
+    grid = np.arange(0.0, data.time_min[-1] + h, h)
+    p_lo = max(4.0 * data.step_min * 60.0, 60.0)
+    periods = np.geomspace(p_lo, max(span_s / 4.0, 2 * p_lo), 120)
+    scores = []
+    for p_s in periods:
+        w = 2.0 * np.pi * 60.0 / p_s
+        cols_t, cols_a = [], []
+        for f in (np.sin, np.cos):
+            v = f(w * grid)
+            a_ = math.exp(-h / tau_min)
+            beta = 1.0 - tau_min * (1.0 - a_) / h
+            c = (1.0 - a_) * v[:-1] + beta * np.diff(v)
+            y = np.concatenate(([0.0], lfilter([1.0], [1.0, -a_], c)))
+            cols_t.append(np.interp(data.time_min, grid, y))
+            if r_a is not None:
+                cols_a.append(f(w * data.air_time_min))
+        a_mat = np.column_stack(cols_t)
+        y_vec = -r_t
+        if r_a is not None:
+            a_mat = np.vstack((a_mat, np.column_stack(cols_a)))
+            y_vec = np.concatenate((y_vec, -r_a))
+        coef, *_ = np.linalg.lstsq(a_mat, y_vec, rcond=None)
+        scores.append((float(np.sum((a_mat @ coef - y_vec) ** 2)), p_s, coef))
+    scores.sort(key=lambda s: s[0])
+    starts = []
+    for _, p_s, (cs, cc) in scores[:3]:
+        # a sin(wt) + b cos(wt) = A sin(wt + phi), A = hypot(a, b), phi = atan2(b, a)
+        starts.append((max(math.hypot(cs, cc), 1e-3), p_s, math.atan2(cc, cs)))
+    return starts
+
+
+def _effect_starts(eff: Effect, base: CandidateFit, data: _Data) -> list[np.ndarray]:
+    b = np.array([base.values[n] for n in _BASE_NAMES])
+    tau = b[0]
+    scale = tau / 2400.0
+    extra: list[tuple[float, ...]]
+    if eff.name == "chamber_rate_limit":
+        rates = data.programme.rates_c_per_min
+        cool = max(-float(rates.min()), 0.05)
+        heat = max(float(rates.max()), 0.05)
+        extra = [(0.5 * cool, 1.05 * heat), (0.8 * cool, 1.05 * heat),
+                 (1.05 * cool, 0.6 * heat)]
+    elif eff.name == "chamber_cycling":
+        extra = _periodic_start(base, data)
+    elif eff.name == "asymmetric_tau":
+        extra = [(tau * 0.85, tau * 1.15), (tau * 1.15, tau * 0.85)]
+    elif eff.name == "selfheat_slope":
+        extra = [(0.0,), (0.03,), (-0.03,)]
+    else:  # times scale with the device's time constant
+        extra = [tuple(v * scale for v in g) for g in eff.guesses]
+    return [np.concatenate((b, np.asarray(e, dtype=float))) for e in extra]
+
+
+def _effect_bounds(eff: Effect, data: _Data) -> tuple[np.ndarray, np.ndarray]:
+    lo, hi = _base_bounds(data)
+    elo = np.array([bd[0] for bd in eff.bounds])
+    ehi = np.array([bd[1] for bd in eff.bounds])
+    if eff.name == "chamber_rate_limit":
+        rates = data.programme.rates_c_per_min
+        ehi = np.array([max(-float(rates.min()), 0.05), max(float(rates.max()), 0.05)]) * 1.5
+    return np.concatenate((lo, elo)), np.concatenate((hi, ehi))
+
+
+def fit_candidate(name: str, base: CandidateFit, data: _Data) -> CandidateFit:
+    eff = EFFECTS[name]
+    lo, hi = _effect_bounds(eff, data)
+    return _fit(name, _effect_starts(eff, base, data), lo, hi, data)
+
+
+# --------------------------------------------------------------------------------------
+# residual analysis
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class ResidualReport:
+    """Where and how the base model misses (residual = model - measured, degC).
+
+    ``segments``: one row per setpoint segment (kind heating/cooling/hold, rms, mean);
+    ``by_temperature``: rms per 10 degC band of the measured temperature;
+    ``ljung_box_p``: p-value of the Ljung-Box test on ``lags`` lags (small = not white);
+    ``period_s``: dominant period of the residual and ``period_share`` its fraction of
+    the residual variance; ``periodic`` if that peak is significant (Fisher's g test).
+    """
+
+    rms_c: float
+    max_abs_c: float
+    time_of_max_min: float
+    rms_heating_c: float
+    rms_cooling_c: float
+    rms_hold_c: float
+    lag1_autocorr: float
+    ljung_box_q: float
+    ljung_box_p: float
+    lags: int
+    white: bool
+    period_s: float
+    period_share: float
+    periodic: bool
+    segments: pd.DataFrame = field(repr=False)
+    by_temperature: pd.DataFrame = field(repr=False)
+
+    def summary(self) -> str:
+        worst = self.segments.sort_values("rms_c", ascending=False).head(1)
+        seg = ""
+        if len(worst):
+            w = worst.iloc[0]
+            seg = (f"; worst segment {int(w['step'])} ({w['kind']}, {w['start_min']:.0f}-"
+                   f"{w['end_min']:.0f} min) rms {w['rms_c']:.3f} degC")
+        return (
+            f"residual rms {self.rms_c:.3f} degC (heating {self.rms_heating_c:.3f}, cooling "
+            f"{self.rms_cooling_c:.3f}, hold {self.rms_hold_c:.3f}), max {self.max_abs_c:.3f} "
+            f"degC at {self.time_of_max_min:.0f} min{seg}; "
+            f"{'white' if self.white else 'structured (not white)'}, Ljung-Box p = "
+            f"{self.ljung_box_p:.2g}; dominant period {self.period_s:.0f} s "
+            f"({self.period_share:.0%} of variance{', significant' if self.periodic else ''})"
+        )
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
+
+
+def analyse_residuals(
+    time_min: np.ndarray, residual_c: np.ndarray, measured_c: np.ndarray, programme: Programme
+) -> ResidualReport:
+    r = np.asarray(residual_c, dtype=float)
+    t = np.asarray(time_min, dtype=float)
+    edges = np.concatenate(([0.0], np.cumsum(programme.durations_min)))
+    seg = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, programme.n_segments - 1)
+    rates = programme.rates_c_per_min
+    kind_of = np.where(rates > 1e-9, "heating", np.where(rates < -1e-9, "cooling", "hold"))
+    rows = []
+    for i in np.unique(seg):
+        m = seg == i
+        rows.append({"step": i + 1, "start_min": edges[i], "end_min": edges[i + 1],
+                     "rate_c_per_min": rates[i], "kind": kind_of[i], "n": int(m.sum()),
+                     "rms_c": _rms(r[m]), "mean_c": float(r[m].mean())})
+    segments = pd.DataFrame(rows)
+    kinds = kind_of[seg]
+    band = 10.0 * np.floor(np.asarray(measured_c) / 10.0)
+    temp_rows = [{"t_lo_c": b, "t_hi_c": b + 10.0, "n": int((band == b).sum()),
+                  "rms_c": _rms(r[band == b]), "mean_c": float(r[band == b].mean())}
+                 for b in np.unique(band)]
+    # whiteness: Ljung-Box Q = n (n+2) sum_k rho_k^2 / (n - k)
+    x = r - r.mean()
+    n = x.size
+    lags = int(max(1, min(20, n // 5)))
+    denom = float(x @ x) or 1e-300
+    rho = np.array([float(x[:-k] @ x[k:]) / denom for k in range(1, lags + 1)])
+    q = float(n * (n + 2) * np.sum(rho**2 / (n - np.arange(1, lags + 1))))
+    p = float(stats.chi2.sf(q, lags))
+    # periodogram (uniform spacing assumed: block means are nearly uniform)
+    spec = np.abs(np.fft.rfft(x)) ** 2
+    freqs = np.fft.rfftfreq(n, d=float(np.median(np.diff(t))) * 60.0)
+    spec, freqs = spec[1:], freqs[1:]
+    k = int(np.argmax(spec)) if spec.size else 0
+    share = float(spec[k] / spec.sum()) if spec.size and spec.sum() > 0 else 0.0
+    # Fisher's g test: P(g > x) ~ m (1 - x)^(m-1)
+    m = spec.size
+    g_p = min(1.0, m * (1.0 - share) ** (m - 1)) if m > 1 else 1.0
+    i_max = int(np.argmax(np.abs(r)))
+    return ResidualReport(
+        rms_c=_rms(r), max_abs_c=float(np.abs(r).max()), time_of_max_min=float(t[i_max]),
+        rms_heating_c=_rms(r[kinds == "heating"]), rms_cooling_c=_rms(r[kinds == "cooling"]),
+        rms_hold_c=_rms(r[kinds == "hold"]), lag1_autocorr=float(rho[0]), ljung_box_q=q,
+        ljung_box_p=p, lags=lags, white=p > 0.01,
+        period_s=float(1.0 / freqs[k]) if spec.size else float("nan"),
+        period_share=share, periodic=bool(g_p < 0.01 and share > 0.05),
+        segments=segments, by_temperature=pd.DataFrame(temp_rows),
+    )
+
+
+# --------------------------------------------------------------------------------------
+# the result
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class Diagnosis:
+    """What :func:`diagnose` found.
+
+    ``effect`` is the chosen effect name or ``"none"``; ``model`` the augmented model
+    (write it with ``json.dumps(d.model.to_json_dict())``); RMS figures are of the
+    internal temperature predicted from the setpoint programme, over every finite sample
+    of the log (``rms_*``) and over the held-out last part when fitted without it
+    (``holdout_*``), degC; ``ambiguous_with`` lists effects the channels present cannot
+    tell apart from the chosen one; ``warnings`` are sentences for the report.
+    """
+
+    effect: str
+    model: ModelSpec
+    base: ModelSpec
+    parameters: Mapping[str, float]
+    stderr: Mapping[str, float]
+    rms_before_c: float
+    rms_after_c: float
+    holdout_rms_before_c: float
+    holdout_rms_after_c: float
+    holdout_start_min: float
+    candidates: tuple[CandidateFit, ...]
+    base_fit: CandidateFit
+    residuals_before: ResidualReport
+    residuals_after: ResidualReport
+    ambiguous_with: tuple[str, ...]
+    warnings: tuple[str, ...]
+    has_air: bool
+    info: Mapping[str, float]
+    time_min: np.ndarray = field(repr=False)
+    measured_c: np.ndarray = field(repr=False)
+    before_c: np.ndarray = field(repr=False)
+    after_c: np.ndarray = field(repr=False)
+    before_g_c_per_min: np.ndarray = field(repr=False)
+    after_g_c_per_min: np.ndarray = field(repr=False)
+
+    @property
+    def main_parameter(self) -> tuple[str, float] | None:
+        if self.effect == "none":
+            return None
+        name = EFFECTS[self.effect].main_param
+        return name, float(self.parameters[name])
+
+    def to_frame(self) -> pd.DataFrame:
+        """The ranking: one row per candidate (base first), best score first after it."""
+        rows = []
+        for c in (self.base_fit, *self.candidates):
+            rows.append({
+                "effect": c.effect,
+                "chosen": c.effect == self.effect,
+                "score_bic": c.score,
+                "delta_bic_vs_none": c.score - self.base_fit.score,
+                "rms_c": c.rms_c,
+                "rms_air_c": c.rms_air_c,
+                "n_params": c.n_params,
+                "tau_s": c.values["tau_s"],
+                "dt0_c": c.values["dt0_c"],
+                "parameters": "; ".join(f"{k}={v:.4g}" for k, v in c.parameters.items()),
+            })
+        return pd.DataFrame(rows)
+
+    def to_json_dict(self) -> dict:
+        return {
+            "effect": self.effect,
+            "parameters": {k: float(v) for k, v in self.parameters.items()},
+            "uncertainty": {k: float(v) for k, v in self.stderr.items()},
+            "base": {"tau_s": self.base.tau_s, "dt0_c": self.base.dt0_c},
+            "model": self.model.to_json_dict(),
+            "rms_before_c": self.rms_before_c,
+            "rms_after_c": self.rms_after_c,
+            "holdout": {
+                "start_min": self.holdout_start_min,
+                "rms_before_c": self.holdout_rms_before_c,
+                "rms_after_c": self.holdout_rms_after_c,
+            },
+            "ambiguous_with": list(self.ambiguous_with),
+            "warnings": list(self.warnings),
+            "residuals": {
+                "rms_heating_c": self.residuals_before.rms_heating_c,
+                "rms_cooling_c": self.residuals_before.rms_cooling_c,
+                "rms_hold_c": self.residuals_before.rms_hold_c,
+                "ljung_box_p": self.residuals_before.ljung_box_p,
+                "white": self.residuals_before.white,
+                "period_s": self.residuals_before.period_s,
+                "periodic": self.residuals_before.periodic,
+            },
+            "candidates": [
+                {"effect": c.effect, "score": c.score, "rms_c": c.rms_c,
+                 "parameters": {k: float(v) for k, v in c.parameters.items()}}
+                for c in self.candidates
+            ],
+        }
+
+    def summary(self) -> str:
+        lines = [f"effect: {self.effect}"]
+        for k, v in self.parameters.items():
+            lines.append(f"  {k} = {v:.4g} +- {self.stderr.get(k, float('nan')):.2g}")
+        lines.append(f"RMS gap (internal temperature from the setpoint): {self.rms_before_c:.4f}"
+                     f" -> {self.rms_after_c:.4f} degC")
+        lines.append(f"held-out (after {self.holdout_start_min:.0f} min, fitted without it): "
+                     f"{self.holdout_rms_before_c:.4f} -> {self.holdout_rms_after_c:.4f} degC")
+        lines.append("before: " + self.residuals_before.summary())
+        lines.extend(f"warning: {w}" for w in self.warnings)
+        return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------------------
+# the workflow
+# --------------------------------------------------------------------------------------
+def _full_prediction(spec: ModelSpec, t0: float, programme: Programme, t: np.ndarray):
+    return spec.predict(programme, t, t0_c=t0)
+
+
+def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
+    """Fit the base model, examine residuals, fit every candidate, choose, check held out.
+
+    Parameters
+    ----------
+    log : MeasuredLog
+        From :func:`schedsyn.logs.read_log` / :func:`~schedsyn.logs.log_from_frame`
+        (needs ``tk_set_c``; uses ``tk_air_c`` when present).
+    settings : DiagnoseSettings, optional
+    """
+    settings = DiagnoseSettings() if settings is None else settings
+    data, info = _prepare(log, settings)
+    names = settings.effects if settings.effects is not None else tuple(EFFECTS)
+    has_air = data.air_c is not None
+    base = fit_base(data)
+    fits: dict[str, CandidateFit] = {}
+    for name in names:
+        twin = _AIR_TWINS.get(name)
+        if not has_air and twin in fits:
+            fits[name] = _rename(fits[twin], name)
+            continue
+        fits[name] = fit_candidate(name, base, data)
+        if not has_air and name in _AIR_TWINS.values():
+            for cl, dev in _AIR_TWINS.items():
+                if dev == name and cl in names and cl not in fits:
+                    fits[cl] = _rename(fits[name], cl)
+    ranked = tuple(sorted(fits.values(), key=lambda c: c.score))
+    warnings: list[str] = []
+    chosen = "none"
+    best = ranked[0] if ranked else None
+    if best is not None:
+        gain = base.score - best.score
+        rel = 1.0 - math.sqrt(best.sse / base.sse) if base.sse > 0 else 0.0
+        if gain > settings.bic_margin and rel >= settings.min_rel_improvement:
+            chosen = best.effect
+        elif gain > settings.bic_margin:
+            warnings.append(
+                f"{best.effect} lowers BIC by {gain:.0f} but the RMS gap only by {rel:.1%} "
+                f"(< {settings.min_rel_improvement:.0%}): treated as no effect")
+    ambiguous: list[str] = []
+    if chosen != "none":
+        if not has_air:
+            pair = {"chamber_lag", "second_time_constant"}
+            if chosen in pair:
+                # same internal temperature: name the device-side one, flag the other
+                other = (pair - {chosen}).pop()
+                if other in fits:
+                    chosen = "second_time_constant"
+                    ambiguous.append("chamber_lag")
+                    warnings.append(
+                        "chamber_lag and second_time_constant give the same internal "
+                        "temperature; without tk_air_c they cannot be told apart "
+                        "(log the chamber air to decide)")
+        for c in ranked:
+            if c.effect in (chosen, *ambiguous):
+                continue
+            if c.score - fits[chosen].score < settings.ambiguity_bic:
+                ambiguous.append(c.effect)
+                warnings.append(
+                    f"{c.effect} fits almost as well as {chosen} (BIC {c.score - fits[chosen].score:+.1f});"
+                    " the log does not tell them apart reliably")
+    chosen_fit = fits[chosen] if chosen != "none" else base
+    # full-resolution predictions and residual reports
+    t_all = (np.asarray(log.time_s, dtype=float) - info["t_first_s"]) / 60.0
+    ok = np.isfinite(log.t_int_c)
+    t_ok, meas = t_all[ok], np.asarray(log.t_int_c, dtype=float)[ok]
+    p_before = _full_prediction(base.model, base.t0_c, data.programme, t_ok)
+    p_after = _full_prediction(chosen_fit.model, chosen_fit.t0_c, data.programme, t_ok)
+    res_before = analyse_residuals(data.time_min, _residuals(base.model, base.t0_c, data)[0],
+                                   data.t_c, data.programme)
+    res_after = analyse_residuals(data.time_min,
+                                  _residuals(chosen_fit.model, chosen_fit.t0_c, data)[0],
+                                  data.t_c, data.programme)
+    # held-out check: refit on the first part, predict the rest
+    cut = data.time_min[-1] * (1.0 - settings.holdout_fraction)
+    head = data.subset(cut)
+    h_base = fit_base(head)
+    h_after = fit_candidate(chosen, h_base, head) if chosen != "none" else h_base
+    tail = t_ok > cut
+
+    def tail_rms(fit: CandidateFit) -> float:
+        pr = _full_prediction(fit.model, fit.t0_c, data.programme, t_ok[tail])
+        return _rms(pr.t_c - meas[tail])
+
+    hb, ha = tail_rms(h_base), tail_rms(h_after)
+    if chosen != "none" and ha >= hb:
+        warnings.append(
+            f"on the held-out last {settings.holdout_fraction:.0%} of the log {chosen} does not "
+            f"improve the prediction ({hb:.4f} -> {ha:.4f} degC): treat it with caution")
+    if chosen == "none" and not res_before.white:
+        warnings.append(
+            "the base-model residuals are not white but no candidate explains them well "
+            "enough: an effect outside the library, or a sensor problem")
+    params = dict(chosen_fit.model.parameters)
+    stderr = {k: chosen_fit.stderr[k] for k in params}
+    stderr.update({k: chosen_fit.stderr[k] for k in ("tau_s", "dt0_c")})
+    return Diagnosis(
+        effect=chosen, model=chosen_fit.model, base=base.model, parameters=params,
+        stderr=stderr, rms_before_c=_rms(p_before.t_c - meas),
+        rms_after_c=_rms(p_after.t_c - meas), holdout_rms_before_c=hb,
+        holdout_rms_after_c=ha, holdout_start_min=float(cut), candidates=ranked,
+        base_fit=base, residuals_before=res_before, residuals_after=res_after,
+        ambiguous_with=tuple(ambiguous), warnings=tuple(warnings), has_air=has_air,
+        info=info, time_min=t_ok, measured_c=meas, before_c=p_before.t_c,
+        after_c=p_after.t_c, before_g_c_per_min=p_before.g_c_per_min,
+        after_g_c_per_min=p_after.g_c_per_min,
+    )
+
+
+def _rename(fit: CandidateFit, name: str) -> CandidateFit:
+    """The same fit under a twin effect's name (identical internal temperature)."""
+    eff = EFFECTS[name]
+    values = dict(fit.values)
+    old = [k for k in values if k not in _BASE_NAMES]
+    mapped = dict(zip(eff.param_names, [values[k] for k in old], strict=True))
+    se = {k: fit.stderr[k] for k in _BASE_NAMES}
+    se.update(zip(eff.param_names, [fit.stderr[k] for k in old], strict=True))
+    vals = {k: values[k] for k in _BASE_NAMES} | mapped
+    model = ModelSpec(fit.model.tau_s, fit.model.dt0_c, name, mapped)
+    return CandidateFit(name, model, fit.t0_c, vals, se, fit.n_params, fit.n_residuals,
+                        fit.sse, fit.score, fit.rms_c, fit.rms_air_c)
+
+
+def diagnose_frame(frame: pd.DataFrame, settings: DiagnoseSettings | None = None,
+                   source: str = "log") -> Diagnosis:
+    """:func:`diagnose` on a DataFrame in the log format (validated by the log reader)."""
+    from .logs import log_from_frame
+
+    return diagnose(log_from_frame(frame, source=source), settings)

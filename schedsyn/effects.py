@@ -1,0 +1,523 @@
+"""A library of candidate effects the planning model leaves out, and the augmented models.
+
+The planning model is ``tau dT/dt + T = Tk + dT0`` with the chamber air ``Tk`` equal to
+its setpoint programme. Each :class:`Effect` here is one named, physically meaningful
+augmentation with its own parameters (units in the names), bounds and starting guesses;
+``effect.augment(base, values)`` returns a new :class:`ModelSpec` (the base is untouched).
+
+Linear effects keep the model linear and time invariant, so they are
+:class:`LinearEffectModel` objects (``gain``, ``ramp``, ``step``, ``free``) and go through
+:func:`schedsyn.model.affine_response`, the exact machinery the planner optimises over:
+
+- ``chamber_lag``: ``tau_c dA/dt + A = Tk_set``; ``tau dT/dt + T = A + dT0``.
+- ``second_time_constant``: ``tau2 dM/dt + M = Tk``; ``tau dT/dt + T = M + dT0``.
+  Both give the two-pole unit-ramp response (times in min, ``a = tau``, ``b = tau2``)::
+
+      S(x) = 1 - (a e^{-x/a} - b e^{-x/b}) / (a - b)
+      R(x) = x - (a + b) + (a^2 e^{-x/a} - b^2 e^{-x/b}) / (a - b)
+
+  and, as the extra state starts at the chamber temperature ``Tk0``, the same free
+  response as the first-order lag. They differ only in the chamber air, so they cannot
+  be told apart when the air is not logged.
+- ``dead_time``: ``tau dT/dt + T = Tk(t - d) + dT0``: ``R(x - d)``, ``S(x - d)``.
+- ``selfheat_slope``: ``dT0 = dt0 + s (T - 20)`` gives
+  ``tau/(1-s) dT/dt + T = (Tk + dt0 - 20 s)/(1-s)``: gain ``1/(1-s)``, ``tau_eff =
+  tau/(1-s)``.
+
+Nonlinear effects are simulated by an exact per-step update on a uniform grid (the
+chamber air is linear within a step; first-order hold)::
+
+    T[k+1] = a T[k] + (1-a) v[k] + (v[k+1] - v[k]) (1 - tau (1-a)/h),  a = exp(-h/tau)
+
+with ``v = A + dT0``:
+
+- ``chamber_rate_limit``: ``A[k+1] = A[k] + clip(S[k+1] - A[k], -c h, r h)``;
+- ``chamber_cycling``: ``A = S + amp sin(2 pi t / P + phi)``;
+- ``asymmetric_tau``: ``tau = tau_heat`` while ``v > T`` (heating), else ``tau_cool``.
+
+They expose the limits they imply for the planner through
+:meth:`ModelSpec.planner_limits`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+import numpy as np
+from scipy.signal import lfilter
+
+from .errors import ParameterError
+from .model import affine_response
+from .params import Limits, ThermalParams
+from .programme import Programme
+
+#: Reference temperature of the self-heating slope, degC (the paper's start temperature).
+SLOPE_REF_C = 20.0
+#: Relative separation below which the two poles of a two-pole model are nudged apart.
+_POLE_SEP = 1e-4
+
+
+# --------------------------------------------------------------------------------------
+# linear augmented model (goes through affine_response)
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class LinearEffectModel:
+    """Linear device model with optional second pole, dead time and self-heating slope.
+
+    ``tau_s dT/dt + T = M(t - delay_s) + dt0_c + s (T - 20)``, ``tau2_s dM/dt + M = Tk``
+    (``M = Tk`` when ``tau2_s == 0``). Satisfies :class:`schedsyn.model.LinearThermalModel`
+    (times in minutes), so the planner and :func:`schedsyn.simulate.simulate` accept it.
+
+    Parameters
+    ----------
+    tau_s : float
+        Device time constant, s, > 0.
+    dt0_c : float
+        Self-heating offset at 20 degC, degC.
+    tau2_s : float
+        Second pole (chamber lag or second thermal mass), s, >= 0 (0 = none).
+    delay_s : float
+        Transport delay from chamber to device, s, >= 0.
+    dt0_slope_c_per_c : float
+        Change of the self-heating offset per degC of device temperature, in (-0.5, 0.5).
+    """
+
+    tau_s: float = 2400.0
+    dt0_c: float = 3.0
+    tau2_s: float = 0.0
+    delay_s: float = 0.0
+    dt0_slope_c_per_c: float = 0.0
+
+    def __post_init__(self) -> None:
+        ThermalParams(self.tau_s, self.dt0_c)  # validates tau_s and dt0_c
+        for name in ("tau2_s", "delay_s"):
+            v = float(getattr(self, name))
+            if not (math.isfinite(v) and 0.0 <= v <= 1e6):
+                raise ParameterError(f"{name} must be within 0 .. 1e6 s, got {v!r}")
+        s = float(self.dt0_slope_c_per_c)
+        if not (math.isfinite(s) and abs(s) < 0.5):
+            raise ParameterError(f"dt0_slope_c_per_c must be within -0.5 .. 0.5, got {s!r}")
+
+    @property
+    def gain(self) -> float:
+        # K = 1/(1 - s)
+        return 1.0 / (1.0 - self.dt0_slope_c_per_c)
+
+    @property
+    def tau_eff_min(self) -> float:
+        # tau_eff = tau/(1 - s), in minutes
+        return self.tau_s / 60.0 / (1.0 - self.dt0_slope_c_per_c)
+
+    def _poles(self) -> tuple[float, float]:
+        a, b = self.tau_eff_min, self.tau2_s / 60.0
+        if b > 0 and abs(a - b) < _POLE_SEP * a:
+            b = a * (1.0 - _POLE_SEP)  # the double pole as the limit of two close ones
+        return a, b
+
+    def _shift(self, x_min: np.ndarray) -> np.ndarray:
+        return np.maximum(np.asarray(x_min, dtype=float) - self.delay_s / 60.0, 0.0)
+
+    def step(self, x_min: np.ndarray) -> np.ndarray:
+        x = self._shift(x_min)
+        a, b = self._poles()
+        if b == 0.0:
+            return -np.expm1(-x / a)  # S = 1 - e^{-x/a}
+        # S = 1 - (a e^{-x/a} - b e^{-x/b})/(a - b)
+        return 1.0 - (a * np.exp(-x / a) - b * np.exp(-x / b)) / (a - b)
+
+    def ramp(self, x_min: np.ndarray) -> np.ndarray:
+        x = self._shift(x_min)
+        a, b = self._poles()
+        if b == 0.0:
+            return x + a * np.expm1(-x / a)  # R = x - a (1 - e^{-x/a})
+        # R = x - (a + b) + (a^2 e^{-x/a} - b^2 e^{-x/b})/(a - b), written to avoid
+        # cancellation at small x: (a^2 (e^{-x/a} - 1) - b^2 (e^{-x/b} - 1))/(a - b) + x
+        return x + (a * a * np.expm1(-x / a) - b * b * np.expm1(-x / b)) / (a - b)
+
+    def free(
+        self, t_min: np.ndarray, tk0_c: float, t0_c: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        # constant chamber Tk0 (second state starts and stays at Tk0):
+        # target = K (Tk0 + dt0 - 20 s); T = e T0 + (1 - e) target; g = e (target - T0)/tau_eff
+        tau = self.tau_eff_min
+        e = np.exp(-np.asarray(t_min, dtype=float) / tau)
+        target = self.gain * (tk0_c + self.dt0_c - SLOPE_REF_C * self.dt0_slope_c_per_c)
+        return e * t0_c + (1.0 - e) * target, e * (target - t0_c) / tau
+
+
+# --------------------------------------------------------------------------------------
+# nonlinear simulation on a uniform grid
+# --------------------------------------------------------------------------------------
+def uniform_grid_min(end_min: float, step_min: float) -> np.ndarray:
+    """``0, h, 2h, ...`` covering ``end_min`` (the last point is >= end_min)."""
+    n = max(1, int(math.ceil(end_min / step_min - 1e-9)))
+    return step_min * np.arange(n + 1)
+
+
+def lag_foh(v_c: np.ndarray, t0_c: float, tau_min: float, h_min: float) -> np.ndarray:
+    """Exact first-order lag of an input linear between grid points (first-order hold).
+
+    ``T[k+1] = a T[k] + (1-a) v[k] + (v[k+1] - v[k]) (1 - tau (1-a)/h)``, ``a = e^{-h/tau}``.
+    """
+    v = np.asarray(v_c, dtype=float)
+    a = math.exp(-h_min / tau_min)
+    beta = 1.0 - tau_min * (1.0 - a) / h_min
+    c = (1.0 - a) * v[:-1] + beta * np.diff(v)
+    y, _ = lfilter([1.0], [1.0, -a], c, zi=[a * t0_c])
+    return np.concatenate(([t0_c], y))
+
+
+def lag_foh_asymmetric(
+    v_c: np.ndarray, t0_c: float, tau_heat_min: float, tau_cool_min: float, h_min: float
+) -> np.ndarray:
+    """First-order hold lag whose time constant is ``tau_heat`` while the target is above T.
+
+    The direction is decided per step from the mean target ``(v[k] + v[k+1])/2`` against
+    ``T[k]`` (exact when the direction does not change inside a step).
+    """
+    v = np.asarray(v_c, dtype=float).tolist()
+    ah, ac = math.exp(-h_min / tau_heat_min), math.exp(-h_min / tau_cool_min)
+    bh = 1.0 - tau_heat_min * (1.0 - ah) / h_min
+    bc = 1.0 - tau_cool_min * (1.0 - ac) / h_min
+    out = [float(t0_c)]
+    t = float(t0_c)
+    for k in range(len(v) - 1):
+        v0, v1 = v[k], v[k + 1]
+        if 0.5 * (v0 + v1) > t:
+            t = ah * t + (1.0 - ah) * v0 + bh * (v1 - v0)
+        else:
+            t = ac * t + (1.0 - ac) * v0 + bc * (v1 - v0)
+        out.append(t)
+    return np.asarray(out)
+
+
+def rate_limited(
+    setpoint_c: np.ndarray, h_min: float, max_cool_c_per_min: float, max_heat_c_per_min: float
+) -> np.ndarray:
+    """Chamber air that follows the setpoint at bounded rates, exactly for a setpoint
+    linear between grid points.
+
+    ``dA/dt = clip(dS/dt, -c, r)`` while ``A = S``; otherwise ``A`` moves towards ``S`` at
+    the limiting rate (``-c`` above, ``+r`` below) and, on meeting ``S`` at ``t*`` inside a
+    step, tracks it (or moves on at the limit if ``S`` is faster than the limit).
+    """
+    s = np.asarray(setpoint_c, dtype=float).tolist()
+    c, r, h = float(max_cool_c_per_min), float(max_heat_c_per_min), float(h_min)
+    out = [s[0]]
+    a = s[0]
+    eps = 1e-12
+    for k in range(len(s) - 1):
+        s0, s1 = s[k], s[k + 1]
+        sig = (s1 - s0) / h  # setpoint slope in this step
+        d0 = a - s0
+        if abs(d0) <= eps:
+            a = s0 + min(max(sig, -c), r) * h
+        elif d0 > 0:  # above the setpoint: cool at the limit until meeting it
+            a1 = a - c * h
+            if a1 >= s1:
+                a = a1
+            else:
+                ts = d0 / (c + sig)  # meets S at t* (c + sig > 0 here)
+                a = s1 if sig <= r else s0 + sig * ts + r * (h - ts)
+        else:  # below: heat at the limit until meeting it
+            a1 = a + r * h
+            if a1 <= s1:
+                a = a1
+            else:
+                ts = -d0 / (r - sig)
+                a = s1 if sig >= -c else s0 + sig * ts - c * (h - ts)
+        out.append(a)
+    return np.asarray(out)
+
+
+# --------------------------------------------------------------------------------------
+# the model specification (base + at most one effect), as written to model files
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class Prediction:
+    """Model prediction at sample times: internal ``t_c``, gradient and chamber air, degC."""
+
+    time_min: np.ndarray
+    t_c: np.ndarray
+    g_c_per_min: np.ndarray
+    tk_air_c: np.ndarray
+
+
+@dataclass(frozen=True, slots=True)
+class ModelSpec:
+    """The base model ``(tau_s, dt0_c)`` augmented with at most one named effect.
+
+    ``parameters`` maps the effect's parameter names (units in the names) to values.
+    """
+
+    tau_s: float = 2400.0
+    dt0_c: float = 3.0
+    effect: str = "none"
+    parameters: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        ThermalParams(self.tau_s, self.dt0_c)
+        if self.effect not in EFFECTS and self.effect != "none":
+            raise ParameterError(
+                f"unknown effect {self.effect!r}; known: none, {', '.join(EFFECTS)}"
+            )
+        params = {k: float(v) for k, v in dict(self.parameters).items()}
+        if self.effect != "none":
+            eff = EFFECTS[self.effect]
+            missing = [n for n in eff.param_names if n not in params]
+            extra = [n for n in params if n not in eff.param_names]
+            if missing or extra:
+                raise ParameterError(
+                    f"effect {self.effect} needs parameters {', '.join(eff.param_names)}; "
+                    f"missing {missing or 'none'}, unexpected {extra or 'none'}"
+                )
+            eff.check(params)
+        elif params:
+            raise ParameterError(f"effect 'none' takes no parameters, got {sorted(params)}")
+        object.__setattr__(self, "tau_s", float(self.tau_s))
+        object.__setattr__(self, "dt0_c", float(self.dt0_c))
+        object.__setattr__(self, "parameters", MappingProxyType(params))
+
+    # -- kinds ---------------------------------------------------------------------------
+    @property
+    def is_linear(self) -> bool:
+        return self.effect == "none" or EFFECTS[self.effect].linear
+
+    def linear_model(self) -> LinearEffectModel:
+        """The :class:`LinearEffectModel` for the planner (linear effects only).
+
+        For a nonlinear effect this is the linear base part; use :meth:`planner_limits`
+        with it and :meth:`predict` to check a plan.
+        """
+        p = self.parameters
+        kw: dict[str, float] = {}
+        if self.effect == "chamber_lag":
+            kw["tau2_s"] = p["tau_chamber_s"]
+        elif self.effect == "second_time_constant":
+            kw["tau2_s"] = p["tau2_s"]
+        elif self.effect == "dead_time":
+            kw["delay_s"] = p["delay_s"]
+        elif self.effect == "selfheat_slope":
+            kw["dt0_slope_c_per_c"] = p["dt0_slope_c_per_c"]
+        elif self.effect == "asymmetric_tau":
+            # the linear part: the mean of the two time constants
+            return LinearEffectModel(0.5 * (p["tau_heat_s"] + p["tau_cool_s"]), self.dt0_c)
+        return LinearEffectModel(self.tau_s, self.dt0_c, **kw)
+
+    def planner_limits(self, limits: Limits | None = None) -> Limits:
+        """Chamber limits the effect implies (a rate limit lowers the usable rates)."""
+        limits = Limits() if limits is None else limits
+        if self.effect != "chamber_rate_limit":
+            return limits
+        p = self.parameters
+        lo = max(limits.rate_min_c_per_min, -p["max_cool_rate_c_per_min"])
+        hi = min(limits.rate_max_c_per_min, p["max_heat_rate_c_per_min"])
+        return dataclasses.replace(limits, rate_min_c_per_min=lo, rate_max_c_per_min=hi)
+
+    # -- prediction ----------------------------------------------------------------------
+    def predict(
+        self,
+        programme: Programme,
+        times_min: np.ndarray,
+        t0_c: float = 20.0,
+        grid_min: float | None = None,
+    ) -> Prediction:
+        """Internal temperature, gradient and chamber air at ``times_min``.
+
+        Linear models are evaluated exactly (:func:`affine_response`); nonlinear ones on a
+        uniform grid of ``grid_min`` (default: 1/6 min, or finer for short logs) and
+        interpolated linearly.
+        """
+        t = np.asarray(times_min, dtype=float)
+        if self.is_linear:
+            resp = affine_response(
+                self.linear_model(), programme.durations_min, t, programme.start_c, t0_c
+            )
+            temp, grad, tk = resp.evaluate(programme.rates_c_per_min)
+            if self.effect == "chamber_lag":
+                air = affine_response(
+                    LinearEffectModel(self.parameters["tau_chamber_s"], 0.0),
+                    programme.durations_min, t, programme.start_c, programme.start_c,
+                )
+                tk = air.evaluate(programme.rates_c_per_min)[0]
+            return Prediction(t, temp, grad, tk)
+        end = max(float(t.max()), programme.total_min)
+        h = grid_min if grid_min is not None else min(1.0 / 6.0, end / 2000.0)
+        grid = uniform_grid_min(end, h)
+        air, temp = self._simulate_grid(programme, grid, h, t0_c)
+        v = air + self.dt0_c
+        tau = self._tau_grid_min(v, temp)
+        grad = (v - temp) / tau
+        if self.effect == "chamber_cycling":  # the air exactly, not interpolated
+            p = self.parameters
+            air_t = programme.chamber_at(t) + p["amplitude_c"] * np.sin(
+                2.0 * np.pi * t * 60.0 / p["period_s"] + p["phase_rad"]
+            )
+        else:
+            air_t = np.interp(t, grid, air)
+        return Prediction(t, np.interp(t, grid, temp), np.interp(t, grid, grad), air_t)
+
+    def _tau_grid_min(self, v: np.ndarray, temp: np.ndarray) -> np.ndarray:
+        if self.effect == "asymmetric_tau":
+            p = self.parameters
+            return np.where(v > temp, p["tau_heat_s"], p["tau_cool_s"]) / 60.0
+        return np.full(v.shape, self.tau_s / 60.0)
+
+    def _simulate_grid(
+        self, programme: Programme, grid: np.ndarray, h: float, t0_c: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        p = self.parameters
+        setpoint = programme.chamber_at(grid)
+        if self.effect == "chamber_rate_limit":
+            air = rate_limited(
+                setpoint, h, p["max_cool_rate_c_per_min"], p["max_heat_rate_c_per_min"]
+            )
+        elif self.effect == "chamber_cycling":
+            # A = S + amp sin(2 pi t/P + phi)
+            air = setpoint + p["amplitude_c"] * np.sin(
+                2.0 * np.pi * grid * 60.0 / p["period_s"] + p["phase_rad"]
+            )
+        else:
+            air = setpoint
+        v = air + self.dt0_c
+        if self.effect == "asymmetric_tau":
+            temp = lag_foh_asymmetric(
+                v, t0_c, p["tau_heat_s"] / 60.0, p["tau_cool_s"] / 60.0, h
+            )
+        else:
+            temp = lag_foh(v, t0_c, self.tau_s / 60.0, h)
+        return air, temp
+
+    # -- files ---------------------------------------------------------------------------
+    def to_json_dict(self) -> dict:
+        out = {
+            "schedsyn_model": 1,
+            "tau_s": self.tau_s,
+            "dt0_c": self.dt0_c,
+            "effect": self.effect,
+            "parameters": dict(self.parameters),
+            "linear": self.is_linear,
+        }
+        if self.effect == "chamber_rate_limit":
+            lim = self.planner_limits()
+            out["planner_limits"] = {
+                "rate_min_c_per_min": lim.rate_min_c_per_min,
+                "rate_max_c_per_min": lim.rate_max_c_per_min,
+            }
+        return out
+
+    @classmethod
+    def from_json_dict(cls, d: Mapping) -> ModelSpec:
+        if not isinstance(d, Mapping) or "tau_s" not in d or "dt0_c" not in d:
+            raise ParameterError(
+                "a model file is a JSON object with at least tau_s, dt0_c (and effect, "
+                "parameters); write one with `schedsyn diagnose LOG.csv --out DIR`"
+            )
+        return cls(
+            tau_s=d["tau_s"],
+            dt0_c=d["dt0_c"],
+            effect=str(d.get("effect", "none")),
+            parameters=dict(d.get("parameters", {})),
+        )
+
+
+# --------------------------------------------------------------------------------------
+# the library
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class Effect:
+    """One candidate effect: named parameters with units, bounds and starting guesses.
+
+    ``guesses`` are starting points for the fit (several: the fit is multi-start);
+    ``main_param`` is the parameter quoted when judging an estimate; ``nuisance`` are
+    parameters fitted but not physically quoted (e.g. a phase).
+    """
+
+    name: str
+    description: str
+    param_names: tuple[str, ...]
+    bounds: tuple[tuple[float, float], ...]
+    guesses: tuple[tuple[float, ...], ...]
+    main_param: str
+    linear: bool
+    uses_air: bool = False  # changes the chamber air (so the air channel tells it apart)
+    nuisance: tuple[str, ...] = ()
+
+    @property
+    def n_params(self) -> int:
+        return len(self.param_names)
+
+    def check(self, values: Mapping[str, float]) -> None:
+        for name, (lo, hi) in zip(self.param_names, self.bounds, strict=True):
+            v = float(values[name])
+            if not (math.isfinite(v) and lo <= v <= hi):
+                raise ParameterError(
+                    f"{self.name}: {name} = {v!r} is outside its range {lo:g} .. {hi:g}"
+                )
+
+    def augment(self, model: ModelSpec, values: Mapping[str, float] | tuple) -> ModelSpec:
+        """A new model: ``model``'s base (tau_s, dt0_c) with this effect added."""
+        if not isinstance(values, Mapping):
+            values = dict(zip(self.param_names, values, strict=True))
+        return ModelSpec(model.tau_s, model.dt0_c, self.name, dict(values))
+
+
+def _library() -> dict[str, Effect]:
+    effects = (
+        Effect(
+            "chamber_lag",
+            "the chamber air follows the setpoint through a first-order lag",
+            ("tau_chamber_s",), ((1.0, 2e4),), ((120.0,), (400.0,), (1200.0,)),
+            "tau_chamber_s", linear=True, uses_air=True,
+        ),
+        Effect(
+            "chamber_rate_limit",
+            "the chamber cannot cool (or heat) as fast as programmed",
+            ("max_cool_rate_c_per_min", "max_heat_rate_c_per_min"),
+            ((0.01, 20.0), (0.01, 20.0)), (),  # guesses come from the programme
+            "max_cool_rate_c_per_min", linear=False, uses_air=True,
+        ),
+        Effect(
+            "chamber_cycling",
+            "the chamber controller alternates heating and cooling around the setpoint",
+            ("amplitude_c", "period_s", "phase_rad"),
+            ((0.0, 20.0), (1.0, 1e5), (-4 * math.pi, 4 * math.pi)), (),  # from periodogram
+            "amplitude_c", linear=False, uses_air=True, nuisance=("phase_rad",),
+        ),
+        Effect(
+            "dead_time",
+            "a transport delay between the chamber and the sensor",
+            ("delay_s",), ((0.0, 1e4),), ((60.0,), (300.0,), (900.0,)),
+            "delay_s", linear=True,
+        ),
+        Effect(
+            "second_time_constant",
+            "a second thermal mass between the chamber air and the sensor",
+            ("tau2_s",), ((1.0, 2e4),), ((120.0,), (400.0,), (1200.0,)),
+            "tau2_s", linear=True,
+        ),
+        Effect(
+            "selfheat_slope",
+            "the self-heating offset changes with temperature: dT0 = dt0 + s (T - 20)",
+            ("dt0_slope_c_per_c",), ((-0.3, 0.3),), ((0.0,),),
+            "dt0_slope_c_per_c", linear=True,
+        ),
+        Effect(
+            "asymmetric_tau",
+            "heating and cooling time constants differ",
+            ("tau_heat_s", "tau_cool_s"), ((1.0, 1e5), (1.0, 1e5)), (),  # from the base tau
+            "tau_cool_s", linear=False,
+        ),
+    )
+    return {e.name: e for e in effects}
+
+
+#: The library of candidate effects, by name.
+EFFECTS: Mapping[str, Effect] = MappingProxyType(_library())
+
+#: Pairs of effects that give the same internal temperature; told apart only by the air.
+AIR_ONLY_DISTINCT = (("chamber_lag", "second_time_constant"),)
