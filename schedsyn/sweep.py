@@ -446,6 +446,38 @@ class SweepResult:
         """Share of grid points with complete coverage (at the first delta)."""
         return float(np.mean(self.covered_mask(1.0)))
 
+    def covered_box(self, min_coverage: float = 1.0) -> dict[str, Any] | None:
+        """Largest axis-aligned sub-box of grid points that all reach ``min_coverage``.
+
+        "Largest" counts grid points (ties: the first found, smallest tau then dT0).
+        Returns ``{"tau_s_range": (lo, hi), "dt0_c_range": (lo, hi), "n_points": n}``
+        or None when no point reaches ``min_coverage``. Used to say which part of a box
+        a plan covers.
+        """
+        ok = self.covered_mask(min_coverage).astype(np.int64)
+        n_tau, n_dt0 = ok.shape
+        # prefix sums: points covered in [i0, i1) x [j0, j1) in O(1)
+        s = np.zeros((n_tau + 1, n_dt0 + 1), dtype=np.int64)
+        s[1:, 1:] = ok.cumsum(0).cumsum(1)
+        best, best_n = None, 0
+        for i0 in range(n_tau):
+            for i1 in range(i0 + 1, n_tau + 1):
+                for j0 in range(n_dt0):
+                    for j1 in range(j0 + 1, n_dt0 + 1):
+                        n = (i1 - i0) * (j1 - j0)
+                        if n <= best_n:
+                            continue
+                        if s[i1, j1] - s[i0, j1] - s[i1, j0] + s[i0, j0] == n:
+                            best, best_n = (i0, i1, j0, j1), n
+        if best is None:
+            return None
+        i0, i1, j0, j1 = best
+        return {
+            "tau_s_range": (float(self.tau_s_values[i0]), float(self.tau_s_values[i1 - 1])),
+            "dt0_c_range": (float(self.dt0_c_values[j0]), float(self.dt0_c_values[j1 - 1])),
+            "n_points": best_n,
+        }
+
     def worst(self) -> dict[str, float]:
         """The grid point with the lowest coverage (then fewest levels) at the first delta."""
         cov, lev = self.coverage_grid.ravel(), self.min_levels_grid.ravel()

@@ -18,6 +18,7 @@ from schedsyn import (
 )
 from schedsyn.cli import main
 from schedsyn.sweep import (
+    SweepResult,
     parse_grid,
     parse_range,
     run_map,
@@ -294,3 +295,36 @@ def test_cli_replan_writes_rows(tmp_path, capsys, monkeypatch):
 def test_cli_needs_steps_without_replan(tmp_path, capsys):
     assert main(["sweep", "--out", str(tmp_path), "--no-progress"]) == 2
     assert "STEPS.csv" in capsys.readouterr().err
+
+
+def _result_with_coverage(cov):
+    cov = np.asarray(cov, dtype=float)
+    n_tau, n_dt0 = cov.shape
+    return SweepResult(
+        region_c=REGION, tau_s_values=2000.0 + 100.0 * np.arange(n_tau),
+        dt0_c_values=np.arange(n_dt0, dtype=float), levels_required=6,
+        deltas_c_per_min=(0.05,), coverage=cov[:, :, None],
+        min_levels=np.where(cov[:, :, None] >= 1.0, 6, 3),
+        t_min_c=np.zeros(cov.shape), t_max_c=np.zeros(cov.shape))
+
+
+def test_covered_box_is_the_largest_full_sub_box():
+    cov = np.array([
+        [1.0, 1.0, 0.9, 1.0],
+        [1.0, 1.0, 1.0, 1.0],
+        [1.0, 1.0, 1.0, 1.0],
+        [0.5, 1.0, 1.0, 1.0],
+    ])
+    res = _result_with_coverage(cov)
+    # the full 2 x 4 band (rows 1-2, 8 points) and the 3 x 2 block (rows 0-2, cols 0-1)
+    # lose to rows 1-3 x cols 1-3 with 9 points
+    assert res.covered_box() == {"tau_s_range": (2100.0, 2300.0),
+                                 "dt0_c_range": (1.0, 3.0), "n_points": 9}
+    assert res.covered_box(0.5)["n_points"] == 16
+    assert _result_with_coverage(np.zeros((3, 3))).covered_box() is None
+    # brute force over every sub-box agrees on the size
+    best = max((i1 - i0) * (j1 - j0)
+               for i0 in range(4) for i1 in range(i0 + 1, 5)
+               for j0 in range(4) for j1 in range(j0 + 1, 5)
+               if np.all(cov[i0:i1, j0:j1] >= 1.0))
+    assert best == 9

@@ -142,6 +142,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"at the nominal point (tau {nominal.tau_s:g} s, dT0 {nominal.dt0_c:g} °C): coverage "
           f"{at_nominal.coverage_grid[0, 0]:.1%}, min {at_nominal.min_levels_grid[0, 0]} levels")
     print(result.summary())
+    box = result.covered_box()
+    if box is not None:
+        (t0, t1), (c0, c1) = box["tau_s_range"], box["dt0_c_range"]
+        print(f"largest fully covered box: tau {t0:g} .. {t1:g} s x dT0 {c0:g} .. {c1:g} °C "
+              f"({box['n_points']} grid points)")
     for j, d in enumerate(result.deltas_c_per_min[1:], start=1):
         cov = result.coverage[:, :, j]
         print(f"at delta {d:g} °C/min: coverage {cov.min():.1%} .. {cov.max():.1%}, min "
