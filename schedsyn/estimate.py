@@ -473,13 +473,14 @@ def _first_finite(y: np.ndarray) -> float:
     return float(y[np.flatnonzero(np.isfinite(y))[0]])
 
 
-def _finish(setup: _Setup, noise: NoiseLevels, method: str, grad, params) -> GradientEstimate:
+def _finish(setup: _Setup, noise: NoiseLevels, method: str, grad, params,
+            time_s: np.ndarray) -> GradientEstimate:
     (filtered, predicted, innov, svar, m2ll), a, b = _run(setup, noise.q, noise.r, store=True)
     x1, x2, p11, p12, p22 = rts_smoother(filtered, predicted, a.tolist(), b.tolist())
     g, g_var = grad(x1, x2, p11, p12, p22)
     innov = np.asarray(innov)
     return GradientEstimate(
-        time_s=setup.t_min * 60.0,
+        time_s=np.array(time_s, dtype=float),
         t_est_c=x1,
         t_std_c=np.sqrt(np.maximum(p11, 0.0)),
         g_est_c_per_min=g,
@@ -532,7 +533,7 @@ def estimate_gradient(
     def grad(x1, x2, p11, p12, p22):
         return x2, p22
 
-    return _finish(setup, noise, "kinematic", grad, None)
+    return _finish(setup, noise, "kinematic", grad, None, log.time_s)
 
 
 def estimate_gradient_model(
@@ -589,7 +590,7 @@ def estimate_gradient_model(
         # g = (Tk + dT0 - T)/tau + d ;  var g = P11/tau^2 - 2 P12/tau + P22
         return offset - x1 / tau + x2, p11 / tau**2 - 2.0 * p12 / tau + p22
 
-    return _finish(setup, noise, "model", grad, params)
+    return _finish(setup, noise, "model", grad, params, log.time_s)
 
 
 def finite_difference_gradient(time_s: np.ndarray, t_c: np.ndarray) -> np.ndarray:

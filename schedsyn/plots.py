@@ -188,3 +188,102 @@ def sweep_panels(panels, nominal: tuple[float, float] | None = (2400.0, 3.0),
     if suptitle:
         fig.suptitle(suptitle)
     return list(axes[0])
+
+
+# -- measured runs (estimate / compare) -------------------------------------------------
+def gradient_plot(estimate, ax=None, truth_c_per_min=None, title: str | None = None):
+    """Estimated gradient against time (min) with its ±2σ band (and the truth if known)."""
+    ax = _axes(ax)
+    t = estimate.time_min
+    g, s = estimate.g_est_c_per_min, estimate.g_std_c_per_min
+    ax.fill_between(t, g - 2 * s, g + 2 * s, color="tab:red", alpha=0.25, lw=0,
+                    label="±2σ")
+    ax.plot(t, g, color="tab:red", lw=1.0, label=f"estimated ({estimate.method})")
+    if truth_c_per_min is not None:
+        ax.plot(t, truth_c_per_min, color="k", lw=0.6, ls="--", label="truth")
+    ax.set_xlabel("time, min")
+    ax.set_ylabel("gradient dT/dt, °C/min")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best")
+    if title:
+        ax.set_title(title)
+    return ax
+
+
+def phase_overlay_plot(sim_t_c, sim_g_c_per_min, run_t_c, run_g_c_per_min, ax=None,
+                       region=None, title: str | None = None):
+    """Measured phase trajectory over the simulated one (thin line), as in paper figs 5-6."""
+    ax = phase_plot(sim_t_c, sim_g_c_per_min, ax=ax, region=region, label="simulated plan",
+                    lw=0.7, color="k")
+    return phase_plot(run_t_c, run_g_c_per_min, ax=ax, label="measured (smoothed)", lw=1.4,
+                      color="tab:red", title=title)
+
+
+def temperature_compare_plot(time_min, measured_c, simulated_c, ax=None,
+                             title: str | None = None):
+    """Measured and simulated internal temperature against time; residual on the right axis."""
+    ax = _axes(ax)
+    ax.plot(time_min, simulated_c, color="k", lw=0.8, label="simulated T")
+    ax.plot(time_min, measured_c, color="tab:red", lw=1.2, alpha=0.8, label="measured T")
+    ax.set_xlabel("time, min")
+    ax.set_ylabel("internal temperature, °C")
+    ax.grid(True, alpha=0.3)
+    right = ax.twinx()
+    resid = np.asarray(measured_c, dtype=float) - np.asarray(simulated_c, dtype=float)
+    right.plot(time_min, resid, color="tab:purple", lw=0.5, label="measured - simulated")
+    right.axhline(0.0, color="tab:purple", lw=0.4, ls=":")
+    right.set_ylabel("residual, °C", color="tab:purple")
+    lim = max(float(np.nanmax(np.abs(resid))) if np.isfinite(resid).any() else 1.0, 1e-3)
+    right.set_ylim(-1.2 * lim, 4 * lim)  # keep the residual in the lower part of the axes
+    lines = ax.get_lines()[:2] + right.get_lines()[:1]
+    ax.legend(lines, [ln.get_label() for ln in lines], loc="upper center", framealpha=0.9)
+    if title:
+        ax.set_title(title)
+    return ax
+
+
+def coverage_compare_plot(planned, run, ax=None, title: str | None = None):
+    """Distinct gradient levels per bin: planned (hatched) next to achieved by the run."""
+    ax = _axes(ax, figsize=(8, 3.5))
+    lo = planned.grid.lower_c
+    w = planned.grid.bin_c
+    ax.bar(lo, planned.levels, width=0.45 * w, align="edge", color="0.85", edgecolor="k",
+           lw=0.4, hatch="//", label=f"planned ({planned.coverage:.0%})")
+    colors = np.where(run.covered, "tab:green", "tab:red")
+    ax.bar(lo + 0.5 * w, run.levels, width=0.45 * w, align="edge", color=colors,
+           edgecolor="k", lw=0.4, label=f"run ({run.coverage:.0%})")
+    ax.axhline(planned.levels_required, color="k", ls="--", lw=1,
+               label=f"required: {planned.levels_required}")
+    ax.set_xlabel("internal temperature bin, °C")
+    ax.set_ylabel(f"distinct levels (Δ ≥ {planned.delta_c_per_min:g} °C/min)")
+    ax.set_title(title or f"coverage: planned {planned.coverage:.0%}, run {run.coverage:.0%}")
+    ax.legend(loc="best")
+    ax.grid(True, axis="y", alpha=0.3)
+    return ax
+
+
+def compare_panels(comparison, region=None, suptitle: str | None = None):
+    """Phase overlay, T with residual, gradients and coverage of a
+    :class:`~schedsyn.compare.RunComparison` in one 2x2 figure; returns the list of axes.
+    Save with ``save_figure(axes[0], path)``."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 2, figsize=(14, 9), constrained_layout=True)
+    c = comparison
+    phase_overlay_plot(c.planned.t_c, c.planned.g_c_per_min, c.run_dense.t_c,
+                       c.run_dense.g_c_per_min, ax=axes[0, 0], region=region,
+                       title="phase portrait: measured over simulated")
+    temperature_compare_plot(c.log.time_min, c.log.t_int_c, c.simulated.t_c, ax=axes[0, 1],
+                             title=f"internal temperature (RMS residual "
+                                   f"{c.rms_residual_c:.2f} °C)")
+    ax = gradient_plot(c.estimate, ax=axes[1, 0], title="gradient: estimated vs simulated")
+    ax.plot(c.simulated.time_min, c.simulated.g_c_per_min, color="k", lw=0.6,
+            label="simulated")
+    ax.legend(loc="best")
+    coverage_compare_plot(c.planned_coverage, c.run_coverage, ax=axes[1, 1])
+    if suptitle:
+        fig.suptitle(suptitle)
+    return list(axes.ravel())

@@ -1,0 +1,65 @@
+"""``schedsyn estimate LOG.csv``: Kalman-smoothed gradient of a measured run, and its plots."""
+
+from __future__ import annotations
+
+import argparse
+
+from ..compare import resample_run
+from ..estimate import estimate_gradient, estimate_gradient_model
+from ..io import write_frame_atomic
+from ..logs import read_log
+from . import _common
+
+
+def add_estimator_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--q", type=float, default=None,
+                   help="gradient random-walk density, (°C/min²)²/min (default: maximum "
+                        "likelihood)")
+    p.add_argument("--r", type=float, default=None,
+                   help="measurement variance, °C² (default: maximum likelihood, at least "
+                        "the quantisation step²/12)")
+    p.add_argument("--method", choices=("kinematic", "model"), default="kinematic",
+                   help="kinematic: (T, g) random walk, no model (default); model: thermal "
+                        "model driven by the logged tk_set_c plus a random-walk correction")
+
+
+def print_log_report(log) -> None:
+    print(f"log {log.source}: {log.report.summary()}")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("estimate", help="estimate the internal-temperature gradient of a "
+                       "measured log (Kalman smoother)", description=__doc__)
+    p.add_argument("log", metavar="LOG.csv", help="measured log (time_s, t_int_c, ...)")
+    p.add_argument("--out", default=None, help="output directory (default out/estimate)")
+    add_estimator_options(p)
+    _common.add_model_options(p)
+    p.add_argument("--region", nargs=2, type=float, metavar=("LO_C", "HI_C"), default=None,
+                   help="working region to shade in the phase portrait, °C")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from .. import plots
+
+    log = read_log(args.log)
+    print_log_report(log)
+    if args.method == "model":
+        params = _common.thermal_params(args)
+        est = estimate_gradient_model(log, params, q=args.q, r=args.r)
+    else:
+        est = estimate_gradient(log, q=args.q, r=args.r)
+    out = _common.out_dir(args.out, "out/estimate")
+    inputs = [args.log]
+    write_frame_atomic(out / "gradient.csv", est.to_frame(), inputs)
+    region = tuple(args.region) if args.region else None
+    dense = resample_run(log, est)  # the same estimate, with the line broken at gaps
+    plots.save_figure(
+        plots.phase_plot(dense.t_c, dense.g_c_per_min, region=region, color="tab:red",
+                         title=f"measured phase portrait ({log.source})"),
+        out / "phase.png", inputs)
+    plots.save_figure(plots.gradient_plot(est, title="estimated gradient"),
+                      out / "gradient.png", inputs)
+    print(est.summary())
+    print(f"wrote {out}/gradient.csv, phase.png, gradient.png")
+    return 0

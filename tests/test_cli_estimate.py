@@ -1,0 +1,143 @@
+"""`schedsyn estimate` and `schedsyn compare`, in-process, plus the run-vs-plan API."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from schedsyn.cli import main
+from schedsyn.compare import compare_run, resample_run
+from schedsyn.coverage import coverage_report
+from schedsyn.grid import BinGrid
+from schedsyn.logs import log_from_frame, read_log
+from schedsyn.params import ThermalParams
+from schedsyn.programme import read_steps
+from schedsyn.synth import synth_log
+
+STEPS = "data/baseline_exp1_steps.csv"
+SAMPLE = "data/sample_run_exp1.csv"
+
+
+@pytest.fixture(scope="module")
+def clean_log_path(tmp_path_factory):
+    path = tmp_path_factory.mktemp("logs") / "run.csv"
+    synth_log(read_steps(STEPS), seed=8).to_csv(path, index=False)
+    return path
+
+
+def test_estimate_writes_gradient_csv(tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main(["estimate", SAMPLE, "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    # the NaN/gap report of the sample log is printed
+    assert "12 of 2918 rows are NaN" in text and "gap in sampling 19200 .. 19800 s" in text
+    assert "fitted by ML: q, r" in text
+    grad = pd.read_csv(out / "gradient.csv")
+    assert list(grad.columns[:4]) == ["time_s", "t_est_c", "g_est_c_per_min", "g_std_c_per_min"]
+    log = read_log(SAMPLE)
+    assert len(grad) == log.n_rows  # one row per log row, NaN rows included
+    np.testing.assert_array_equal(grad["time_s"], log.time_s)
+    assert grad["g_est_c_per_min"].notna().all()
+    truth = log.extra["g_true_c_per_min"].to_numpy()
+    assert np.sqrt(np.mean((grad["g_est_c_per_min"] - truth) ** 2)) < 0.01
+    for name in ("phase.png", "gradient.png"):
+        assert (out / name).stat().st_size > 0
+
+
+def test_estimate_user_noise_and_model_method(tmp_path, capsys, clean_log_path):
+    out = tmp_path / "o"
+    rc = main(["estimate", str(clean_log_path), "--out", str(out), "--q", "1e-3", "--r", "4e-4",
+               "--method", "model", "--tau-s", "2400"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "model Kalman smoother: q = 0.001 " in text and "fitted by ML: none" in text
+    assert len(pd.read_csv(out / "gradient.csv")) == len(pd.read_csv(clean_log_path))
+
+
+def test_estimate_bad_logs_are_one_line_exit_2(tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    pd.DataFrame({"time_s": [0, 10, 10, 20, 30, 40], "t_int_c": [20.0] * 6}).to_csv(bad,
+                                                                                  index=False)
+    assert main(["estimate", str(bad), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "bad.csv" in err and "duplicates" in err
+    kelvin = tmp_path / "k.csv"
+    pd.DataFrame({"time_s": np.arange(10.0), "t_int_c": np.full(10, 293.0)}).to_csv(
+        kelvin, index=False)
+    assert main(["estimate", str(kelvin)]) == 2
+    assert "kelvin" in capsys.readouterr().err
+    no_tk = tmp_path / "n.csv"
+    pd.DataFrame({"time_s": np.arange(10.0), "t_int_c": np.full(10, 20.0)}).to_csv(
+        no_tk, index=False)
+    assert main(["estimate", str(no_tk), "--method", "model", "--out", str(tmp_path)]) == 2
+    assert "tk_set_c" in capsys.readouterr().err
+    assert main(["estimate", str(no_tk), "--q", "-1", "--out", str(tmp_path)]) == 2
+
+
+def test_compare_writes_outputs_and_reports_coverage(tmp_path, capsys):
+    out = tmp_path / "c"
+    assert main(["compare", SAMPLE, STEPS, "--out", str(out), "--region", "-50", "-30"]) == 0
+    text = capsys.readouterr().out
+    assert "planned: coverage of [-50, -30]" in text and "run:     coverage of" in text
+    assert "measured - simulated T: RMS" in text
+    for name in ("gradient.csv", "compare.csv", "coverage.csv", "summary.json",
+                 "phase_compare.png", "temperature_compare.png", "coverage_compare.png",
+                 "compare.png"):
+        assert (out / name).stat().st_size > 0
+    summary = json.loads((out / "summary.json").read_text())
+    cov = pd.read_csv(out / "coverage.csv")
+    assert len(cov) == 20
+    assert summary["planned_coverage"] == pytest.approx(cov["planned_covered"].mean())
+    assert summary["run_coverage"] == pytest.approx(cov["run_covered"].mean())
+    # the sample device is slower than planned (tau 2700 s): the residual is degrees, not noise
+    assert 0.5 < summary["rms_residual_c"] < 5.0
+
+
+def test_compare_refuses_to_overwrite_inputs(tmp_path, capsys, clean_log_path):
+    import shutil
+
+    log = tmp_path / "compare.csv"
+    shutil.copy(clean_log_path, log)
+    before = log.read_bytes()
+    assert main(["compare", str(log), STEPS, "--out", str(tmp_path)]) == 2
+    assert "refusing to overwrite" in capsys.readouterr().err
+    assert log.read_bytes() == before
+
+
+def test_compare_of_a_faithful_run_reproduces_the_plan(clean_log_path):
+    """Right model, clean chamber: the run's coverage matches the plan's, residual ~ noise."""
+    log = read_log(clean_log_path)
+    programme = read_steps(STEPS)
+    grid = BinGrid(-50.0, -30.0)
+    cmp = compare_run(log, programme, grid=grid)
+    assert cmp.rms_residual_c < 0.03  # sensor noise 0.02 + quantisation
+    # levels 0.05 degC/min apart: an estimate within ~0.01 degC/min flips at most a
+    # borderline level per bin (a passing bin of the plan may miss by one, or vice versa)
+    diff = cmp.run_coverage.levels - cmp.planned_coverage.levels
+    assert np.all(np.abs(diff) <= 1) and np.mean(diff == 0) >= 0.75
+    assert abs(cmp.run_coverage.coverage - cmp.planned_coverage.coverage) <= 0.15
+    frame = cmp.to_frame()
+    assert len(frame) == log.n_rows
+    np.testing.assert_allclose(frame["residual_c"], frame["t_meas_c"] - frame["t_sim_c"])
+    # a wrong model shows up as a large residual, and the phase trajectories separate
+    off = compare_run(log, programme, ThermalParams(tau_s=3000.0), grid=grid)
+    assert off.rms_residual_c > 20 * cmp.rms_residual_c
+
+
+def test_resample_run_breaks_at_gaps():
+    t = np.concatenate((np.arange(0, 600, 10.0), np.arange(1200, 1800, 10.0)))
+    temp = 20 - 0.01 * t
+    log = log_from_frame(pd.DataFrame({"time_s": t, "t_int_c": temp}))
+    from schedsyn.estimate import estimate_gradient
+
+    est = estimate_gradient(log, q=1e-6, r=1e-4)
+    dense = resample_run(log, est, dt_min=0.1)
+    inside = (dense.time_min > 590.0 / 60.0) & (dense.time_min < 20.0)  # rows 590 s, 1200 s
+    assert inside.any() and np.isnan(dense.t_c[inside]).all()
+    assert np.isfinite(dense.t_c[~inside]).all()
+    # a gap never counts as a pass: coverage equals that of the two halves separately
+    grid = BinGrid(5.0, 15.0)
+    rep = coverage_report(dense.t_c, dense.g_c_per_min, grid, levels_required=1)
+    assert np.all(rep.pass_counts[4:9] == 0)  # 9..14 degC lie inside the gap
+    assert np.all(rep.pass_counts[[0, 1, 2, 9]] == 1)
