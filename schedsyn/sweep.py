@@ -297,6 +297,12 @@ def _run_dask(address: str, func, items, progress, desc) -> list[Any]:
             "the Dask backend needs dask[distributed]: pip install 'schedsyn[dask]' "
             "(or run without --dask)"
         ) from None
+    from distributed.comm.registry import get_backend
+
+    try:
+        get_backend(address.split("://", 1)[0])  # check the scheme before connecting
+    except ValueError as exc:
+        raise ParameterError(f"Dask scheduler address {address!r}: {exc}") from None
     try:
         client = Client(address, timeout="10s", set_as_default=False)
     except (OSError, TimeoutError) as exc:

@@ -211,12 +211,20 @@ def test_backends_agree(programme):
     assert ref[2] == local[2] == [1.0, 2.0, 3.0, 4.0]
 
 
-def test_dask_backend_agrees(programme):
+@pytest.fixture(scope="module")
+def dask_address():
+    """A 2-worker Dask cluster on 127.0.0.1 (threads, real TCP), for this module only."""
     distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  protocol="tcp://", host="127.0.0.1",
+                                  dashboard_address=None) as cluster:
+        yield cluster.scheduler_address
+
+
+def test_dask_backend_agrees(programme, dask_address):
+    assert dask_address.startswith("tcp://127.0.0.1:")
     ref = _all_backends(programme, "serial")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp://",
-                                  host="127.0.0.1", dashboard_address=None) as cluster:
-        got = _all_backends(programme, cluster.scheduler_address)
+    got = _all_backends(programme, dask_address)
     pd.testing.assert_frame_equal(ref[0], got[0], check_exact=True)
     pd.testing.assert_frame_equal(ref[1], got[1], check_exact=True)
     assert got[2] == ref[2]
@@ -328,3 +336,30 @@ def test_covered_box_is_the_largest_full_sub_box():
                for j0 in range(4) for j1 in range(j0 + 1, 5)
                if np.all(cov[i0:i1, j0:j1] >= 1.0))
     assert best == 9
+
+
+def test_cli_on_dask_matches_serial(tmp_path, dask_address):
+    common = ["sweep", STEPS, "--tau-s", "2000:2800:3", "--dt0-c", "0:6:3", "--no-progress"]
+    assert main([*common, "--out", str(tmp_path / "d"), "--dask", dask_address]) == 0
+    assert main([*common, "--out", str(tmp_path / "s"), "--workers", "1"]) == 0
+    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "d" / "sweep.csv"),
+                                  pd.read_csv(tmp_path / "s" / "sweep.csv"), check_exact=True)
+
+
+def test_heatmaps_draw_mixed_and_single_point_grids(tmp_path):
+    from schedsyn import plots
+
+    mixed = _result_with_coverage([[1.0, 0.5], [1.0, 1.0], [0.2, 1.0]]).to_frame()
+    single = _result_with_coverage([[0.75]]).to_frame()
+    axes = plots.sweep_panels([(mixed, "coverage", "mixed"), (mixed, "min_levels", "levels"),
+                               (single, "coverage", "one point")], nominal=(2100.0, 0.5))
+    assert len(axes) == 3 and axes[0].get_title() == "mixed"
+    assert len(axes[0].collections) >= 2  # the mesh and the full-coverage outline
+    plots.save_figure(axes[0], tmp_path / "h.png")
+    assert (tmp_path / "h.png").stat().st_size > 0
+
+
+def test_bad_dask_address_is_a_parameter_error():
+    pytest.importorskip("distributed")
+    with pytest.raises(ParameterError, match="unknown address scheme 'foo'"):
+        run_map(abs, [1, 2], backend="foo://somewhere:8786")
