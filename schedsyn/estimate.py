@@ -54,7 +54,7 @@ PRIOR_G_STD_C_PER_MIN = 3.0
 #: likelihood (their terms would depend on the prior, not on q and r).
 N_DIFFUSE = 2
 #: The noise search runs on at most this many rows (an evenly strided copy of the log).
-MAX_ML_ROWS = 1500
+MAX_ML_ROWS = 1000
 #: Bounds of the search, in natural log of q ((degC/min^2)^2/min) and of r (degC^2).
 LOG_Q_BOUNDS = (math.log(1e-14), math.log(1e4))
 LOG_R_BOUNDS = (math.log(1e-12), math.log(1e2))
@@ -358,7 +358,7 @@ def _fit_noise(setup: _Setup, q: float | None, r: float | None, quant_c: float) 
     bounds = []
     if q is None:
         # coarse scan of q (the likelihood is often flat far from the optimum)
-        grid = np.arange(-12.0, 3.0, 1.5) * math.log(10.0)
+        grid = np.arange(-12.0, 3.0, 2.0) * math.log(10.0)
         best = None
         for lq in grid:
             theta = [lq] + ([] if r is not None else [math.log(r_extra_start)])
@@ -372,8 +372,13 @@ def _fit_noise(setup: _Setup, q: float | None, r: float | None, quant_c: float) 
     if r is None:
         start.append(math.log(r_extra_start))
         bounds.append(LOG_R_BOUNDS)
-    res = minimize(cost, np.array(start), method="Nelder-Mead",
-                   options={"xatol": 0.02, "fatol": 0.01, "maxiter": 400})
+    # initial simplex one unit (a factor e) along each log level: scipy's default (5 % of
+    # the coordinate) is degenerate at log q = 0
+    x0 = np.array(start)
+    simplex = np.vstack([x0, x0 + np.eye(x0.size)])
+    res = minimize(cost, x0, method="Nelder-Mead",
+                   options={"xatol": 0.05, "fatol": 0.05, "maxiter": 400,
+                            "initial_simplex": simplex})
     theta = np.clip(res.x, [lo for lo, _ in bounds], [hi for _, hi in bounds])
     qq, rr = levels(theta)
     return NoiseLevels(qq, rr, quant_c, fitted)

@@ -318,3 +318,18 @@ def test_real_tclab_logs(path):
     net = (log.t_int_c[-1] - log.t_int_c[0]) / (log.time_min[-1] - log.time_min[0])
     mean_g = np.trapezoid(est.g_est_c_per_min, log.time_min) / (log.time_min[-1])
     assert mean_g == pytest.approx(net, abs=0.05)
+
+
+def test_ml_noise_levels_beat_a_brute_force_grid(rng):
+    """The optimiser's (q, r) is at least as likely as every point of a coarse grid
+    (a TCLab-like coarsely quantised heating curve, 1 s sampling)."""
+    t = np.arange(900.0)
+    temp = 23.0 + 40.0 * (1.0 - np.exp(-t / 180.0)) + 0.05 * rng.standard_normal(t.size)
+    y = 0.32 * np.round(temp / 0.32)
+    log = log_from_frame(pd.DataFrame({"time_s": t, "t_int_c": y}))
+    est = estimate_gradient(log)
+    assert est.noise.quant_c == pytest.approx(0.32)
+    grid = [estimate_gradient(log, q=q, r=r).minus2_log_likelihood
+            for q in 10.0 ** np.arange(-3.0, 3.5, 0.5)
+            for r in est.noise.quant_c**2 / 12 * np.array([1.0, 1.2, 1.5, 2.0])]
+    assert est.minus2_log_likelihood <= min(grid) + 0.5
