@@ -116,7 +116,8 @@ def _batch_posterior(y, a, b, u, q11, q12, q22, r, x0, p0):
     def m2ll(idx):
         ss = s[np.ix_(idx, idx)]
         rr = resid[idx]
-        return idx.size * np.log(2 * np.pi) + np.linalg.slogdet(ss)[1] + rr @ np.linalg.solve(ss, rr)
+        quad = rr @ np.linalg.solve(ss, rr)
+        return idx.size * np.log(2 * np.pi) + np.linalg.slogdet(ss)[1] + quad
 
     full = m2ll(np.arange(obs.size))
     head = m2ll(np.arange(N_DIFFUSE))
