@@ -6,6 +6,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
@@ -334,3 +336,23 @@ def test_ml_noise_levels_beat_a_brute_force_grid(rng):
             for q in 10.0 ** np.arange(-3.0, 3.5, 0.5)
             for r in est.noise.quant_c**2 / 12 * np.array([1.0, 1.2, 1.5, 2.0])]
     assert est.minus2_log_likelihood <= min(grid) + 0.5
+
+
+def _fq(kind, h, q, tau=40.0):
+    a, b, q11, q12, q22 = (kinematic_transition(np.array([h]), q) if kind == "kinematic"
+                           else lag_transition(np.array([h]), tau, q))
+    f = np.array([[a[0], b[0]], [0.0, 1.0]])
+    return f, np.array([[q11[0], q12[0]], [q12[0], q22[0]]])
+
+
+@settings(max_examples=60, deadline=None)
+@given(h1=st.floats(1e-3, 200.0), h2=st.floats(1e-3, 200.0),
+       kind=st.sampled_from(["kinematic", "lag"]))
+def test_two_steps_compose_into_one(h1, h2, kind):
+    """F(h1 + h2) = F(h2) F(h1) and Q(h1 + h2) = F(h2) Q(h1) F(h2)^T + Q(h2)."""
+    q = 1e-3
+    f1, q1 = _fq(kind, h1, q)
+    f2, q2 = _fq(kind, h2, q)
+    f, qq = _fq(kind, h1 + h2, q)
+    np.testing.assert_allclose(f, f2 @ f1, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(qq, f2 @ q1 @ f2.T + q2, rtol=1e-7, atol=1e-14)
