@@ -712,6 +712,8 @@ class ReplanResult:
                 continue
             if pd.api.types.is_bool_dtype(ok[col]) or ok[col].isna().all():
                 continue
+            if len(ok) > 1 and ok[col].nunique() == 1:
+                continue  # the same at every point (e.g. the region): not a sensitivity
             parts.append(f"{col} {ok[col].min():.4g} .. {ok[col].max():.4g}")
         if parts:
             text += "; " + "; ".join(parts)

@@ -290,7 +290,7 @@ def test_cli_replan_writes_rows(tmp_path, capsys, monkeypatch):
     import schedsyn.cli.sweep as cli_sweep
 
     monkeypatch.setattr(cli_sweep, "_planner_available", lambda: True)
-    monkeypatch.setattr(cli_sweep, "PlanAtPoint", lambda region, levels, limits: fake_plan)
+    monkeypatch.setattr(cli_sweep, "PlanAtPoint", lambda *args: fake_plan)
     rc = main(["sweep", "--replan", "--tau-s", "2000:2800:3", "--dt0-c", "0:6:3",
                "--out", str(tmp_path), "--workers", "1", "--no-progress"])
     assert rc == 0
@@ -363,3 +363,27 @@ def test_bad_dask_address_is_a_parameter_error():
     pytest.importorskip("distributed")
     with pytest.raises(ParameterError, match="unknown address scheme 'foo'"):
         run_map(abs, [1, 2], backend="foo://somewhere:8786")
+
+
+def test_replan_adapter_builds_the_paper_spec(monkeypatch):
+    from schedsyn import Limits
+    from schedsyn.cli.sweep import PlanAtPoint, default_approx
+
+    assert default_approx((-50.0, -30.0), Limits()) == (-52.0, -20.0)  # the paper's exp. 1
+    assert default_approx((-30.0, 0.0), Limits()) == (-40.0, 10.0)
+    assert default_approx((30.0, 60.0), Limits()) == (20.0, 62.0)
+    planner = pytest.importorskip("schedsyn.planner")
+    seen = {}
+
+    def stub(spec, params, limits):
+        seen.update(spec=spec, params=params, limits=limits)
+        return _FakePlan(params.tau_s, params.dt0_c)
+
+    monkeypatch.setattr(planner, "plan_experiment", stub)
+    fn = PlanAtPoint((-50.0, -30.0), (-52.0, -20.0), 6, 0.05, Limits())
+    fn(ThermalParams(tau_s=2100.0, dt0_c=1.0))
+    spec = seen["spec"]
+    assert (spec.working_lo_c, spec.working_hi_c, spec.approx_lo_c, spec.approx_hi_c) == (
+        -50.0, -30.0, -52.0, -20.0)
+    assert spec.levels_required == 6 and spec.delta_c_per_min == 0.05
+    assert seen["params"] == ThermalParams(tau_s=2100.0, dt0_c=1.0)

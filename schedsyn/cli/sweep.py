@@ -26,6 +26,9 @@ def register(sub) -> None:
     p.add_argument("steps", metavar="STEPS.csv", nargs="?", default=None,
                    help="chamber step table (not needed with --replan)")
     _common.add_region_option(p)
+    p.add_argument("--approx", nargs=2, type=float, default=None, metavar=("LO_C", "HI_C"),
+                   help="approximation region for --replan, °C (default: 10 °C beyond the "
+                   "working region, within the device limits)")
     p.add_argument("--tau-s", default="1800:3000:13", metavar="START:STOP:N",
                    help="grid of time constants, s (default 1800:3000:13)")
     p.add_argument("--dt0-c", default="0:6:13", metavar="START:STOP:N",
@@ -55,19 +58,30 @@ def register(sub) -> None:
 class PlanAtPoint:
     """Picklable ``plan_fn`` for :func:`~schedsyn.sweep.sweep_replan`: plan with given params.
 
-    Calls ``schedsyn.planner.plan_experiment(params=..., region=..., levels_required=...,
-    limits=...)``; imported lazily so that the fixed-plan sweep works without a planner.
+    Calls ``schedsyn.planner.plan_experiment(ExperimentSpec(...), params, limits)``; the
+    planner is imported lazily so that the fixed-plan sweep works without it.
     """
 
     region: tuple[float, float]
+    approx: tuple[float, float]
     levels_required: int
+    delta_c_per_min: float
     limits: Limits
 
     def __call__(self, params: ThermalParams):
-        from ..planner import plan_experiment
+        from ..planner import ExperimentSpec, plan_experiment
 
-        return plan_experiment(params=params, region=self.region,
-                               levels_required=self.levels_required, limits=self.limits)
+        spec = ExperimentSpec(
+            "sweep", self.region[0], self.region[1], self.approx[0], self.approx[1],
+            levels_required=self.levels_required, delta_c_per_min=self.delta_c_per_min)
+        return plan_experiment(spec, params, self.limits)
+
+
+def default_approx(region: tuple[float, float], limits: Limits) -> tuple[float, float]:
+    """The paper's approximation region: 10 degC beyond the working region on each side,
+    but not past the device limits (W1 = [-50, -30] gives [-52, -20], as in experiment 1)."""
+    lo, hi = region
+    return max(lo - 10.0, limits.device_min_c), min(hi + 10.0, limits.device_max_c)
 
 
 def _planner_available() -> bool:
@@ -103,16 +117,19 @@ def run(args: argparse.Namespace) -> int:
         if not _planner_available():
             raise SchedsynError("re-planning needs the planner (schedsyn.planner), which this "
                                 "installation lacks; run the sweep without --replan")
-        result = sweep_replan(PlanAtPoint((lo, hi), args.levels, limits), taus, dt0s,
-                              backend=backend, workers=args.workers, progress=progress)
+        approx = tuple(args.approx) if args.approx else default_approx((lo, hi), limits)
+        plan_fn = PlanAtPoint((lo, hi), approx, args.levels, args.deltas_c_per_min[0], limits)
+        result = sweep_replan(plan_fn, taus, dt0s, backend=backend, workers=args.workers,
+                              progress=progress)
         frame = result.to_frame()
         write_frame_atomic(out / "sweep.csv", frame, inputs)
         numeric = [c for c in frame.columns
                    if c not in ("tau_s", "dt0_c") and frame[c].dtype.kind in "if"]
-        preferred = [c for c in numeric if "duration" in c or "margin" in c] or numeric
+        wanted = ("duration_min", "coverage", "margin_g_c_per_min")
+        preferred = [c for c in wanted if c in numeric] or numeric[:2]
         if preferred:
             ok = frame[frame["status"] == "ok"]
-            panels = [(ok, c, f"re-planned: {c}") for c in preferred[:2]]
+            panels = [(ok, c, f"re-planned: {c}") for c in preferred]
             plots.save_figure(plots.sweep_panels(panels, nominal=marker)[0],
                               out / "sweep.png", inputs)
         print(result.summary())
