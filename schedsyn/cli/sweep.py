@@ -32,7 +32,8 @@ def register(sub) -> None:
     p.add_argument("--tau-s", default="1800:3000:13", metavar="START:STOP:N",
                    help="grid of time constants, s (default 1800:3000:13)")
     p.add_argument("--dt0-c", default="0:6:13", metavar="START:STOP:N",
-                   help="grid of self-heating offsets, °C (default 0:6:13)")
+                   help="grid of self-heating offsets, °C (default 0:6:13); attach a "
+                   "negative start with '=', e.g. --dt0-c=-2:4:7")
     p.add_argument("--out", default=None, help="output directory (default out/sweep)")
     p.add_argument("--levels", type=int, default=6, help="required distinct gradient levels")
     p.add_argument("--deltas-c-per-min", type=float, nargs="+", default=[0.05, 0.1],
