@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 from scipy import optimize, stats
-from scipy.signal import lfilter
+from scipy.signal import lfilter, lombscargle
 
 from .effects import EFFECTS, Effect, LinearEffectModel, ModelSpec
 from .errors import LogFormatError, ParameterError, SolverFailedError
@@ -67,8 +67,8 @@ class DiagnoseSettings:
     """
 
     fit_step_s: float | None = None
-    bic_margin: float = 25.0
-    min_rel_improvement: float = 0.05
+    bic_margin: float = 15.0
+    min_rel_improvement: float = 0.02
     ambiguity_bic: float = 10.0
     holdout_fraction: float = 0.3
     setpoint_tol_c: float = 0.05
@@ -233,14 +233,11 @@ def _spec(effect: str, theta: np.ndarray, names: Sequence[str]) -> ModelSpec:
 
 
 def _residuals(spec: ModelSpec, t0: float, data: _Data) -> tuple[np.ndarray, np.ndarray | None]:
-    times = data.time_min
-    if data.air_time_min is not None:
-        times = np.concatenate((times, data.air_time_min))
-    pred = spec.predict(data.programme, times, t0_c=t0, grid_min=min(data.step_min, 1 / 6))
-    n = data.time_min.size
-    r_t = pred.t_c[:n] - data.t_c
-    r_a = None if data.air_time_min is None else pred.tk_air_c[n:] - data.air_c
-    return r_t, r_a
+    temp, air = spec.predict_channels(
+        data.programme, data.time_min, data.air_time_min, t0_c=t0,
+        grid_min=min(data.step_min, 1 / 3),
+    )
+    return temp - data.t_c, None if air is None else air - data.air_c
 
 
 def _fit(effect: str, starts: Sequence[np.ndarray], lo: np.ndarray, hi: np.ndarray,
@@ -268,7 +265,7 @@ def _fit(effect: str, starts: Sequence[np.ndarray], lo: np.ndarray, hi: np.ndarr
         try:
             res = optimize.least_squares(
                 fun, x0, bounds=(lo[free_idx], hi[free_idx]), x_scale="jac",
-                method="trf", diff_step=1e-4, max_nfev=300, xtol=1e-8, ftol=1e-10,
+                method="trf", diff_step=1e-4, max_nfev=60, xtol=1e-8, ftol=1e-8,
             )
         except (ValueError, np.linalg.LinAlgError) as exc:  # pragma: no cover - defensive
             raise SolverFailedError(f"fitting {effect} failed: {exc}") from exc
@@ -342,11 +339,30 @@ def fit_base(data: _Data) -> CandidateFit:
     return _fit("none", [_base_start(data)], lo, hi, data)
 
 
-def _periodic_start(base: CandidateFit, data: _Data) -> list[np.ndarray]:
-    """Best periods by a scan with amplitude and phase solved linearly (variable projection).
+def _peak_periods(t_min: np.ndarray, r: np.ndarray, p_lo_s: float, p_hi_s: float,
+                  n_peaks: int = 3) -> list[float]:
+    """Periods (s) of the highest distinct peaks of the Lomb-Scargle periodogram of ``r``.
 
-    For a period P the cycling adds ``a sin + b cos`` to the air; its effect on T is the
-    lag of that input, linear in (a, b).
+    The frequency grid is 4x finer than the natural resolution 1/span, so a sinusoid of
+    many cycles is not missed between grid points.
+    """
+    t_s = (t_min - t_min[0]) * 60.0
+    span = max(t_s[-1], 1.0)
+    f = np.arange(1.0 / p_hi_s, 1.0 / p_lo_s, 1.0 / (4.0 * span))
+    if f.size < 3:
+        return []
+    power = lombscargle(t_s, r - r.mean(), 2.0 * np.pi * f)
+    peaks = [i for i in range(1, f.size - 1) if power[i] >= power[i - 1] and power[i] >= power[i + 1]]
+    peaks.sort(key=lambda i: -power[i])
+    return [float(1.0 / f[i]) for i in peaks[:n_peaks]]
+
+
+def _periodic_start(base: CandidateFit, data: _Data) -> list[tuple[float, float, float]]:
+    """Starting (amplitude, period, phase) for chamber_cycling.
+
+    Periods from the periodogram peaks of the base residuals (air channel and internal
+    temperature); for each, amplitude and phase by linear least squares (the cycling adds
+    ``a sin + b cos`` to the air; its effect on T is the lag of that input, linear in a, b).
     """
     r_t, r_a = _residuals(base.model, base.t0_c, data)
     tau_min = base.values["tau_s"] / 60.0
@@ -354,33 +370,32 @@ def _periodic_start(base: CandidateFit, data: _Data) -> list[np.ndarray]:
     h = data.step_min
     grid = np.arange(0.0, data.time_min[-1] + h, h)
     p_lo = max(4.0 * data.step_min * 60.0, 60.0)
-    periods = np.geomspace(p_lo, max(span_s / 4.0, 2 * p_lo), 120)
-    scores = []
+    p_hi = max(span_s / 4.0, 2 * p_lo)
+    periods = _peak_periods(data.time_min, r_t, p_lo, p_hi)
+    if r_a is not None:
+        periods = _peak_periods(data.air_time_min, r_a, p_lo, p_hi) + periods
+    starts = []
     for p_s in periods:
         w = 2.0 * np.pi * 60.0 / p_s
         cols_t, cols_a = [], []
-        for f in (np.sin, np.cos):
-            v = f(w * grid)
+        for fn in (np.sin, np.cos):
+            v = fn(w * grid)
             a_ = math.exp(-h / tau_min)
             beta = 1.0 - tau_min * (1.0 - a_) / h
             c = (1.0 - a_) * v[:-1] + beta * np.diff(v)
             y = np.concatenate(([0.0], lfilter([1.0], [1.0, -a_], c)))
             cols_t.append(np.interp(data.time_min, grid, y))
             if r_a is not None:
-                cols_a.append(f(w * data.air_time_min))
+                cols_a.append(fn(w * data.air_time_min))
         a_mat = np.column_stack(cols_t)
         y_vec = -r_t
         if r_a is not None:
             a_mat = np.vstack((a_mat, np.column_stack(cols_a)))
             y_vec = np.concatenate((y_vec, -r_a))
-        coef, *_ = np.linalg.lstsq(a_mat, y_vec, rcond=None)
-        scores.append((float(np.sum((a_mat @ coef - y_vec) ** 2)), p_s, coef))
-    scores.sort(key=lambda s: s[0])
-    starts = []
-    for _, p_s, (cs, cc) in scores[:3]:
+        (cs, cc), *_ = np.linalg.lstsq(a_mat, y_vec, rcond=None)
         # a sin(wt) + b cos(wt) = A sin(wt + phi), A = hypot(a, b), phi = atan2(b, a)
-        starts.append((max(math.hypot(cs, cc), 1e-3), p_s, math.atan2(cc, cs)))
-    return starts
+        starts.append((min(max(math.hypot(cs, cc), 1e-3), 19.0), p_s, math.atan2(cc, cs)))
+    return starts or [(0.5, p_lo * 4, 0.0)]
 
 
 def _effect_starts(eff: Effect, base: CandidateFit, data: _Data) -> list[np.ndarray]:
@@ -418,7 +433,37 @@ def _effect_bounds(eff: Effect, data: _Data) -> tuple[np.ndarray, np.ndarray]:
 def fit_candidate(name: str, base: CandidateFit, data: _Data) -> CandidateFit:
     eff = EFFECTS[name]
     lo, hi = _effect_bounds(eff, data)
-    return _fit(name, _effect_starts(eff, base, data), lo, hi, data)
+    fit = _fit(name, _effect_starts(eff, base, data), lo, hi, data)
+    if name == "chamber_rate_limit":
+        fit = _unbind_rate_limits(fit, data)
+    return fit
+
+
+#: A rate limit the log never reaches is reported as this (degC/min): no limit.
+NOT_BINDING_C_PER_MIN = 20.0
+
+
+def _unbind_rate_limits(fit: CandidateFit, data: _Data) -> CandidateFit:
+    """A rate limit the programme never reaches is not identified: report "no limit".
+
+    If lifting a fitted limit to :data:`NOT_BINDING_C_PER_MIN` leaves the residuals
+    unchanged, it did not bind anywhere in this log.
+    """
+    params = dict(fit.model.parameters)
+    se = dict(fit.stderr)
+    base_r = np.concatenate([r for r in _residuals(fit.model, fit.t0_c, data) if r is not None])
+    for key in ("max_cool_rate_c_per_min", "max_heat_rate_c_per_min"):
+        trial = dict(params, **{key: NOT_BINDING_C_PER_MIN})
+        spec = ModelSpec(fit.model.tau_s, fit.model.dt0_c, fit.effect, trial)
+        r = np.concatenate([x for x in _residuals(spec, fit.t0_c, data) if x is not None])
+        if np.allclose(r, base_r, rtol=0.0, atol=1e-9):
+            params, se[key] = trial, float("nan")
+    if params == dict(fit.model.parameters):
+        return fit
+    spec = ModelSpec(fit.model.tau_s, fit.model.dt0_c, fit.effect, params)
+    values = dict(fit.values) | params
+    return CandidateFit(fit.effect, spec, fit.t0_c, values, se, fit.n_params, fit.n_residuals,
+                        fit.sse, fit.score, fit.rms_c, fit.rms_air_c)
 
 
 # --------------------------------------------------------------------------------------

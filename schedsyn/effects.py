@@ -361,6 +361,41 @@ class ModelSpec:
             air_t = np.interp(t, grid, air)
         return Prediction(t, np.interp(t, grid, temp), np.interp(t, grid, grad), air_t)
 
+    def predict_channels(
+        self,
+        programme: Programme,
+        t_times_min: np.ndarray,
+        air_times_min: np.ndarray | None,
+        t0_c: float = 20.0,
+        grid_min: float | None = None,
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """Internal temperature at ``t_times_min`` and chamber air at ``air_times_min``.
+
+        The same maths as :meth:`predict`, evaluating each channel only where it is
+        needed (used by the fits, which call it thousands of times).
+        """
+        if not self.is_linear:
+            if air_times_min is None:
+                return self.predict(programme, t_times_min, t0_c, grid_min).t_c, None
+            n = np.size(t_times_min)
+            pr = self.predict(
+                programme, np.concatenate((t_times_min, air_times_min)), t0_c, grid_min
+            )
+            return pr.t_c[:n], pr.tk_air_c[n:]
+        resp = affine_response(
+            self.linear_model(), programme.durations_min, t_times_min, programme.start_c, t0_c
+        )
+        temp = resp.a_t @ programme.rates_c_per_min + resp.b_t
+        if air_times_min is None:
+            return temp, None
+        if self.effect == "chamber_lag":
+            air = affine_response(
+                LinearEffectModel(self.parameters["tau_chamber_s"], 0.0),
+                programme.durations_min, air_times_min, programme.start_c, programme.start_c,
+            )
+            return temp, air.a_t @ programme.rates_c_per_min + air.b_t
+        return temp, programme.chamber_at(air_times_min)
+
     def _tau_grid_min(self, v: np.ndarray, temp: np.ndarray) -> np.ndarray:
         if self.effect == "asymmetric_tau":
             p = self.parameters

@@ -287,3 +287,20 @@ def compare_panels(comparison, region=None, suptitle: str | None = None):
     if suptitle:
         fig.suptitle(suptitle)
     return list(axes.ravel())
+
+
+def residual_plot(time_min, before_c, after_c=None, ax=None, title: str | None = None,
+                  labels=("base model", "augmented model")):
+    """Residuals (model - measured, °C) against time, before and after augmentation."""
+    ax = _axes(ax)
+    ax.plot(time_min, before_c, color="tab:red", lw=0.8, alpha=0.8, label=labels[0])
+    if after_c is not None:
+        ax.plot(time_min, after_c, color="tab:blue", lw=0.8, alpha=0.8, label=labels[1])
+    ax.axhline(0.0, color="k", lw=0.6)
+    ax.set_xlabel("time, min")
+    ax.set_ylabel("model - measured, °C")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best")
+    if title:
+        ax.set_title(title)
+    return ax

@@ -137,3 +137,88 @@ def synth_effect_log(
     cols["t_true_c"] = pred.t_c
     cols["g_true_c_per_min"] = pred.g_c_per_min
     return pd.DataFrame(cols)
+
+
+#: Realistic ranges of the hidden effects' parameters for blind tests (uniform draws).
+EFFECT_RANGES = {
+    "chamber_lag": {"tau_chamber_s": (60.0, 600.0)},
+    "chamber_rate_limit": {"max_cool_rate_c_per_min": (0.3, 0.8)},
+    "chamber_cycling": {"amplitude_c": (0.3, 2.0), "period_s": (300.0, 1800.0)},
+    "dead_time": {"delay_s": (60.0, 600.0)},
+    "second_time_constant": {"tau2_s": (300.0, 1200.0)},
+    "selfheat_slope": {"dt0_slope_c_per_c": (0.01, 0.05)},
+    "asymmetric_tau": {"ratio": (1.15, 1.40)},
+}
+
+
+def random_effect_model(effect: str, rng: np.random.Generator, tau_s: float = 2400.0,
+                        dt0_c: float = 3.0):
+    """A :class:`~schedsyn.effects.ModelSpec` with ``effect`` drawn from EFFECT_RANGES.
+
+    ``chamber_rate_limit`` limits cooling only (heating limit 10 degC/min, not binding);
+    ``chamber_cycling`` gets a random phase; ``asymmetric_tau`` makes one of the two time
+    constants ``ratio`` times the other (which one at random), around ``tau_s``.
+    """
+    from .effects import ModelSpec
+
+    if effect == "none":
+        return ModelSpec(tau_s, dt0_c)
+    if effect not in EFFECT_RANGES:
+        raise ParameterError(f"unknown effect {effect!r}; known: none, {', '.join(EFFECT_RANGES)}")
+    draw = {k: float(rng.uniform(*v)) for k, v in EFFECT_RANGES[effect].items()}
+    if effect == "chamber_rate_limit":
+        draw["max_heat_rate_c_per_min"] = 10.0
+    elif effect == "chamber_cycling":
+        draw["phase_rad"] = float(rng.uniform(-np.pi, np.pi))
+    elif effect == "asymmetric_tau":
+        ratio = draw.pop("ratio")
+        slow, fast = tau_s * math.sqrt(ratio), tau_s / math.sqrt(ratio)
+        heat_slow = bool(rng.integers(2))
+        draw = {"tau_heat_s": slow if heat_slow else fast, "tau_cool_s": fast if heat_slow else slow}
+    return ModelSpec(tau_s, dt0_c, effect, draw)
+
+
+def test_programmes() -> dict[str, Programme]:
+    """Two simple 9-hour programmes (20 degC start and end) for blind tests.
+
+    ``cold``: down to -40 at -1 degC/min, up to +40 at +2, down to -10 at -0.8, back;
+    ``warm``: up to +60 at +1, down to 0 at -1, up to +50 at +2.5, back at -0.6.
+    """
+    def build(steps: list[tuple[float, float]]) -> Programme:
+        d = [s[0] for s in steps]
+        return Programme(np.array(d + [540.0 - sum(d)]), np.array([s[1] for s in steps] + [0.0]))
+
+    return {
+        "cold": build([(60, -1.0), (60, 0.0), (40, 2.0), (90, 0.0), (62.5, -0.8), (60, 0.0),
+                       (30, 1.0)]),
+        "warm": build([(40, 1.0), (60, 0.0), (60, -1.0), (60, 0.0), (20, 2.5), (60, 0.0),
+                       (50, -0.6)]),
+    }
+
+
+def blind_case(
+    effect: str,
+    seed: int,
+    programme: Programme,
+    *,
+    sample_s: float | None = None,
+    with_air: bool | None = None,
+    noise_c: float | None = None,
+    quant_c: float = 0.01,
+):
+    """One blind test log: ``(frame, truth ModelSpec, noise_c)``, all drawn from ``seed``.
+
+    Base ``tau_s`` in 1800..3000 s, ``dt0_c`` in 1..5 degC, the effect's parameters from
+    :data:`EFFECT_RANGES`, noise 0.01..0.03 degC, sampling 1, 2, 5 or 10 s, air channel
+    with probability 1/2 (each unless given).
+    """
+    rng = np.random.default_rng(seed)
+    tau_s = float(rng.uniform(1800.0, 3000.0))
+    dt0_c = float(rng.uniform(1.0, 5.0))
+    truth = random_effect_model(effect, rng, tau_s, dt0_c)
+    noise = float(rng.uniform(0.01, 0.03)) if noise_c is None else noise_c
+    samp = float(rng.choice([1.0, 2.0, 5.0, 10.0])) if sample_s is None else sample_s
+    air = bool(rng.integers(2)) if with_air is None else with_air
+    frame = synth_effect_log(programme, truth, sample_s=samp, noise_c=noise, quant_c=quant_c,
+                             seed=int(rng.integers(2**31)), with_air=air)
+    return frame, truth, noise

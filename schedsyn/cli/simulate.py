@@ -6,6 +6,7 @@ import argparse
 
 from ..coverage import trajectory_coverage
 from ..io import write_frame_atomic
+from ..params import ThermalParams
 from ..programme import read_steps
 from ..simulate import simulate
 from . import _common
@@ -23,6 +24,9 @@ def register(sub) -> None:
     p.add_argument("--delta-c-per-min", type=float, default=0.05,
                    help="minimum gradient difference between levels, °C/min")
     p.add_argument("--dt-min", type=float, default=0.1, help="simulation step, min")
+    p.add_argument("--model", default=None, metavar="MODEL.json",
+                   help="augmented model file (from `schedsyn diagnose --out DIR`); "
+                        "--tau-s/--dt0-c then override its base")
     p.set_defaults(func=run)
 
 
@@ -32,7 +36,20 @@ def run(args: argparse.Namespace) -> int:
     params = _common.thermal_params(args)
     limits = _common.limits(args)
     programme = read_steps(args.steps, limits)
-    traj = simulate(programme, params, dt_min=args.dt_min, t0_c=limits.t_init_c)
+    if args.model is not None:  # an augmented model: exact if linear, else on a grid
+        import dataclasses
+
+        from ..models_io import load_model, simulate_effect
+
+        spec = load_model(args.model)
+        params = _common.thermal_params(args, ThermalParams(spec.tau_s, spec.dt0_c))
+        spec = dataclasses.replace(spec, tau_s=params.tau_s, dt0_c=params.dt0_c)
+        limits = spec.planner_limits(limits)
+        traj = simulate_effect(programme, spec, dt_min=args.dt_min, t0_c=limits.t_init_c)
+        print(f"model {args.model}: effect {spec.effect} "
+              f"{dict(spec.parameters) if spec.parameters else ''}")
+    else:
+        traj = simulate(programme, params, dt_min=args.dt_min, t0_c=limits.t_init_c)
     lo, hi = args.region
     report = trajectory_coverage(traj, lo, hi, args.levels, args.delta_c_per_min)
     out = _common.out_dir(args.out, "out/simulate")

@@ -1,0 +1,209 @@
+"""The effect library against scipy's ODE solver, and the model-file contract."""
+
+import bisect
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from schedsyn import FirstOrderLag, Programme, ThermalParams, affine_response, simulate
+from schedsyn.effects import EFFECTS, LinearEffectModel, ModelSpec
+from schedsyn.errors import ParameterError
+from schedsyn.models_io import load_model, simulate_effect, write_model
+
+PROG = Programme([30.0, 20.0, 40.0, 60.0, 25.0], [-1.0, 0.0, 2.5, -0.5, 0.0], 20.0)
+TIMES = np.linspace(0.0, PROG.total_min + 15.0, 353)
+
+
+EDGES = [0.0, *np.cumsum(PROG.durations_min).tolist()]
+TEMPS = PROG.boundary_temps_c.tolist()
+RATES = PROG.rates_c_per_min.tolist()
+
+
+def _rate(t):
+    i = bisect.bisect_right(EDGES, t) - 1
+    return RATES[i] if i < len(RATES) else 0.0
+
+
+def _setpoint(t):
+    i = min(bisect.bisect_right(EDGES, t) - 1, len(RATES))
+    return TEMPS[i] + (RATES[i] * (t - EDGES[i]) if i < len(RATES) else 0.0)
+
+
+def _integrate(rhs, x0, shift=0.0):
+    """Integrate piece by piece (never across a rate change, also ``shift`` later) at TIMES."""
+    stops = np.unique(np.concatenate((EDGES, np.add(EDGES, shift), [TIMES[-1]])))
+    stops = stops[stops <= TIMES[-1]]
+    out = np.empty((len(x0), TIMES.size))
+    x = np.asarray(x0, dtype=float)
+    for a, b in zip(stops[:-1], stops[1:], strict=True):
+        m = (TIMES >= a) & (TIMES <= b)
+        sol = solve_ivp(rhs, (a, b), x, method="DOP853", rtol=1e-11, atol=1e-11,
+                        dense_output=True)
+        out[:, m] = sol.sol(TIMES[m])
+        x = sol.y[:, -1]
+    return out
+
+
+@pytest.mark.parametrize(("tau_s", "tau_c_s", "t0_c"), [(2400.0, 300.0, 18.0), (1800.0, 900.0, 21.0)])
+def test_chamber_lag_matches_ode(tau_s, tau_c_s, t0_c):
+    spec = ModelSpec(tau_s, 3.0, "chamber_lag", {"tau_chamber_s": tau_c_s})
+    tau, tc = tau_s / 60, tau_c_s / 60
+
+    # tau_c dA/dt + A = Tk_set;  tau dT/dt + T = A + dT0 (A starts at the setpoint)
+    def rhs(t, x):
+        return [_rate(t), (x[0] - x[1]) / tc, (x[1] + 3.0 - x[2]) / tau]
+
+    ref = _integrate(rhs, [20.0, 20.0, t0_c])
+    pred = spec.predict(PROG, TIMES, t0_c=t0_c)
+    np.testing.assert_allclose(pred.t_c, ref[2], atol=1e-7)
+    np.testing.assert_allclose(pred.g_c_per_min, (ref[1] + 3.0 - ref[2]) / tau, atol=1e-8)
+    np.testing.assert_allclose(pred.tk_air_c, ref[1], atol=1e-7)
+
+
+@pytest.mark.parametrize("tau2_s", [300.0, 1200.0, 2400.0])
+def test_second_time_constant_matches_ode(tau2_s):
+    spec = ModelSpec(2400.0, 2.0, "second_time_constant", {"tau2_s": tau2_s})
+    tau, t2 = 40.0, tau2_s / 60
+
+    def rhs(t, x):
+        return [_rate(t), (x[0] - x[1]) / t2, (x[1] + 2.0 - x[2]) / tau]
+
+    ref = _integrate(rhs, [20.0, 20.0, 19.0])
+    pred = spec.predict(PROG, TIMES, t0_c=19.0)
+    atol = 1e-7 if tau2_s != 2400.0 else 2e-3  # the double pole is approximated
+    np.testing.assert_allclose(pred.t_c, ref[2], atol=atol)
+    np.testing.assert_allclose(pred.tk_air_c, PROG.chamber_at(TIMES), atol=1e-12)
+
+
+def test_dead_time_matches_ode():
+    spec = ModelSpec(2400.0, 3.0, "dead_time", {"delay_s": 300.0})
+    d = 5.0
+
+    # tau dT/dt + T = Tk(t - d) + dT0, the chamber at its start value before t = 0
+    def rhs(t, x):
+        return [(_setpoint(max(t - d, 0.0)) + 3.0 - x[0]) / 40.0]
+
+    ref = _integrate(rhs, [18.0], shift=d)
+    pred = spec.predict(PROG, TIMES, t0_c=18.0)
+    np.testing.assert_allclose(pred.t_c, ref[0], atol=1e-7)
+
+
+def test_selfheat_slope_matches_ode():
+    s = 0.04
+    spec = ModelSpec(2400.0, 3.0, "selfheat_slope", {"dt0_slope_c_per_c": s})
+
+    # tau dT/dt + T = Tk + dt0 + s (T - 20)
+    def rhs(t, x):
+        return [_rate(t), (x[0] + 3.0 + s * (x[1] - 20.0) - x[1]) / 40.0]
+
+    ref = _integrate(rhs, [20.0, 17.0])
+    pred = spec.predict(PROG, TIMES, t0_c=17.0)
+    np.testing.assert_allclose(pred.t_c, ref[1], atol=1e-7)
+    g_ref = (ref[0] + 3.0 + s * (ref[1] - 20.0) - ref[1]) / 40.0
+    np.testing.assert_allclose(pred.g_c_per_min, g_ref, atol=1e-8)
+
+
+def test_rate_limit_matches_ode():
+    spec = ModelSpec(2400.0, 3.0, "chamber_rate_limit",
+                     {"max_cool_rate_c_per_min": 0.5, "max_heat_rate_c_per_min": 2.0})
+    k = 1e4  # a stiff proportional follower saturated at the limits approximates the limiter
+
+    def rhs(t, x):
+        return [min(max(k * (_setpoint(t) - x[0]), -0.5), 2.0), (x[0] + 3.0 - x[1]) / 40.0]
+
+    times = np.arange(0.0, TIMES[-1], 0.25)  # on the coarse grid: the limiter is exact there
+    sol = solve_ivp(rhs, (0, times[-1]), [20.0, 18.0], t_eval=times, method="LSODA",
+                    rtol=1e-9, atol=1e-9, max_step=0.05)
+    pred = spec.predict(PROG, times, t0_c=18.0, grid_min=0.25)
+    # the follower lags by rate/k: 2.5e-4 degC; the grid update is exact for the limiter
+    np.testing.assert_allclose(pred.tk_air_c, sol.y[0], atol=1e-3)
+    np.testing.assert_allclose(pred.t_c, sol.y[1], atol=1e-3)
+    assert np.min(np.diff(pred.tk_air_c) / np.diff(times)) >= -0.5 - 1e-9
+
+
+def test_cycling_and_asymmetric_match_ode():
+    cyc = ModelSpec(2400.0, 3.0, "chamber_cycling",
+                    {"amplitude_c": 1.0, "period_s": 600.0, "phase_rad": 0.3})
+    ref = _integrate(lambda t, x: [(_setpoint(t) + math.sin(2 * math.pi * t / 10 + 0.3) + 3.0
+                                    - x[0]) / 40.0], [18.0])
+    np.testing.assert_allclose(cyc.predict(PROG, TIMES, t0_c=18.0, grid_min=0.02).t_c, ref[0],
+                               atol=1e-4)
+
+    asym = ModelSpec(2400.0, 3.0, "asymmetric_tau", {"tau_heat_s": 2000.0, "tau_cool_s": 2800.0})
+
+    def rhs(t, x):
+        v = _setpoint(t) + 3.0
+        return [(v - x[0]) / (2000.0 / 60 if v > x[0] else 2800.0 / 60)]
+
+    sol = solve_ivp(rhs, (0, TIMES[-1]), [18.0], t_eval=TIMES, rtol=1e-10, atol=1e-10,
+                    max_step=0.5)
+    np.testing.assert_allclose(asym.predict(PROG, TIMES, t0_c=18.0, grid_min=0.02).t_c,
+                               sol.y[0], atol=1e-4)
+
+
+def test_linear_effect_model_is_a_planner_model():
+    """No effect = the first-order lag exactly; effects go through simulate(model=...)."""
+    plain = LinearEffectModel(2400.0, 3.0)
+    a = affine_response(plain, PROG.durations_min, TIMES, 20.0, 19.0)
+    b = affine_response(FirstOrderLag(ThermalParams(2400.0, 3.0)), PROG.durations_min, TIMES,
+                        20.0, 19.0)
+    np.testing.assert_allclose(a.a_t, b.a_t, atol=1e-12)
+    np.testing.assert_allclose(a.b_t, b.b_t, atol=1e-12)
+    spec = ModelSpec(2400.0, 3.0, "dead_time", {"delay_s": 120.0})
+    traj = simulate(PROG, model=spec.linear_model(), times_min=TIMES, t0_c=20.0)
+    np.testing.assert_allclose(traj.t_c, spec.predict(PROG, TIMES).t_c, atol=1e-12)
+    # a step response starts flat for the delay and the ramp response is its integral
+    x = np.linspace(0, 200, 4001)
+    m = spec.linear_model()
+    assert np.all(m.step(x[x <= 2.0]) == 0.0)
+    integral = np.concatenate(([0], np.cumsum(0.5 * (m.step(x)[1:] + m.step(x)[:-1]) * np.diff(x))))
+    np.testing.assert_allclose(m.ramp(x), integral, atol=1e-4)
+
+
+def test_augment_returns_new_model_and_validates():
+    base = ModelSpec(2400.0, 3.0)
+    lag = EFFECTS["chamber_lag"].augment(base, (300.0,))
+    assert base.effect == "none" and dict(base.parameters) == {}
+    assert lag.effect == "chamber_lag" and lag.parameters["tau_chamber_s"] == 300.0
+    assert EFFECTS["chamber_cycling"].n_params == 3 and EFFECTS["dead_time"].n_params == 1
+    assert lag.is_linear and not EFFECTS["asymmetric_tau"].augment(base, (2000.0, 2800.0)).is_linear
+    with pytest.raises(ParameterError, match="unknown effect"):
+        ModelSpec(2400.0, 3.0, "gremlins", {})
+    with pytest.raises(ParameterError, match="missing"):
+        ModelSpec(2400.0, 3.0, "dead_time", {})
+    with pytest.raises(ParameterError, match="outside its range"):
+        ModelSpec(2400.0, 3.0, "dead_time", {"delay_s": -5.0})
+    with pytest.raises(ParameterError, match="dt0_slope"):
+        LinearEffectModel(2400.0, 3.0, dt0_slope_c_per_c=0.9)
+
+
+def test_rate_limit_gives_planner_limits():
+    spec = ModelSpec(2400.0, 3.0, "chamber_rate_limit",
+                     {"max_cool_rate_c_per_min": 0.6, "max_heat_rate_c_per_min": 20.0})
+    lim = spec.planner_limits()
+    assert lim.rate_min_c_per_min == pytest.approx(-0.6)
+    assert lim.rate_max_c_per_min == 3.0
+    assert ModelSpec(2400.0, 3.0).planner_limits().rate_min_c_per_min == -1.0
+
+
+def test_model_file_round_trip(tmp_path):
+    for spec in (ModelSpec(2000.0, 2.5, "second_time_constant", {"tau2_s": 500.0}),
+                 ModelSpec(2000.0, 2.5, "chamber_cycling",
+                           {"amplitude_c": 0.5, "period_s": 900.0, "phase_rad": 1.0})):
+        path = write_model(tmp_path / f"{spec.effect}.json", spec)
+        back = load_model(path)
+        assert back == spec
+        traj = simulate_effect(PROG, back, TIMES)
+        np.testing.assert_allclose(traj.t_c, spec.predict(PROG, TIMES).t_c)
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"tau_s": 2400}))
+    with pytest.raises(ParameterError, match="tau_s, dt0_c"):
+        load_model(bad)
+    bad.write_text("{not json")
+    with pytest.raises(ParameterError, match="not valid JSON"):
+        load_model(bad)
+    with pytest.raises(ParameterError, match="does not exist"):
+        load_model(tmp_path / "missing.json")
