@@ -17,6 +17,7 @@ from schedsyn.estimate import (
     N_DIFFUSE,
     estimate_gradient,
     estimate_gradient_model,
+    filter_smooth,
     finite_difference_gradient,
     kalman_filter,
     kinematic_transition,
@@ -356,3 +357,47 @@ def test_two_steps_compose_into_one(h1, h2, kind):
     f, qq = _fq(kind, h1 + h2, q)
     np.testing.assert_allclose(f, f2 @ f1, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(qq, f2 @ q1 @ f2.T + q2, rtol=1e-7, atol=1e-14)
+
+
+@pytest.mark.parametrize("kind", ["kinematic", "lag"])
+def test_steady_state_fast_path_equals_plain_recursions(kind, rng, monkeypatch):
+    """filter_smooth (vectorised where the filter is steady) = kalman_filter + rts_smoother
+    on a log with NaN rows, a gap and an irregular stretch; the fast path is exercised."""
+    import schedsyn.estimate as est_mod
+
+    calls = []
+    real_lti = est_mod._lti
+    monkeypatch.setattr(est_mod, "_lti", lambda *a: calls.append(1) or real_lti(*a))
+    n = 6000
+    h = np.full(n, 1.0 / 6.0)  # 10 s steps, in minutes
+    h[0] = 0.0
+    h[2500] += 15.0  # a 15 min gap
+    h[4000:4100] = rng.uniform(0.05, 0.3, 100)  # irregular sampling
+    t = np.cumsum(h)
+    y = 20.0 + 3.0 * np.sin(t / 30.0) + 0.02 * rng.standard_normal(n)
+    y[[50, 51, 3000]] = np.nan
+    y[5000:5040] = np.nan
+    if kind == "kinematic":
+        a, b, q11, q12, q22 = kinematic_transition(h, 1e-3)
+        u = np.zeros(n)
+    else:
+        a, b, q11, q12, q22 = lag_transition(h, 40.0, 1e-4)
+        tk = 20.0 + 8.0 * np.sin(t / 25.0)
+        u = np.concatenate(([0.0], lag_input(h[1:], tk[:-1], tk[1:], FirstOrderLag())))
+    x0, p0 = (y[0], 0.0), (100.0, 0.0, 9.0)
+    lists = [v.tolist() for v in (a, b, u, q11, q12, q22)]
+    filt, pred, innov, svar, m2ll = kalman_filter(y.tolist(), *lists, 4e-4, x0, p0)
+    ref = rts_smoother(filt, pred, a.tolist(), b.tolist())
+    fast = filter_smooth(y, a, b, u, q11, q12, q22, 4e-4, x0, p0)
+    assert len(calls) >= 4  # steady stretches were solved vectorised
+    std_t, std_g = np.sqrt(ref[2]), np.sqrt(ref[4])
+    np.testing.assert_allclose((fast[0] - ref[0]) / std_t, 0.0, atol=1e-7)
+    np.testing.assert_allclose((fast[1] - ref[1]) / std_g, 0.0, atol=1e-7)
+    for i in (2, 3, 4):
+        np.testing.assert_allclose(fast[i], ref[i], rtol=1e-7, atol=1e-9 * np.max(ref[i]))
+    np.testing.assert_allclose(fast[5], innov, atol=1e-9)
+    np.testing.assert_allclose(fast[6], svar, rtol=1e-9)
+    assert fast[7] == pytest.approx(m2ll, rel=1e-10)
+    # likelihood only
+    assert filter_smooth(y, a, b, u, q11, q12, q22, 4e-4, x0, p0, smooth=False)[7] == \
+        pytest.approx(m2ll, rel=1e-10)
