@@ -539,11 +539,11 @@ class _Setup:
         if self.tau_min is not None:
             # compose T' = e T + u over the fine steps in each coarse step:
             # u_c = sum_j u_j prod_{i > j} e_i  (exact for the chamber-driven part)
-            log_e = -self.h_min / self.tau_min
-            cum = np.cumsum(log_e)
-            for c in range(1, idx.size):
-                lo, hi = idx[c - 1] + 1, idx[c] + 1
-                u[c] = float(np.sum(self.u[lo:hi] * np.exp(cum[hi - 1] - cum[lo:hi])))
+            cum = np.cumsum(-self.h_min / self.tau_min)  # log prod e_i
+            fine = np.arange(1, idx[-1] + 1)
+            chunk = np.searchsorted(idx, fine, side="left")  # coarse step of each fine one
+            w = self.u[fine] * np.exp(cum[idx[chunk]] - cum[fine])
+            u = np.bincount(chunk, weights=w, minlength=idx.size)
         return _Setup(t, self.y[idx], h, u, self.tau_min, self.x0)
 
 

@@ -401,3 +401,25 @@ def test_steady_state_fast_path_equals_plain_recursions(kind, rng, monkeypatch):
     # likelihood only
     assert filter_smooth(y, a, b, u, q11, q12, q22, 4e-4, x0, p0, smooth=False)[7] == \
         pytest.approx(m2ll, rel=1e-10)
+
+
+def test_strided_copy_composes_the_chamber_input_exactly(rng):
+    """The noise search's strided copy of a model-based log: its transition over a merged
+    step equals the fine steps applied one after another."""
+    import schedsyn.estimate as est_mod
+
+    n, tau = 3000, 40.0
+    h = np.concatenate(([0.0], rng.uniform(0.01, 0.5, n - 1)))
+    u = np.concatenate(([0.0], rng.normal(0.0, 1.0, n - 1)))
+    setup = est_mod._Setup(np.cumsum(h), rng.normal(size=n), h, u, tau, (0.0, 0.0))
+    coarse = setup.stride(7)
+    idx = np.arange(0, n, 7)
+    np.testing.assert_allclose(coarse.t_min, setup.t_min[idx])
+    a_c, b_c, *_ = lag_transition(coarse.h_min, tau, 1.0)
+    for k in (1, 2, 100, idx.size - 1):
+        x = np.array([1.5, -0.2])  # (T, d) through the fine steps
+        for j in range(idx[k - 1] + 1, idx[k] + 1):
+            a, b, *_ = lag_transition(np.array([h[j]]), tau, 1.0)
+            x = np.array([a[0] * x[0] + b[0] * x[1] + u[j], x[1]])
+        direct = a_c[k] * 1.5 + b_c[k] * -0.2 + coarse.u[k]
+        assert direct == pytest.approx(x[0], rel=1e-12, abs=1e-12)
