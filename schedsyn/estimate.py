@@ -576,12 +576,16 @@ def _fit_noise(setup: _Setup, q: float | None, r: float | None, quant_c: float) 
     r_extra_start = max(r_start - floor, 1e-3 * r_start)
 
     def levels(theta):
+        # clipped to the bounds: Nelder-Mead is unbounded, the filter needs r > 0
         i = 0
         qq = q
         if q is None:
-            qq = math.exp(theta[i])
+            qq = math.exp(min(max(theta[i], LOG_Q_BOUNDS[0]), LOG_Q_BOUNDS[1]))
             i += 1
-        rr = r if r is not None else floor + math.exp(theta[i])
+        if r is None:
+            rr = floor + math.exp(min(max(theta[i], LOG_R_BOUNDS[0]), LOG_R_BOUNDS[1]))
+        else:
+            rr = r
         return qq, rr
 
     def cost(theta):
@@ -589,7 +593,6 @@ def _fit_noise(setup: _Setup, q: float | None, r: float | None, quant_c: float) 
         m2ll = _run(coarse, qq, rr, smooth=False)[-1]
         return m2ll if math.isfinite(m2ll) else 1e300
 
-    bounds = []
     if q is None:
         # coarse scan of q (the likelihood is often flat far from the optimum)
         grid = np.arange(-12.0, 3.0, 2.0) * math.log(10.0)
@@ -600,12 +603,10 @@ def _fit_noise(setup: _Setup, q: float | None, r: float | None, quant_c: float) 
             if best is None or c < best[0]:
                 best = (c, lq)
         start = [best[1]]
-        bounds.append(LOG_Q_BOUNDS)
     else:
         start = []
     if r is None:
         start.append(math.log(r_extra_start))
-        bounds.append(LOG_R_BOUNDS)
     # initial simplex one unit (a factor e) along each log level: scipy's default (5 % of
     # the coordinate) is degenerate at log q = 0
     x0 = np.array(start)
@@ -613,8 +614,7 @@ def _fit_noise(setup: _Setup, q: float | None, r: float | None, quant_c: float) 
     res = minimize(cost, x0, method="Nelder-Mead",
                    options={"xatol": 0.05, "fatol": 0.05, "maxiter": 400,
                             "initial_simplex": simplex})
-    theta = np.clip(res.x, [lo for lo, _ in bounds], [hi for _, hi in bounds])
-    qq, rr = levels(theta)
+    qq, rr = levels(res.x)
     return NoiseLevels(qq, rr, quant_c, fitted)
 
 

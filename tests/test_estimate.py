@@ -423,3 +423,13 @@ def test_strided_copy_composes_the_chamber_input_exactly(rng):
             x = np.array([a[0] * x[0] + b[0] * x[1] + u[j], x[1]])
         direct = a_c[k] * 1.5 + b_c[k] * -0.2 + coarse.u[k]
         assert direct == pytest.approx(x[0], rel=1e-12, abs=1e-12)
+
+
+def test_constant_readings_do_not_break_the_noise_search():
+    """A sensor that never changes: r goes to its lower bound, not to 0 (no division by 0)."""
+    t = np.arange(500.0)
+    log = log_from_frame(pd.DataFrame({"time_s": t, "t_int_c": np.full(t.size, 20.0)}))
+    est = estimate_gradient(log)
+    assert est.r > 0 and np.all(np.isfinite(est.g_std_c_per_min))
+    np.testing.assert_allclose(est.g_est_c_per_min, 0.0, atol=1e-9)
+    np.testing.assert_allclose(est.t_est_c, 20.0, atol=1e-9)
