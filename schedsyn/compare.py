@@ -172,6 +172,7 @@ def compare_run(
     levels_required: int = 6,
     delta_c_per_min: float = 0.05,
     method: str = "kinematic",
+    chamber: str = "tk_set_c",
     q: float | None = None,
     r: float | None = None,
     t0_c: float = 20.0,
@@ -194,6 +195,8 @@ def compare_run(
     method : {"kinematic", "model"}
         Gradient estimator; ``"kinematic"`` (default) does not lean on the model, so the
         run is judged independently of the simulation it is compared with.
+    chamber : {"tk_set_c", "tk_air_c"}
+        Logged chamber column driving the model-based estimator.
     q, r : float, optional
         Fixed noise levels (see :func:`schedsyn.estimate.estimate_gradient`).
     t0_c : float
@@ -205,7 +208,7 @@ def compare_run(
     if method == "kinematic":
         est = estimate_gradient(log, q=q, r=r)
     elif method == "model":
-        est = estimate_gradient_model(log, params, q=q, r=r)
+        est = estimate_gradient_model(log, params, chamber=chamber, q=q, r=r)
     else:
         raise ParameterError(f"method must be 'kinematic' or 'model', got {method!r}")
     if not math.isfinite(t0_c):

@@ -141,3 +141,20 @@ def test_resample_run_breaks_at_gaps():
     rep = coverage_report(dense.t_c, dense.g_c_per_min, grid, levels_required=1)
     assert np.all(rep.pass_counts[4:9] == 0)  # 9..14 degC lie inside the gap
     assert np.all(rep.pass_counts[[0, 1, 2, 9]] == 1)
+
+
+def test_compare_with_the_model_based_estimator(clean_log_path, tmp_path, capsys):
+    log = read_log(clean_log_path)
+    programme = read_steps(STEPS)
+    grid = BinGrid(-50.0, -30.0)
+    air = compare_run(log, programme, grid=grid, method="model", chamber="tk_air_c")
+    assert air.estimate.method == "model"
+    truth = log.extra["g_true_c_per_min"].to_numpy()
+    assert np.sqrt(np.mean((air.estimate.g_est_c_per_min - truth) ** 2)) < 0.01
+    from schedsyn.errors import ParameterError
+
+    with pytest.raises(ParameterError, match="method"):
+        compare_run(log, programme, grid=grid, method="kalman")
+    rc = main(["compare", str(clean_log_path), STEPS, "--method", "model", "--chamber",
+               "tk_air_c", "--out", str(tmp_path / "m")])
+    assert rc == 0 and "model Kalman smoother" in capsys.readouterr().out

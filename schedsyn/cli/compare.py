@@ -44,8 +44,8 @@ def run(args: argparse.Namespace) -> int:
     programme = read_steps(args.steps, limits)
     lo, hi = args.region
     cmp = compare_run(log, programme, params, grid=BinGrid(lo, hi), levels_required=args.levels,
-                      delta_c_per_min=args.delta_c_per_min, method=args.method, q=args.q,
-                      r=args.r, t0_c=limits.t_init_c)
+                      delta_c_per_min=args.delta_c_per_min, method=args.method,
+                      chamber=args.chamber, q=args.q, r=args.r, t0_c=limits.t_init_c)
     out = _common.out_dir(args.out, "out/compare")
     inputs = [args.log, args.steps]
     write_frame_atomic(out / "gradient.csv", cmp.estimate.to_frame(), inputs)

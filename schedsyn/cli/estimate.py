@@ -20,7 +20,10 @@ def add_estimator_options(p: argparse.ArgumentParser) -> None:
                         "the quantisation step²/12)")
     p.add_argument("--method", choices=("kinematic", "model"), default="kinematic",
                    help="kinematic: (T, g) random walk, no model (default); model: thermal "
-                        "model driven by the logged tk_set_c plus a random-walk correction")
+                        "model driven by the logged chamber plus a random-walk correction")
+    p.add_argument("--chamber", choices=("tk_set_c", "tk_air_c"), default="tk_set_c",
+                   help="chamber column that drives the model-based estimate (default "
+                        "tk_set_c)")
 
 
 def print_log_report(log) -> None:
@@ -46,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     print_log_report(log)
     if args.method == "model":
         params = _common.thermal_params(args)
-        est = estimate_gradient_model(log, params, q=args.q, r=args.r)
+        est = estimate_gradient_model(log, params, chamber=args.chamber, q=args.q, r=args.r)
     else:
         est = estimate_gradient(log, q=args.q, r=args.r)
     out = _common.out_dir(args.out, "out/estimate")
