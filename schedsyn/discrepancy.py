@@ -125,34 +125,58 @@ def setpoint_programme(time_s: np.ndarray, tk_set_c: np.ndarray, tol_c: float = 
 
 @dataclass(frozen=True, slots=True)
 class _Data:
-    """Block means the fit runs on (times in min from the log start)."""
+    """Block means the fit runs on (times in min from the log start).
+
+    ``t_var``/``air_var`` are the variances of the sample times within each block, min^2:
+    a block mean of a curved signal is ``f(t_mean) + var/2 f''`` (the fit corrects for it).
+    """
 
     programme: Programme
     time_min: np.ndarray
     t_c: np.ndarray
+    t_var: np.ndarray
     air_time_min: np.ndarray | None
     air_c: np.ndarray | None
+    air_var: np.ndarray | None
     step_min: float
 
     def subset(self, until_min: float) -> _Data:
         m = self.time_min <= until_min
-        am = None if self.air_time_min is None else self.air_time_min <= until_min
-        return _Data(
-            self.programme, self.time_min[m], self.t_c[m],
-            None if am is None else self.air_time_min[am],
-            None if am is None else self.air_c[am], self.step_min,
-        )
+        if self.air_time_min is None:
+            return _Data(self.programme, self.time_min[m], self.t_c[m], self.t_var[m],
+                         None, None, None, self.step_min)
+        am = self.air_time_min <= until_min
+        return _Data(self.programme, self.time_min[m], self.t_c[m], self.t_var[m],
+                     self.air_time_min[am], self.air_c[am], self.air_var[am], self.step_min)
 
 
-def _block_means(t: np.ndarray, v: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
+def _block_means(
+    t: np.ndarray, v: np.ndarray, width: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Means of time and value over blocks of ``width``, and the time variance per block."""
     ok = np.isfinite(v)
     t, v = t[ok], v[ok]
     if t.size == 0:
-        return t, v
+        return t, v, t
     idx = np.floor((t - t[0]) / width + 1e-9).astype(int)
     starts = np.flatnonzero(np.r_[True, np.diff(idx) > 0])
     counts = np.diff(np.r_[starts, t.size])
-    return np.add.reduceat(t, starts) / counts, np.add.reduceat(v, starts) / counts
+    tm = np.add.reduceat(t, starts) / counts
+    var = np.maximum(np.add.reduceat(t * t, starts) / counts - tm * tm, 0.0)
+    return tm, np.add.reduceat(v, starts) / counts, var
+
+
+def _second_derivative(t: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """``f''`` on an irregular grid (three-point formula; ends copy their neighbours)."""
+    out = np.zeros_like(f)
+    if f.size < 3:
+        return out
+    h1, h2 = np.diff(t)[:-1], np.diff(t)[1:]
+    df = np.diff(f)
+    # f'' = 2 [(f[k+1]-f[k])/h2 - (f[k]-f[k-1])/h1] / (h1 + h2)
+    out[1:-1] = 2.0 * (df[1:] / h2 - df[:-1] / h1) / (h1 + h2)
+    out[0], out[-1] = out[1], out[-2]
+    return out
 
 
 def _prepare(log, settings: DiagnoseSettings) -> tuple[_Data, dict]:
@@ -179,18 +203,23 @@ def _prepare(log, settings: DiagnoseSettings) -> tuple[_Data, dict]:
     if step_s is None:
         step_s = min(max(duration_s / 1500.0, dt_s), 20.0)
     step_min = max(step_s, dt_s) / 60.0
-    bt, bv = _block_means(t_min, np.asarray(log.t_int_c, dtype=float), step_min)
+    bt, bv, bvar = _block_means(t_min, np.asarray(log.t_int_c, dtype=float), step_min)
     if bt.size < 20:
         raise LogFormatError(
             f"the log has {bt.size} usable blocks of {step_min * 60:g} s; at least 20 are "
             "needed to fit the model (use a longer log or a smaller fit_step_s)"
         )
-    at = av = None
+    at = av = avar = None
     if log.tk_air_c is not None and np.isfinite(log.tk_air_c).sum() >= 20:
-        at, av = _block_means(t_min, np.asarray(log.tk_air_c, dtype=float), step_min)
+        # the air is SAMPLED, not averaged: it has kinks (block means of a kink are biased)
+        air = np.asarray(log.tk_air_c, dtype=float)
+        ok_a = np.flatnonzero(np.isfinite(air))
+        stride = max(1, int(round(step_min * 60.0 / dt_s)))
+        pick = ok_a[::stride]
+        at, av, avar = t_min[pick], air[pick], np.zeros(pick.size)
     info = {"sample_s": dt_s, "duration_s": duration_s, "fit_step_s": step_min * 60.0,
             "t_first_s": t0_s}
-    return _Data(programme, bt, bv, at, av, step_min), info
+    return _Data(programme, bt, bv, bvar, at, av, avar, step_min), info
 
 
 # --------------------------------------------------------------------------------------
@@ -237,11 +266,17 @@ def _residuals(spec: ModelSpec, t0: float, data: _Data) -> tuple[np.ndarray, np.
         data.programme, data.time_min, data.air_time_min, t0_c=t0,
         grid_min=min(data.step_min, 1 / 3),
     )
-    return temp - data.t_c, None if air is None else air - data.air_c
+    # block mean = f(t_mean) + var/2 f''
+    temp = temp + 0.5 * data.t_var * _second_derivative(data.time_min, temp)
+    if air is None:
+        return temp - data.t_c, None
+    air = air + 0.5 * data.air_var * _second_derivative(data.air_time_min, air)
+    return temp - data.t_c, air - data.air_c
 
 
 def _fit(effect: str, starts: Sequence[np.ndarray], lo: np.ndarray, hi: np.ndarray,
-         data: _Data, fixed: Mapping[str, float] | None = None) -> CandidateFit:
+         data: _Data, fixed: Mapping[str, float] | None = None,
+         n_refine: int = 1) -> CandidateFit:
     names = () if effect == "none" else EFFECTS[effect].param_names
     fixed = dict(fixed or {})
     free_idx = [i for i, n in enumerate(_BASE_NAMES + names) if n not in fixed]
@@ -259,9 +294,14 @@ def _fit(effect: str, starts: Sequence[np.ndarray], lo: np.ndarray, hi: np.ndarr
         r_t, r_a = _residuals(_spec(effect, theta, names), theta[2], data)
         return r_t if r_a is None else np.concatenate((r_t, r_a))
 
+    # multi-start: score every start with one evaluation, refine the best n_refine
+    x0s = [np.clip(np.asarray(s, dtype=float)[free_idx], lo[free_idx], hi[free_idx])
+           for s in starts]
+    if len(x0s) > n_refine:
+        costs = [float(np.sum(fun(x) ** 2)) for x in x0s]
+        x0s = [x0s[i] for i in np.argsort(costs)[:n_refine]]
     best = None
-    for s in starts:
-        x0 = np.clip(np.asarray(s, dtype=float)[free_idx], lo[free_idx], hi[free_idx])
+    for x0 in x0s:
         try:
             res = optimize.least_squares(
                 fun, x0, bounds=(lo[free_idx], hi[free_idx]), x_scale="jac",
@@ -334,9 +374,10 @@ def _base_start(data: _Data) -> np.ndarray:
     return np.array([tau_s, float(np.clip(dt0, -49, 49)), t0])
 
 
-def fit_base(data: _Data) -> CandidateFit:
+def fit_base(data: _Data, start: CandidateFit | None = None) -> CandidateFit:
     lo, hi = _base_bounds(data)
-    return _fit("none", [_base_start(data)], lo, hi, data)
+    x0 = _base_start(data) if start is None else np.array([start.values[n] for n in _BASE_NAMES])
+    return _fit("none", [x0], lo, hi, data)
 
 
 def _peak_periods(t_min: np.ndarray, r: np.ndarray, p_lo_s: float, p_hi_s: float,
@@ -352,7 +393,8 @@ def _peak_periods(t_min: np.ndarray, r: np.ndarray, p_lo_s: float, p_hi_s: float
     if f.size < 3:
         return []
     power = lombscargle(t_s, r - r.mean(), 2.0 * np.pi * f)
-    peaks = [i for i in range(1, f.size - 1) if power[i] >= power[i - 1] and power[i] >= power[i + 1]]
+    inner = np.arange(1, f.size - 1)
+    peaks = inner[(power[1:-1] >= power[:-2]) & (power[1:-1] >= power[2:])].tolist()
     peaks.sort(key=lambda i: -power[i])
     return [float(1.0 / f[i]) for i in peaks[:n_peaks]]
 
@@ -430,10 +472,17 @@ def _effect_bounds(eff: Effect, data: _Data) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate((lo, elo)), np.concatenate((hi, ehi))
 
 
-def fit_candidate(name: str, base: CandidateFit, data: _Data) -> CandidateFit:
+def fit_candidate(name: str, base: CandidateFit, data: _Data,
+                  start: CandidateFit | None = None) -> CandidateFit:
+    """Fit one effect, from multi-starts around the base fit (or from ``start`` alone)."""
     eff = EFFECTS[name]
     lo, hi = _effect_bounds(eff, data)
-    fit = _fit(name, _effect_starts(eff, base, data), lo, hi, data)
+    if start is not None:
+        names = _BASE_NAMES + eff.param_names
+        starts = [np.array([start.values[n] for n in names])]
+    else:
+        starts = _effect_starts(eff, base, data)
+    fit = _fit(name, starts, lo, hi, data, n_refine=1 if eff.linear else 2)
     if name == "chamber_rate_limit":
         fit = _unbind_rate_limits(fit, data)
     return fit
@@ -744,7 +793,8 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
             if c.score - fits[chosen].score < settings.ambiguity_bic:
                 ambiguous.append(c.effect)
                 warnings.append(
-                    f"{c.effect} fits almost as well as {chosen} (BIC {c.score - fits[chosen].score:+.1f});"
+                    f"{c.effect} fits almost as well as {chosen} "
+                    f"(BIC {c.score - fits[chosen].score:+.1f});"
                     " the log does not tell them apart reliably")
     chosen_fit = fits[chosen] if chosen != "none" else base
     # full-resolution predictions and residual reports
@@ -761,8 +811,8 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
     # held-out check: refit on the first part, predict the rest
     cut = data.time_min[-1] * (1.0 - settings.holdout_fraction)
     head = data.subset(cut)
-    h_base = fit_base(head)
-    h_after = fit_candidate(chosen, h_base, head) if chosen != "none" else h_base
+    h_base = fit_base(head, start=base)
+    h_after = fit_candidate(chosen, h_base, head, start=chosen_fit) if chosen != "none" else h_base
     tail = t_ok > cut
 
     def tail_rms(fit: CandidateFit) -> float:

@@ -177,22 +177,44 @@ def lag_foh_asymmetric(
     """First-order hold lag whose time constant is ``tau_heat`` while the target is above T.
 
     The direction is decided per step from the mean target ``(v[k] + v[k+1])/2`` against
-    ``T[k]`` (exact when the direction does not change inside a step).
+    ``T[k]`` (exact when the direction does not change inside a step). Vectorised by
+    runs: the whole rest is filtered with the current direction's time constant, and the
+    run ends at the first step whose direction differs (a few runs per programme segment).
     """
-    v = np.asarray(v_c, dtype=float).tolist()
-    ah, ac = math.exp(-h_min / tau_heat_min), math.exp(-h_min / tau_cool_min)
-    bh = 1.0 - tau_heat_min * (1.0 - ah) / h_min
-    bc = 1.0 - tau_cool_min * (1.0 - ac) / h_min
-    out = [float(t0_c)]
-    t = float(t0_c)
-    for k in range(len(v) - 1):
-        v0, v1 = v[k], v[k + 1]
-        if 0.5 * (v0 + v1) > t:
-            t = ah * t + (1.0 - ah) * v0 + bh * (v1 - v0)
-        else:
-            t = ac * t + (1.0 - ac) * v0 + bc * (v1 - v0)
-        out.append(t)
-    return np.asarray(out)
+    v = np.asarray(v_c, dtype=float)
+    n = v.size
+    out = np.empty(n)
+    out[0] = t0_c
+    mid = 0.5 * (v[:-1] + v[1:])
+    k = 0
+    while k < n - 1:
+        heat = bool(mid[k] > out[k])
+        y = lag_foh(v[k:], out[k], tau_heat_min if heat else tau_cool_min, h_min)
+        # direction of each later step with this run's temperatures
+        flip = np.flatnonzero((mid[k:] > y[:-1]) != heat)
+        end = k + (int(flip[0]) if flip.size else n - 1 - k)  # first step of the next run
+        out[k + 1 : end + 1] = y[1 : end - k + 1]
+        k = end
+    return out
+
+
+def _rate_limited_step(a: float, s0: float, s1: float, h: float, c: float, r: float) -> float:
+    """One exact step of the limiter from air ``a`` with the setpoint linear s0 -> s1."""
+    sig = (s1 - s0) / h  # setpoint slope in this step
+    d0 = a - s0
+    if abs(d0) <= 1e-12:
+        return s0 + min(max(sig, -c), r) * h
+    if d0 > 0:  # above the setpoint: cool at the limit until meeting it at t*
+        a1 = a - c * h
+        if a1 >= s1:
+            return a1
+        ts = d0 / (c + sig)  # c + sig > 0 here
+        return s1 if sig <= r else s0 + sig * ts + r * (h - ts)
+    a1 = a + r * h  # below: heat at the limit until meeting it
+    if a1 <= s1:
+        return a1
+    ts = -d0 / (r - sig)
+    return s1 if sig >= -c else s0 + sig * ts - c * (h - ts)
 
 
 def rate_limited(
@@ -204,34 +226,35 @@ def rate_limited(
     ``dA/dt = clip(dS/dt, -c, r)`` while ``A = S``; otherwise ``A`` moves towards ``S`` at
     the limiting rate (``-c`` above, ``+r`` below) and, on meeting ``S`` at ``t*`` inside a
     step, tracks it (or moves on at the limit if ``S`` is faster than the limit).
+    Vectorised by runs (tracking / cooling at the limit / heating at the limit).
     """
-    s = np.asarray(setpoint_c, dtype=float).tolist()
+    s = np.asarray(setpoint_c, dtype=float)
     c, r, h = float(max_cool_c_per_min), float(max_heat_c_per_min), float(h_min)
-    out = [s[0]]
-    a = s[0]
-    eps = 1e-12
-    for k in range(len(s) - 1):
-        s0, s1 = s[k], s[k + 1]
-        sig = (s1 - s0) / h  # setpoint slope in this step
-        d0 = a - s0
-        if abs(d0) <= eps:
-            a = s0 + min(max(sig, -c), r) * h
-        elif d0 > 0:  # above the setpoint: cool at the limit until meeting it
-            a1 = a - c * h
-            if a1 >= s1:
-                a = a1
-            else:
-                ts = d0 / (c + sig)  # meets S at t* (c + sig > 0 here)
-                a = s1 if sig <= r else s0 + sig * ts + r * (h - ts)
-        else:  # below: heat at the limit until meeting it
-            a1 = a + r * h
-            if a1 <= s1:
-                a = a1
-            else:
-                ts = -d0 / (r - sig)
-                a = s1 if sig >= -c else s0 + sig * ts - c * (h - ts)
-        out.append(a)
-    return np.asarray(out)
+    n = s.size
+    out = np.empty(n)
+    out[0] = s[0]
+    slope = np.diff(s) / h
+    k = 0
+    while k < n - 1:
+        a = out[k]
+        if abs(a - s[k]) <= 1e-12:  # tracking until the setpoint outruns a limit
+            fast = np.flatnonzero((slope[k:] > r) | (slope[k:] < -c))
+            j = k + (int(fast[0]) if fast.size else n - 1 - k)
+            out[k + 1 : j + 1] = s[k + 1 : j + 1]
+            if j < n - 1:
+                out[j + 1] = _rate_limited_step(out[j], s[j], s[j + 1], h, c, r)
+            k = j + 1
+            continue
+        rate = -c if a > s[k] else r
+        line = a + rate * h * np.arange(1, n - k)  # at k+1, k+2, ...
+        met = np.flatnonzero(line < s[k + 1 :]) if rate < 0 else np.flatnonzero(line > s[k + 1 :])
+        m = int(met[0]) if met.size else n - 1 - k  # the step k+m meets the setpoint
+        out[k + 1 : k + m + 1] = line[:m]
+        j = k + m
+        if j < n - 1:
+            out[j + 1] = _rate_limited_step(out[j], s[j], s[j + 1], h, c, r)
+        k = j + 1
+    return out
 
 
 # --------------------------------------------------------------------------------------
@@ -357,8 +380,10 @@ class ModelSpec:
             air_t = programme.chamber_at(t) + p["amplitude_c"] * np.sin(
                 2.0 * np.pi * t * 60.0 / p["period_s"] + p["phase_rad"]
             )
-        else:
+        elif self.effect == "chamber_rate_limit":
             air_t = np.interp(t, grid, air)
+        else:  # the chamber follows its setpoint
+            air_t = programme.chamber_at(t)
         return Prediction(t, np.interp(t, grid, temp), np.interp(t, grid, grad), air_t)
 
     def predict_channels(
@@ -506,7 +531,7 @@ def _library() -> dict[str, Effect]:
         Effect(
             "chamber_lag",
             "the chamber air follows the setpoint through a first-order lag",
-            ("tau_chamber_s",), ((1.0, 2e4),), ((120.0,), (400.0,), (1200.0,)),
+            ("tau_chamber_s",), ((1.0, 2e4),), ((60.0,), (150.0,), (400.0,), (1000.0,), (2500.0,)),
             "tau_chamber_s", linear=True, uses_air=True,
         ),
         Effect(
@@ -526,13 +551,13 @@ def _library() -> dict[str, Effect]:
         Effect(
             "dead_time",
             "a transport delay between the chamber and the sensor",
-            ("delay_s",), ((0.0, 1e4),), ((60.0,), (300.0,), (900.0,)),
+            ("delay_s",), ((0.0, 1e4),), ((30.0,), (100.0,), (300.0,), (900.0,)),
             "delay_s", linear=True,
         ),
         Effect(
             "second_time_constant",
             "a second thermal mass between the chamber air and the sensor",
-            ("tau2_s",), ((1.0, 2e4),), ((120.0,), (400.0,), (1200.0,)),
+            ("tau2_s",), ((1.0, 2e4),), ((60.0,), (150.0,), (400.0,), (1000.0,), (2500.0,)),
             "tau2_s", linear=True,
         ),
         Effect(

@@ -174,11 +174,12 @@ def random_effect_model(effect: str, rng: np.random.Generator, tau_s: float = 24
         ratio = draw.pop("ratio")
         slow, fast = tau_s * math.sqrt(ratio), tau_s / math.sqrt(ratio)
         heat_slow = bool(rng.integers(2))
-        draw = {"tau_heat_s": slow if heat_slow else fast, "tau_cool_s": fast if heat_slow else slow}
+        draw = {"tau_heat_s": slow if heat_slow else fast,
+                "tau_cool_s": fast if heat_slow else slow}
     return ModelSpec(tau_s, dt0_c, effect, draw)
 
 
-def test_programmes() -> dict[str, Programme]:
+def blind_programmes() -> dict[str, Programme]:
     """Two simple 9-hour programmes (20 degC start and end) for blind tests.
 
     ``cold``: down to -40 at -1 degC/min, up to +40 at +2, down to -10 at -0.8, back;

@@ -26,13 +26,13 @@ import pandas as pd
 from schedsyn import read_steps
 from schedsyn.discrepancy import DiagnoseSettings, diagnose_frame
 from schedsyn.effects import EFFECTS
-from schedsyn.synth import blind_case, test_programmes
+from schedsyn.synth import blind_case, blind_programmes
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def programmes():
-    progs = dict(test_programmes())
+    progs = dict(blind_programmes())
     progs["exp1"] = read_steps(ROOT / "data" / "baseline_exp1_steps.csv")
     return progs
 

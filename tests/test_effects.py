@@ -47,7 +47,9 @@ def _integrate(rhs, x0, shift=0.0):
     return out
 
 
-@pytest.mark.parametrize(("tau_s", "tau_c_s", "t0_c"), [(2400.0, 300.0, 18.0), (1800.0, 900.0, 21.0)])
+@pytest.mark.parametrize(
+    ("tau_s", "tau_c_s", "t0_c"), [(2400.0, 300.0, 18.0), (1800.0, 900.0, 21.0)]
+)
 def test_chamber_lag_matches_ode(tau_s, tau_c_s, t0_c):
     spec = ModelSpec(tau_s, 3.0, "chamber_lag", {"tau_chamber_s": tau_c_s})
     tau, tc = tau_s / 60, tau_c_s / 60
