@@ -44,3 +44,18 @@ def test_import_does_not_load_matplotlib():
     code = "import sys, schedsyn; print('matplotlib' in sys.modules)"
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert res.stdout.strip() == "False"
+
+
+def test_outputs_get_normal_permissions(tmp_path):
+    import os
+
+    from schedsyn.io import write_text_atomic
+
+    umask = os.umask(0o022)
+    try:
+        out = write_text_atomic(tmp_path / "x.txt", "hello")
+    finally:
+        os.umask(umask)
+    assert out.read_text() == "hello"
+    assert (out.stat().st_mode & 0o777) == 0o644
+    assert not list(tmp_path.glob(".x.txt.*"))  # no temporary file left behind
