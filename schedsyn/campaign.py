@@ -1,0 +1,503 @@
+"""A campaign: several experiments planned with one model and one chamber.
+
+The paper splits -50 .. +60 degC into four working regions, one 9-hour experiment each
+(:func:`default_campaign`). A campaign is described by a TOML file (the paper's one is
+``data/paper_campaign.toml``; copy and edit it)::
+
+    [model]        tau_s, dt0_c                        (ThermalParams)
+    [limits]       chamber_min_c, duration_max_min ... (Limits; any field)
+    [settings]     levels_required, delta_c_per_min, segment_min, objective, ...
+                   (ExperimentSpec fields shared by every experiment)
+    [robust]       tau_s = [LO, HI], dt0_c = [LO, HI]  (optional robust box)
+    [[experiment]] name, working_lo_c, working_hi_c, approx_lo_c, approx_hi_c,
+                   any setting to override, baseline_steps = "FILE.csv" (optional,
+                   relative to the TOML file)
+
+:func:`plan_campaign` plans every experiment (in parallel over the local cores through
+:func:`schedsyn.sweep.run_map`) and returns a :class:`CampaignResult` whose
+``summary_frame()`` puts each plan next to the paper-like baseline, if any.
+:func:`chamber_requirement` answers "what chamber do I need?": coverage as a function
+of the chamber floor and ceiling.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+import time
+import tomllib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .coverage import coverage_report
+from .errors import InfeasiblePlanError, ParameterError, SchedsynError
+from .params import Limits, ThermalParams
+from .planner import ExperimentSpec, Plan, plan_experiment
+from .programme import read_steps
+from .simulate import simulate
+from .sweep import run_map
+
+#: The repository's data folder (the paper campaign and the paper-like baseline).
+DATA_DIR = Path(__file__).resolve().parents[1] / "data"
+PAPER_CAMPAIGN_TOML = DATA_DIR / "paper_campaign.toml"
+PAPER_BASELINE_EXP1 = DATA_DIR / "baseline_exp1_steps.csv"
+
+#: The paper's regions: (name, working lo, working hi, approximation lo, approximation hi).
+PAPER_REGIONS_C = (
+    ("W1", -50.0, -30.0, -52.0, -20.0),
+    ("W2", -30.0, 0.0, -40.0, 10.0),
+    ("W3", 0.0, 30.0, -10.0, 40.0),
+    ("W4", 30.0, 60.0, 20.0, 60.0),
+)
+
+_REGION_KEYS = ("name", "working_lo_c", "working_hi_c", "approx_lo_c", "approx_hi_c")
+_SETTING_KEYS = tuple(
+    f.name for f in dataclasses.fields(ExperimentSpec) if f.name not in _REGION_KEYS
+)
+_INT_KEYS = ("levels_required", "max_steps")
+_STR_KEYS = ("name", "objective")
+
+
+@dataclass(frozen=True, slots=True)
+class CampaignConfig:
+    """Experiments planned with one model and one chamber.
+
+    Parameters
+    ----------
+    experiments : tuple of ExperimentSpec
+        At least one; names must be distinct (they name the output folders).
+    params : ThermalParams
+        Nominal model parameters.
+    limits : Limits
+        Chamber, device and duration limits shared by every experiment.
+    robust_tau_s, robust_dt0_c : (lo, hi), optional
+        Robust box: each programme must cover its region for every (tau, dT0) in it.
+    baseline_steps : tuple of (Path or None)
+        Empty, or one entry per experiment: a paper-like step table to compare with.
+    """
+
+    experiments: tuple[ExperimentSpec, ...]
+    params: ThermalParams = field(default_factory=ThermalParams)
+    limits: Limits = field(default_factory=Limits)
+    robust_tau_s: tuple[float, float] | None = None
+    robust_dt0_c: tuple[float, float] | None = None
+    baseline_steps: tuple[Path | None, ...] = ()
+
+    def __post_init__(self) -> None:
+        exps = tuple(self.experiments)
+        if not exps or not all(isinstance(e, ExperimentSpec) for e in exps):
+            raise ParameterError("a campaign needs at least one experiment (ExperimentSpec)")
+        names = [e.name for e in exps]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ParameterError(f"experiment names must be distinct, repeated: {dup}")
+        for n in names:
+            if any(c in n for c in "/\\") or n in (".", ".."):
+                raise ParameterError(f"experiment name {n!r} cannot name a folder; use "
+                                     "letters, digits, '-' or '_'")
+        object.__setattr__(self, "experiments", exps)
+        for key in ("robust_tau_s", "robust_dt0_c"):
+            v = getattr(self, key)
+            if v is not None:
+                v = tuple(float(x) for x in v)
+                if len(v) != 2 or not all(math.isfinite(x) for x in v) or v[0] > v[1]:
+                    raise ParameterError(f"{key} must be (lo, hi) with lo <= hi, got {v}")
+                object.__setattr__(self, key, v)
+        base = tuple(None if b is None else Path(b) for b in self.baseline_steps)
+        if base and len(base) != len(exps):
+            raise ParameterError(f"baseline_steps needs one entry per experiment "
+                                 f"({len(exps)}), got {len(base)}")
+        object.__setattr__(self, "baseline_steps", base)
+
+    def baseline_for(self, i: int) -> Path | None:
+        return self.baseline_steps[i] if self.baseline_steps else None
+
+
+def default_campaign() -> CampaignConfig:
+    """The paper's four experiments W1..W4 with the default model, limits and settings.
+
+    Experiment W1 is compared with the paper-like baseline ``data/baseline_exp1_steps.csv``.
+    """
+    exps = tuple(ExperimentSpec(n, wl, wh, al, ah) for n, wl, wh, al, ah in PAPER_REGIONS_C)
+    return CampaignConfig(
+        experiments=exps, baseline_steps=(PAPER_BASELINE_EXP1, None, None, None))
+
+
+# ---------------------------------------------------------------------------------------
+# TOML
+# ---------------------------------------------------------------------------------------
+def _where(path: Path | str, table: str, key: str | None = None) -> str:
+    return f"{path}: [{table}]" + (f" {key}" if key else "")
+
+
+def _check_keys(table: dict, allowed: Sequence[str], where: str) -> None:
+    unknown = sorted(set(table) - set(allowed))
+    if unknown:
+        raise ParameterError(f"{where}: unknown key(s) {unknown}; allowed: {sorted(allowed)}")
+
+
+def _value(value: Any, key: str, where: str) -> Any:
+    """Type-check one TOML value for the field ``key`` (ints are fine for floats)."""
+    if key in _STR_KEYS:
+        if not isinstance(value, str):
+            raise ParameterError(f"{where} {key} must be a string, got {value!r}")
+        return value
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ParameterError(f"{where} {key} must be a number, got {value!r}")
+    if key in _INT_KEYS:
+        if float(value) != int(value):
+            raise ParameterError(f"{where} {key} must be a whole number, got {value!r}")
+        return int(value)
+    return float(value)
+
+
+def _table(doc: dict, name: str, path: Path) -> dict:
+    t = doc.get(name, {})
+    if not isinstance(t, dict):
+        raise ParameterError(f"{path}: {name} must be a table [{name}], got {t!r}")
+    return t
+
+
+def _pair(value: Any, where: str) -> tuple[float, float]:
+    if (not isinstance(value, list) or len(value) != 2
+            or any(isinstance(x, bool) or not isinstance(x, int | float) for x in value)):
+        raise ParameterError(f"{where} must be [LO, HI] (two numbers), got {value!r}")
+    return float(value[0]), float(value[1])
+
+
+def _wrap(where: str, build: Callable[[], Any]) -> Any:
+    try:
+        return build()
+    except SchedsynError as exc:
+        raise ParameterError(f"{where}: {exc}") from None
+
+
+def campaign_from_dict(doc: dict, path: Path | str = "<config>") -> CampaignConfig:
+    """Build a :class:`CampaignConfig` from a parsed TOML document (see module doc)."""
+    path = Path(path)
+    _check_keys(doc, ("model", "limits", "settings", "robust", "experiment"), str(path))
+    model = _table(doc, "model", path)
+    _check_keys(model, ("tau_s", "dt0_c"), _where(path, "model"))
+    params = _wrap(_where(path, "model"), lambda: ThermalParams(
+        **{k: _value(v, k, _where(path, "model")) for k, v in model.items()}))
+    lim = _table(doc, "limits", path)
+    lim_keys = [f.name for f in dataclasses.fields(Limits)]
+    _check_keys(lim, lim_keys, _where(path, "limits"))
+    limits = _wrap(_where(path, "limits"), lambda: Limits(
+        **{k: _value(v, k, _where(path, "limits")) for k, v in lim.items()}))
+    settings = _table(doc, "settings", path)
+    _check_keys(settings, _SETTING_KEYS, _where(path, "settings"))
+    settings = {k: _value(v, k, _where(path, "settings")) for k, v in settings.items()}
+    robust = _table(doc, "robust", path)
+    _check_keys(robust, ("tau_s", "dt0_c"), _where(path, "robust"))
+    box = {k: _pair(v, _where(path, "robust", k)) for k, v in robust.items()}
+
+    raw = doc.get("experiment")
+    if raw is None:
+        raise ParameterError(f"{path}: no experiment; add at least one [[experiment]] table "
+                             "with name, working_lo_c, working_hi_c, approx_lo_c, approx_hi_c")
+    if not isinstance(raw, list) or not all(isinstance(e, dict) for e in raw) or not raw:
+        raise ParameterError(f"{path}: experiment must be an array of tables [[experiment]]")
+    specs, baselines = [], []
+    for i, exp in enumerate(raw, start=1):
+        where = f"{path}: [[experiment]] #{i}" + (
+            f" ({exp['name']})" if isinstance(exp.get("name"), str) else "")
+        _check_keys(exp, (*_REGION_KEYS, *_SETTING_KEYS, "baseline_steps"), where)
+        missing = [k for k in _REGION_KEYS if k not in exp]
+        if missing:
+            raise ParameterError(f"{where}: missing key(s) {missing}")
+        base = exp.get("baseline_steps")
+        if base is not None:
+            if not isinstance(base, str) or not base:
+                raise ParameterError(f"{where} baseline_steps must be a file name, got {base!r}")
+            base_path = Path(base)
+            if not base_path.is_absolute():
+                base_path = path.resolve().parent / base_path
+            if not base_path.is_file():
+                raise ParameterError(f"{where} baseline_steps: {base_path} does not exist")
+            baselines.append(base_path)
+        else:
+            baselines.append(None)
+        kw = {**settings, **{k: _value(v, k, where) for k, v in exp.items()
+                             if k != "baseline_steps"}}
+        specs.append(_wrap(where, lambda kw=kw: ExperimentSpec(**kw)))
+    return _wrap(str(path), lambda: CampaignConfig(
+        experiments=tuple(specs), params=params, limits=limits,
+        robust_tau_s=box.get("tau_s"), robust_dt0_c=box.get("dt0_c"),
+        baseline_steps=tuple(baselines) if any(b is not None for b in baselines) else ()))
+
+
+def load_campaign(path: Path | str) -> CampaignConfig:
+    """Read a campaign TOML file; errors name the file, the table and the key."""
+    path = Path(path)
+    if not path.is_file():
+        raise ParameterError(f"campaign file {path} does not exist or is not a file")
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ParameterError(f"{path} is not valid TOML ({exc})") from None
+    return campaign_from_dict(doc, path)
+
+
+# ---------------------------------------------------------------------------------------
+# planning
+# ---------------------------------------------------------------------------------------
+def stderr_progress(message: str) -> None:
+    """A picklable progress callable: one line on stderr."""
+    print(message, file=sys.stderr, flush=True)
+
+
+@dataclass(frozen=True, slots=True)
+class _PlanJob:
+    spec: ExperimentSpec
+    params: ThermalParams
+    limits: Limits
+    robust_tau_s: tuple[float, float] | None
+    robust_dt0_c: tuple[float, float] | None
+
+
+def _plan_job(job: _PlanJob, progress: Callable[[str], None] | None) -> Plan | InfeasiblePlanError:
+    """Plan one experiment; an infeasible request is returned, not raised (the others go on)."""
+    tic = time.perf_counter()
+    name = job.spec.name
+
+    def say(msg: str) -> None:  # which experiment, solver time so far
+        if progress is not None:
+            progress(f"{name} [{time.perf_counter() - tic:6.1f} s] {msg}")
+
+    say("planning")
+    try:
+        plan = plan_experiment(job.spec, job.params, job.limits,
+                               robust_tau_s=job.robust_tau_s, robust_dt0_c=job.robust_dt0_c,
+                               progress=say)
+    except InfeasiblePlanError as exc:
+        say(f"infeasible: {exc}")
+        return exc
+    say(f"done: {plan.status}, coverage {plan.coverage.coverage:.0%}, "
+        f"{plan.duration_min:g} min")
+    return plan
+
+
+def _baseline_row(path: Path | None, spec: ExperimentSpec, params: ThermalParams,
+                  limits: Limits) -> dict:
+    """Coverage of a paper-like step table by dense simulation (NaN/'none' without one)."""
+    if path is None:
+        return {"baseline": "none", "baseline_duration_min": np.nan, "baseline_steps": np.nan,
+                "baseline_coverage": np.nan, "baseline_min_levels": np.nan,
+                "baseline_coverage_delta_0p1": np.nan}
+    prog = read_steps(path)
+    traj = simulate(prog, params, t0_c=limits.t_init_c)
+    rep = coverage_report(traj.t_c, traj.g_c_per_min, spec.grid, spec.levels_required,
+                          spec.delta_c_per_min)
+    rep01 = coverage_report(traj.t_c, traj.g_c_per_min, spec.grid, spec.levels_required, 0.1)
+    return {"baseline": Path(path).name, "baseline_duration_min": prog.total_min,
+            "baseline_steps": prog.n_segments, "baseline_coverage": rep.coverage,
+            "baseline_min_levels": rep.min_levels, "baseline_coverage_delta_0p1": rep01.coverage}
+
+
+SUMMARY_COLUMNS = (
+    "experiment", "working_min_c", "working_max_c", "duration_min", "steps", "coverage",
+    "min_levels", "solve_s", "coverage_delta_0p1", "complete", "status",
+    "baseline", "baseline_duration_min", "baseline_steps", "baseline_coverage",
+    "baseline_min_levels", "baseline_coverage_delta_0p1",
+)
+
+
+@dataclass(frozen=True, slots=True)
+class CampaignResult:
+    """The plans of a campaign (``None`` where a request was infeasible) and baselines.
+
+    ``errors[i]`` is the message of an infeasible experiment ``i`` (empty otherwise).
+    """
+
+    config: CampaignConfig
+    plans: tuple[Plan | None, ...]
+    errors: tuple[str, ...]
+    baselines: tuple[dict, ...]
+    wall_s: float
+
+    @property
+    def complete(self) -> bool:
+        """Every experiment planned and complete (by the independent check)."""
+        return all(p is not None and p.complete for p in self.plans)
+
+    def summary_frame(self) -> pd.DataFrame:
+        """One row per experiment: the plan's figures next to the baseline's."""
+        rows = []
+        for spec, plan, err, base in zip(self.config.experiments, self.plans, self.errors,
+                                         self.baselines, strict=True):
+            if plan is not None:
+                s = plan.to_summary_dict()
+                row = {k: s[k] for k in ("experiment", "working_min_c", "working_max_c",
+                                         "duration_min", "steps", "coverage", "min_levels",
+                                         "solve_s", "coverage_delta_0p1", "complete")}
+                row["status"] = plan.status
+            else:
+                row = {"experiment": spec.name, "working_min_c": spec.working_lo_c,
+                       "working_max_c": spec.working_hi_c, "duration_min": np.nan,
+                       "steps": np.nan, "coverage": 0.0, "min_levels": 0, "solve_s": np.nan,
+                       "coverage_delta_0p1": 0.0, "complete": False,
+                       "status": "infeasible"}
+            row.update(base)
+            rows.append(row)
+        return pd.DataFrame(rows, columns=list(SUMMARY_COLUMNS))
+
+    to_frame = summary_frame
+
+
+def plan_campaign(
+    config: CampaignConfig,
+    progress: Callable[[str], None] | None = None,
+    backend: Any = "local",
+    *,
+    workers: int | None = None,
+) -> CampaignResult:
+    """Plan every experiment of ``config`` (in parallel on ``backend``, see ``run_map``).
+
+    Parameters
+    ----------
+    config : CampaignConfig
+    progress : callable(str), optional
+        Receives lines like ``"W1 [  12.3 s] structure found: 480 min"`` (experiment,
+        solver time so far, message). With the ``"local"`` backend it runs in the worker
+        processes, so it must be picklable (a module-level function such as
+        :func:`stderr_progress`). A tqdm bar on stderr counts finished experiments.
+    backend : "local", "serial", Dask address or client
+        Where to plan (default: a process pool over this machine's cores).
+    workers : int, optional
+        Size of the local pool.
+
+    Returns
+    -------
+    CampaignResult
+        An infeasible experiment does not stop the others: its plan is ``None`` and its
+        message is in ``errors``.
+    """
+    tic = time.perf_counter()
+    jobs = [_PlanJob(s, config.params, config.limits, config.robust_tau_s, config.robust_dt0_c)
+            for s in config.experiments]
+    out = run_map(partial(_plan_job, progress=progress), jobs, backend, workers=workers,
+                  progress=progress is not None, desc="experiments")
+    plans = tuple(p if isinstance(p, Plan) else None for p in out)
+    errors = tuple("" if isinstance(p, Plan) else str(p) for p in out)
+    baselines = tuple(
+        _baseline_row(config.baseline_for(i), s, config.params, config.limits)
+        for i, s in enumerate(config.experiments))
+    return CampaignResult(config, plans, errors, baselines, time.perf_counter() - tic)
+
+
+# ---------------------------------------------------------------------------------------
+# what chamber do I need?
+# ---------------------------------------------------------------------------------------
+CHAMBER_COLUMNS = (
+    "chamber_min_c", "chamber_max_c", "coverage", "coverage_delta_0p1", "min_levels",
+    "duration_min", "steps", "complete", "status", "notes",
+)
+
+
+@dataclass(frozen=True, slots=True)
+class _ChamberJob:
+    spec: ExperimentSpec
+    params: ThermalParams
+    limits: Limits
+    robust_tau_s: tuple[float, float] | None
+    robust_dt0_c: tuple[float, float] | None
+
+
+def _chamber_job(job: _ChamberJob, progress) -> Plan | InfeasiblePlanError:
+    tag = f"{job.spec.name} floor {job.limits.chamber_min_c:g} ceiling {job.limits.chamber_max_c:g}"
+    return _plan_job(_PlanJob(job.spec, job.params, job.limits, job.robust_tau_s,
+                              job.robust_dt0_c),
+                     None if progress is None else partial(_tagged, progress, tag))
+
+
+def _tagged(progress, tag: str, msg: str) -> None:
+    progress(f"{tag}: {msg}")
+
+
+def chamber_plans(
+    spec: ExperimentSpec,
+    floors_c: Sequence[float] | None = None,
+    ceilings_c: Sequence[float] | None = None,
+    params: ThermalParams | None = None,
+    limits: Limits | None = None,
+    *,
+    robust_tau_s: tuple[float, float] | None = None,
+    robust_dt0_c: tuple[float, float] | None = None,
+    progress: Callable[[str], None] | None = None,
+    backend: Any = "local",
+    workers: int | None = None,
+) -> tuple[list[tuple[float, float]], list[Plan | InfeasiblePlanError]]:
+    """Plan ``spec`` for every (floor, ceiling) pair; see :func:`chamber_requirement`."""
+    params = ThermalParams() if params is None else params
+    limits = Limits() if limits is None else limits
+    floors = [limits.chamber_min_c] if not floors_c else [float(x) for x in floors_c]
+    ceilings = [limits.chamber_max_c] if not ceilings_c else [float(x) for x in ceilings_c]
+    pairs = [(f, c) for f in floors for c in ceilings]
+    jobs = []
+    for f, c in pairs:
+        try:
+            lim = dataclasses.replace(limits, chamber_min_c=f, chamber_max_c=c)
+        except ParameterError as exc:
+            raise ParameterError(f"chamber floor {f:g} / ceiling {c:g} degC: {exc}") from None
+        jobs.append(_ChamberJob(spec, params, lim, robust_tau_s, robust_dt0_c))
+    out = run_map(partial(_chamber_job, progress=progress), jobs, backend, workers=workers,
+                  progress=progress is not None, desc="chambers")
+    return pairs, out
+
+
+def chamber_frame(pairs, results) -> pd.DataFrame:
+    """The table of :func:`chamber_requirement` from :func:`chamber_plans`' output."""
+    rows = []
+    for (f, c), r in zip(pairs, results, strict=True):
+        if isinstance(r, Plan):
+            rows.append({"chamber_min_c": f, "chamber_max_c": c,
+                         "coverage": r.coverage.coverage,
+                         "coverage_delta_0p1": r.coverage_0p1.coverage,
+                         "min_levels": r.coverage.min_levels, "duration_min": r.duration_min,
+                         "steps": r.steps, "complete": r.complete, "status": r.status,
+                         "notes": " | ".join(r.notes)})
+        else:
+            best = r.best_coverage if r.best_coverage is not None else 0.0
+            rows.append({"chamber_min_c": f, "chamber_max_c": c, "coverage": best,
+                         "coverage_delta_0p1": np.nan, "min_levels": 0,
+                         "duration_min": np.nan, "steps": np.nan, "complete": False,
+                         "status": "infeasible", "notes": str(r)})
+    return pd.DataFrame(rows, columns=list(CHAMBER_COLUMNS))
+
+
+def chamber_requirement(
+    spec: ExperimentSpec,
+    floors_c: Sequence[float] | None = None,
+    ceilings_c: Sequence[float] | None = None,
+    params: ThermalParams | None = None,
+    limits: Limits | None = None,
+    *,
+    robust_tau_s: tuple[float, float] | None = None,
+    robust_dt0_c: tuple[float, float] | None = None,
+    progress: Callable[[str], None] | None = None,
+    backend: Any = "local",
+    workers: int | None = None,
+) -> pd.DataFrame:
+    """Coverage as a function of the chamber floor and ceiling ("what chamber do I need?").
+
+    Plans ``spec`` once for every pair of ``floors_c`` x ``ceilings_c`` (degC; a missing
+    list keeps the value of ``limits``) and reports, per pair, the coverage of the
+    exported table (independent dense check) at ``delta`` and at 0.1 degC/min, the
+    fewest distinct levels of any bin, the duration, the step count and whether the plan
+    is complete. An infeasible pair is a row with status ``infeasible`` and its message.
+
+    Near the cold end the floor bounds the cooling gradient, g = (Tk_min + dT0 - T)/tau,
+    so coverage of a region near -50 degC grows as the floor is lowered.
+    """
+    pairs, results = chamber_plans(
+        spec, floors_c, ceilings_c, params, limits, robust_tau_s=robust_tau_s,
+        robust_dt0_c=robust_dt0_c, progress=progress, backend=backend, workers=workers)
+    return chamber_frame(pairs, results)
