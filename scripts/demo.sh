@@ -1,7 +1,18 @@
 #!/usr/bin/env bash
-# The main job: plan the default campaign, write step tables and plots to out/.
+# The main job: plan the default campaign (the paper's four experiments W1..W4), write
+# step tables, plan.json and plots to out/<experiment>/ and the summary to out/summary.csv.
+# Extra arguments go to `schedsyn campaign` (e.g. a CONFIG.toml copied from
+# data/paper_campaign.toml). Exit code: that of `schedsyn campaign` (0 all complete,
+# 1 some experiment incomplete, 2 bad input).
 # (creates .venv and installs what it needs on first use)
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/_venv.sh" test
-.venv/bin/schedsyn simulate data/baseline_exp1_steps.csv --region -50 -30 --out out/baseline "$@"
-echo "plots and coverage of the paper-like baseline in out/baseline/"
+rc=0
+.venv/bin/schedsyn campaign --out out "$@" || rc=$?
+# the paper-like baseline of experiment 1, simulated, for comparison with out/W1/
+.venv/bin/schedsyn simulate data/baseline_exp1_steps.csv --region -50 -30 --out out/baseline \
+  > /dev/null
+echo "summary (plans next to the paper-like baseline): out/summary.csv"
+echo "per experiment: out/<experiment>/steps.csv, plan.json, program.png, phase.png, coverage.png"
+echo "paper-like baseline of experiment 1: out/baseline/"
+exit "$rc"

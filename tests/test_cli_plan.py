@@ -1,0 +1,115 @@
+"""`schedsyn plan`: one experiment, its outputs, exit codes and one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import pandas as pd
+import pytest
+
+from schedsyn.cli import main
+from schedsyn.coverage import trajectory_coverage
+from schedsyn.params import Limits, ThermalParams
+from schedsyn.programme import read_steps
+from schedsyn.simulate import simulate
+
+pytestmark = pytest.mark.filterwarnings("ignore:Solution may be inaccurate:UserWarning")
+
+
+def test_plan_writes_outputs_and_its_coverage_survives_re_simulation(tmp_path, capsys):
+    out = tmp_path / "p"
+    rc = main(["plan", "--working", "-10", "0", "--approx", "-20", "10", "--levels", "2",
+               "--name", "small", "--tau-s", "2400", "--out", str(out), "--quiet"])
+    text = capsys.readouterr().out
+    for name in ("steps.csv", "plan.json", "program.png", "phase.png", "coverage.png"):
+        assert (out / name).stat().st_size > 0, name
+    plan = json.loads((out / "plan.json").read_text())
+    assert rc == (0 if plan["complete"] else 1)
+    assert plan["experiment"] == "small" and plan["tau_s"] == 2400.0
+    if not plan["complete"]:
+        assert "NOT COMPLETE" in text
+    # independent check with the planning model
+    prog = read_steps(out / "steps.csv", Limits())
+    traj = simulate(prog, ThermalParams(tau_s=2400.0), dt_min=0.1)
+    rep = trajectory_coverage(traj, -10, 0, levels_required=2, delta_c_per_min=0.05)
+    assert rep.coverage == pytest.approx(plan["coverage"])
+    assert rep.min_levels == plan["min_levels"]
+    assert prog.total_min == pytest.approx(plan["duration_min"])
+    assert "coverage of [-10, 0] degC" in text
+
+
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["--working", "0", "-10", "--approx", "-20", "10"], ["lo_c < hi_c"]),
+        (["--working", "-10", "0", "--approx", "-5", "10"], ["approximation region"]),
+        (["--working", "-10", "-0.5", "--approx", "-20", "10"], ["whole number"]),
+        (["--working", "-10", "0", "--levels", "1"], ["levels_required"]),
+        (["--working", "-10", "0", "--segment-min", "2.5"], ["segment_min"]),
+        (["--working", "-10", "0", "--robust-tau-s", "2600-2200"], ["--robust-tau-s", "LO:HI"]),
+        (["--working", "-10", "0", "--robust-dt0-c", "4:2"], ["--robust-dt0-c", "LO must"]),
+        (["--working", "-10", "0", "--tau-s", "-5"], ["tau_s"]),
+        (["--working", "-10", "0", "--chamber-min-c", "30"], ["chamber"]),
+        (["--working", "-10", "0", "--model", "/nonexistent/model.json"], ["model file"]),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, words):
+    out = tmp_path / "o"
+    assert main(["plan", *argv, "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert err.startswith("schedsyn plan: error:")
+    for w in words:
+        assert w in err, err
+    assert not out.exists()
+
+
+def test_infeasible_request_names_the_requirement_and_best_coverage(tmp_path, capsys):
+    out = tmp_path / "o"
+    rc = main(["plan", "--working", "-10", "-8", "--approx", "-20", "0", "--levels", "2",
+               "--duration-max-min", "20", "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2
+    assert len(err.splitlines()) == 1, err
+    assert "best reachable coverage is 0%" in err and "20 min" in err
+    assert not (out / "steps.csv").exists()
+
+
+def test_default_approximation_region_follows_the_paper_rule(tmp_path):
+    from argparse import Namespace
+
+    from schedsyn.cli.plan import build_spec
+
+    args = Namespace(working=[-50.0, -30.0], approx=None, name="W1", levels=6,
+                     delta_c_per_min=0.05, segment_min=5.0, objective="shortest",
+                     max_steps=80)
+    spec = build_spec(args, Limits())
+    assert (spec.approx_lo_c, spec.approx_hi_c) == (-52.0, -20.0)  # clipped at the device
+    args.working = [0.0, 30.0]
+    spec = build_spec(args, Limits())
+    assert (spec.approx_lo_c, spec.approx_hi_c) == (-10.0, 40.0)
+
+
+def test_help_lists_plan_and_campaign(capsys):
+    assert main(["--help"]) == 0
+    text = capsys.readouterr().out
+    assert "plan" in text and "campaign" in text
+    assert main(["plan", "--help"]) == 0
+    assert "--chamber-min-c" in capsys.readouterr().out
+
+
+def test_chamber_csv_from_several_floors(tmp_path, capsys):
+    out = tmp_path / "c"
+    rc = main(["plan", "--working", "-50", "-47", "--approx", "-52", "-40", "--levels", "2",
+               "--chamber-min-c", "-52", "-70", "--out", str(out), "--quiet"])
+    frame = pd.read_csv(out / "chamber.csv")
+    assert frame["chamber_min_c"].tolist() == [-52.0, -70.0]
+    assert {"coverage", "min_levels", "duration_min", "complete"} <= set(frame.columns)
+    plan = json.loads((out / "plan.json").read_text())
+    # the files are for the least demanding chamber with a complete plan (else the best)
+    if frame["complete"].any():
+        floor = frame.loc[frame["complete"], "chamber_min_c"].max()
+        assert plan["limits"]["chamber_min_c"] == floor and rc == 0
+    else:
+        assert rc == 1
+    assert "coverage vs chamber floor/ceiling" in capsys.readouterr().out
