@@ -263,8 +263,23 @@ class _PlanJob:
     robust_dt0_c: tuple[float, float] | None
 
 
-def _plan_job(job: _PlanJob, progress: Callable[[str], None] | None) -> Plan | InfeasiblePlanError:
-    """Plan one experiment; an infeasible request is returned, not raised (the others go on)."""
+@dataclass(frozen=True, slots=True)
+class Infeasible:
+    """An experiment nothing could be planned for: the planner's message, best coverage."""
+
+    message: str
+    best_coverage: float
+
+    def __str__(self) -> str:
+        return self.message
+
+
+def _plan_job(job: _PlanJob, progress: Callable[[str], None] | None) -> Plan | Infeasible:
+    """Plan one experiment; an infeasible request is returned, not raised (the others go on).
+
+    (An exception's extra attributes do not survive pickling back from a worker, hence
+    :class:`Infeasible`.)
+    """
     tic = time.perf_counter()
     name = job.spec.name
 
@@ -279,7 +294,8 @@ def _plan_job(job: _PlanJob, progress: Callable[[str], None] | None) -> Plan | I
                                progress=say)
     except InfeasiblePlanError as exc:
         say(f"infeasible: {exc}")
-        return exc
+        best = exc.best_coverage if exc.best_coverage is not None else 0.0
+        return Infeasible(str(exc), float(best))
     say(f"done: {plan.status}, coverage {plan.coverage.coverage:.0%}, "
         f"{plan.duration_min:g} min")
     return plan
@@ -331,8 +347,8 @@ class CampaignResult:
     def summary_frame(self) -> pd.DataFrame:
         """One row per experiment: the plan's figures next to the baseline's."""
         rows = []
-        for spec, plan, err, base in zip(self.config.experiments, self.plans, self.errors,
-                                         self.baselines, strict=True):
+        for spec, plan, base in zip(self.config.experiments, self.plans, self.baselines,
+                                    strict=True):
             if plan is not None:
                 s = plan.to_summary_dict()
                 row = {k: s[k] for k in ("experiment", "working_min_c", "working_max_c",
@@ -411,7 +427,7 @@ class _ChamberJob:
     robust_dt0_c: tuple[float, float] | None
 
 
-def _chamber_job(job: _ChamberJob, progress) -> Plan | InfeasiblePlanError:
+def _chamber_job(job: _ChamberJob, progress) -> Plan | Infeasible:
     tag = f"{job.spec.name} floor {job.limits.chamber_min_c:g} ceiling {job.limits.chamber_max_c:g}"
     return _plan_job(_PlanJob(job.spec, job.params, job.limits, job.robust_tau_s,
                               job.robust_dt0_c),
@@ -434,7 +450,7 @@ def chamber_plans(
     progress: Callable[[str], None] | None = None,
     backend: Any = "local",
     workers: int | None = None,
-) -> tuple[list[tuple[float, float]], list[Plan | InfeasiblePlanError]]:
+) -> tuple[list[tuple[float, float]], list[Plan | Infeasible]]:
     """Plan ``spec`` for every (floor, ceiling) pair; see :func:`chamber_requirement`."""
     params = ThermalParams() if params is None else params
     limits = Limits() if limits is None else limits
@@ -465,8 +481,7 @@ def chamber_frame(pairs, results) -> pd.DataFrame:
                          "steps": r.steps, "complete": r.complete, "status": r.status,
                          "notes": " | ".join(r.notes)})
         else:
-            best = r.best_coverage if r.best_coverage is not None else 0.0
-            rows.append({"chamber_min_c": f, "chamber_max_c": c, "coverage": best,
+            rows.append({"chamber_min_c": f, "chamber_max_c": c, "coverage": r.best_coverage,
                          "coverage_delta_0p1": np.nan, "min_levels": 0,
                          "duration_min": np.nan, "steps": np.nan, "complete": False,
                          "status": "infeasible", "notes": str(r)})

@@ -208,8 +208,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {out}/chamber.csv")
         plan = _pick(pairs, results)
         if plan is None:
-            best = max((r.best_coverage or 0.0) for r in results
-                       if isinstance(r, InfeasiblePlanError))
+            best = max(r.best_coverage for r in results)
             raise InfeasiblePlanError(
                 f"no chamber in the list can plan {spec.name}; best reachable coverage is "
                 f"{best:.0%} ({results[0]})", best_coverage=best)
