@@ -538,7 +538,7 @@ def _library() -> dict[str, Effect]:
             "chamber_rate_limit",
             "the chamber cannot cool (or heat) as fast as programmed",
             ("max_cool_rate_c_per_min", "max_heat_rate_c_per_min"),
-            ((0.01, 20.0), (0.01, 20.0)), (),  # guesses come from the programme
+            ((1e-3, 1e6), (1e-3, 1e6)), (),  # guesses come from the programme
             "max_cool_rate_c_per_min", linear=False, uses_air=True,
         ),
         Effect(

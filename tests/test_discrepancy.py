@@ -189,3 +189,24 @@ def test_bad_input_is_a_clear_error():
         DiagnoseSettings(effects=("gremlins",))
     with pytest.raises(ParameterError, match="holdout_fraction"):
         DiagnoseSettings(holdout_fraction=1.5)
+
+
+TCLAB = Path(__file__).resolve().parents[2] / "shared" / "data" / "tclab"
+
+
+@pytest.mark.skipif(not TCLAB.is_dir(), reason="../shared/data/tclab (real logs) absent")
+def test_real_tclab_sine_run_finds_a_second_lag():
+    """Real heater/thermistor board: the heater-to-sensor lag is the missing effect."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("tclab_diagnose",
+                                                  ROOT / "scripts" / "tclab_diagnose.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    log, k = mod.tclab_log(TCLAB / "validation_experiment_env_2_sin_5_50_run_1.csv")
+    d = diagnose(log, mod.SETTINGS)
+    assert 0.5 < k < 1.5  # degC per % heater
+    assert d.effect == "second_time_constant" and "chamber_lag" in d.ambiguous_with
+    assert 5.0 < d.parameters["tau2_s"] < 60.0
+    assert d.rms_after_c < 0.5 * d.rms_before_c
+    assert d.holdout_rms_after_c < 0.6 * d.holdout_rms_before_c
