@@ -625,6 +625,12 @@ def analyse_residuals(
     )
 
 
+def _json_num(v: float) -> float | None:
+    """A float for JSON; NaN/inf (not identified) become null."""
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
 # --------------------------------------------------------------------------------------
 # the result
 # --------------------------------------------------------------------------------------
@@ -694,7 +700,7 @@ class Diagnosis:
         return {
             "effect": self.effect,
             "parameters": {k: float(v) for k, v in self.parameters.items()},
-            "uncertainty": {k: float(v) for k, v in self.stderr.items()},
+            "uncertainty": {k: _json_num(v) for k, v in self.stderr.items()},
             "base": {"tau_s": self.base.tau_s, "dt0_c": self.base.dt0_c},
             "model": self.model.to_json_dict(),
             "rms_before_c": self.rms_before_c,
@@ -712,7 +718,7 @@ class Diagnosis:
                 "rms_hold_c": self.residuals_before.rms_hold_c,
                 "ljung_box_p": self.residuals_before.ljung_box_p,
                 "white": self.residuals_before.white,
-                "period_s": self.residuals_before.period_s,
+                "period_s": _json_num(self.residuals_before.period_s),
                 "periodic": self.residuals_before.periodic,
             },
             "candidates": [

@@ -11,6 +11,10 @@ from schedsyn.models_io import load_model
 from schedsyn.synth import blind_programmes, synth_effect_log
 
 
+def _no_nan(name):
+    raise AssertionError(f"non-standard JSON constant {name} in the output")
+
+
 @pytest.fixture(scope="module")
 def rate_limited_log(tmp_path_factory):
     prog = blind_programmes()["cold"]
@@ -30,7 +34,7 @@ def test_diagnose_json_model_file_and_simulate(rate_limited_log, tmp_path, capsy
     rc = main(["diagnose", str(log), "--json", "--out", str(out), "--fit-step-s", "60"])
     captured = capsys.readouterr()
     assert rc == 0, captured.err
-    js = json.loads(captured.out)  # exactly one JSON object on stdout
+    js = json.loads(captured.out, parse_constant=_no_nan)  # one strict JSON object
     assert js["effect"] == "chamber_rate_limit"
     assert js["parameters"]["max_cool_rate_c_per_min"] == pytest.approx(0.6, rel=0.05)
     assert js["parameters"]["max_heat_rate_c_per_min"] == 1e6  # never binding: no limit
