@@ -531,7 +531,7 @@ def _library() -> dict[str, Effect]:
         Effect(
             "chamber_lag",
             "the chamber air follows the setpoint through a first-order lag",
-            ("tau_chamber_s",), ((1.0, 2e4),), ((60.0,), (150.0,), (400.0,), (1000.0,), (2500.0,)),
+            ("tau_chamber_s",), ((1e-3, 2e4),), ((60.0,), (150.0,), (400.0,), (1000.0,), (2500.0,)),
             "tau_chamber_s", linear=True, uses_air=True,
         ),
         Effect(
@@ -557,7 +557,7 @@ def _library() -> dict[str, Effect]:
         Effect(
             "second_time_constant",
             "a second thermal mass between the chamber air and the sensor",
-            ("tau2_s",), ((1.0, 2e4),), ((60.0,), (150.0,), (400.0,), (1000.0,), (2500.0,)),
+            ("tau2_s",), ((1e-3, 2e4),), ((60.0,), (150.0,), (400.0,), (1000.0,), (2500.0,)),
             "tau2_s", linear=True,
         ),
         Effect(
