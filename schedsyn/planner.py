@@ -60,6 +60,8 @@ OBJECTIVES = ("shortest", "margin")
 SAMPLE_MIN = 1.0
 #: Extra separation between neighbouring bands beyond delta, degC/min (sampling, rounding).
 BAND_SAFETY_C_PER_MIN = 0.012
+#: Longest transition (turnaround) searched before a sweep, min.
+MAX_TRANSITION_MIN = 150.0
 #: Distances of the inner band knots from the working edges, degC.
 KNOT_INSETS_C = (1.5, 4.0)
 #: A sweep crosses an inner knot at a planned sample within +- this, degC.
@@ -335,7 +337,7 @@ def _dynamic_tops(tops, knots, direction, tau_min, limits):
 def make_bands(spec: ExperimentSpec, n_dir: int, direction: int, sep_c_per_min: float,
                params_list: Sequence[ThermalParams], limits: Limits,
                width_c_per_min: float = BAND_WIDTH_C_PER_MIN,
-               caps: tuple[float, float] | None = None) -> list[Band]:
+               caps: tuple[float, float] | None = None, dynamic: bool = True) -> list[Band]:
     """``n_dir`` bands ``sep`` apart, stacked down from the fastest gradient available.
 
     Slow sweeps cost time (a sweep lasts span / gradient), so the bands sit as high as
@@ -366,7 +368,8 @@ def make_bands(spec: ExperimentSpec, n_dir: int, direction: int, sep_c_per_min: 
         a_hi = TURN_ACCEL_FRACTION * -limits.rate_min_c_per_min / tau_max
         v_room = min(math.sqrt(max(a_lo * room_lo, 0.0)), math.sqrt(max(a_hi * room_hi, 0.0)))
         tops.append(min(v_lim, v_room))
-    tops = _dynamic_tops(tops, knots, direction, tau_max, limits)
+    if dynamic:
+        tops = _dynamic_tops(tops, knots, direction, tau_max, limits)
     widths = [min(width_c_per_min, (v - v_min - (n_dir - 1) * sep_c_per_min) / n_dir)
               for v in tops]
     bands = []
@@ -694,25 +697,22 @@ def _place_sweep(planner: _Planner, u_fixed, d, band, confine_from, max_seg):
                 return sol[:-1], win, cf
         return None
 
-    hi_x = s_max - s_start - d_fast
+    hi_x = min(s_max - s_start - d_fast, int(MAX_TRANSITION_MIN / SAMPLE_MIN))
     if hi_x < 0:
         return None
+    # earliest feasible transition: scan in segment steps (feasibility is not monotone
+    # enough for bisection over the whole range), then refine to the minute
     step = max(1, int(round(seg / SAMPLE_MIN)))
-    lo_x, found, x = -1, None, 0
-    while x <= hi_x:
+    prev, found = -1, None
+    for x in range(0, hi_x + 1, step):
         res = attempt(x)
         if res is not None:
             found = (x, res)
             break
-        lo_x = x
-        x = step if x == 0 else 2 * x
-    if found is None and lo_x < hi_x:
-        res = attempt(hi_x)
-        if res is not None:
-            found = (hi_x, res)
+        prev = x
     if found is None:
         return None
-    hi_ok = found[0]
+    lo_x, hi_ok = prev, found[0]
     while hi_ok - lo_x > 1:
         mid = (lo_x + hi_ok) // 2
         res = attempt(mid)
@@ -958,61 +958,104 @@ def explain_shortfall(spec: ExperimentSpec, params: ThermalParams, limits: Limit
     return notes
 
 
-#: Edge caps tried by the structure search: (cooling at lo, cooling at hi, heating at lo,
-#: heating at hi) as fractions of ``max_cool_c_per_min`` / ``max_heat_c_per_min``.
-#: Heating -> cooling turnarounds happen at the upper edge and are slow (the chamber
-#: cools at only 1 degC/min), so sweeps are slower there; cooling -> heating turnarounds
-#: at the lower edge are quick (3 degC/min).
-CAP_CANDIDATES = ((1.0, 0.7, 1.0, 0.9), (1.0, 0.7, 1.4, 0.9), (0.7, 0.7, 1.0, 0.9))
+#: Structures tried by the search: edge caps (cooling at lo, cooling at hi, heating at
+#: lo, heating at hi) as fractions of ``max_cool_c_per_min`` / ``max_heat_c_per_min``, and
+#: whether the band tops are lowered to what the sweep dynamics can follow. Heating ->
+#: cooling turnarounds happen at the upper edge and are slow (the chamber cools at only
+#: 1 degC/min), so sweeps are slower there; cooling -> heating turnarounds at the lower
+#: edge are quick (3 degC/min). The list was tuned on the paper's four regions (see
+#: docs/planner.md); every candidate yields a valid plan or none.
+CANDIDATES = (
+    ((1.0, 0.7, 1.0, 0.9), True),
+    ((1.0, 0.7, 1.0, 0.9), False),
+    ((1.0, 0.7, 1.4, 0.9), False),
+    ((0.7, 0.7, 1.0, 0.9), True),
+)
+#: The greedy may run past the duration limit by this factor; such a structure is only
+#: used (cut at the limit) when nothing fits, to give the best reachable coverage.
+OVERRUN_FACTOR = 1.3
 
 
-def _synthesise(spec, params_list, limits, models, progress, max_candidates=None):
+@dataclass(slots=True)
+class _Search:
+    best: tuple | None          # (structure, sep) that fits the duration limit
+    overrun: _Structure | None  # shortest structure that does not fit
+    planner: _Planner
+    reasons: list[str]
+
+
+def _synthesise(spec, params_list, limits, models, progress, max_candidates=None) -> _Search:
     """Search structures (first direction, band separation, edge caps).
 
-    For each candidate: bands -> greedy placement of the sweeps. ``shortest`` keeps the shortest candidate that fits the duration
-    limit; ``margin`` the one with the widest band separation that fits.
+    For each candidate: bands -> greedy placement of the sweeps. ``shortest`` keeps the
+    shortest structure that fits the duration limit; ``margin`` the one with the widest
+    band separation that fits.
     """
     seg = spec.segment_min
     max_seg = int(limits.duration_max_min // seg)
+    ext_seg = int(math.ceil(max_seg * OVERRUN_FACTOR))
     scenarios = [Scenario(p, m) for p, m in zip(params_list, models, strict=True)]
-    planner = _Planner(spec, limits, _Responses(scenarios, max_seg, seg, limits))
-    best = None
-    reasons: list[str] = []
+    planner = _Planner(spec, limits, _Responses(scenarios, ext_seg, seg, limits))
+    search = _Search(None, None, planner, [])
     base_sep = spec.delta_c_per_min + BAND_SAFETY_C_PER_MIN
     seps = [base_sep] if spec.objective == "shortest" else [
         base_sep + x for x in (0.04, 0.02, 0.0)]
-    candidates = CAP_CANDIDATES[:max_candidates]
     for sep in seps:
         for first in _first_directions(spec, limits):
             directions = _sweep_directions(spec, first)
             n_by_dir = {d: directions.count(d) for d in (+1, -1)}
-            for caps in candidates:
+            for caps, dynamic in CANDIDATES[:max_candidates]:
                 cap_by_dir = {
                     -1: (caps[0] * spec.max_cool_c_per_min, caps[1] * spec.max_cool_c_per_min),
                     +1: (caps[2] * spec.max_heat_c_per_min, caps[3] * spec.max_heat_c_per_min)}
                 bands = {d: make_bands(spec, n_by_dir[d], d, sep, params_list, limits,
-                                       caps=cap_by_dir[d]) if n_by_dir[d] else []
-                         for d in (+1, -1)}
+                                       caps=cap_by_dir[d], dynamic=dynamic)
+                         if n_by_dir[d] else [] for d in (+1, -1)}
                 narrow = [d for d in (+1, -1) if bands[d] and _band_feasibility(bands[d]) <= 0]
                 if narrow:
-                    reasons.append(
+                    search.reasons.append(
                         f"the {'heating' if narrow[0] > 0 else 'cooling'} gradients the chamber "
                         f"allows near the region's edges cannot hold {n_by_dir[narrow[0]]} "
                         f"levels {sep:.3f} degC/min apart")
-                    break
+                    continue
                 order = _order_bands(directions, bands, spec, params_list[0], limits)
-                structure, why = _greedy(planner, directions, order, max_seg, progress)
+                structure, why = _greedy(planner, directions, order, ext_seg, progress)
                 if structure is None:
-                    reasons.append(why)
+                    search.reasons.append(why)
                     continue
                 minutes = structure.n_seg * seg
-                if best is None or structure.n_seg < best[0].n_seg:
-                    best = (structure, sep)
+                if structure.n_seg > max_seg:
+                    search.reasons.append(
+                        f"the sweeps need {minutes:g} min, more than the limit "
+                        f"{limits.duration_max_min:g} min")
+                    if search.overrun is None or structure.n_seg < search.overrun.n_seg:
+                        search.overrun = structure
+                    continue
+                if search.best is None or structure.n_seg < search.best[0].n_seg:
+                    search.best = (structure, sep)
                 if progress:
                     progress(f"structure found: {minutes:g} min")
-        if best is not None:
+        if search.best is not None:
             break  # margin: the widest separation that fits
-    return best, planner, reasons
+    return search
+
+
+def _truncate(planner: _Planner, structure: _Structure, max_seg: int) -> _Structure:
+    """Cut an over-long structure so that it returns to the end temperature in time."""
+    limits = planner.limits
+    for n_r in range(1, max_seg):
+        cut = max_seg - n_r
+        u_fixed = structure.u[:cut]
+        lp = _SubLP(planner, u_fixed, max_seg)
+        lp.chamber()
+        lp.device(None)
+        lp.chamber_end(limits.end_c)
+        x = lp.solve(lambda v: cp.norm1(v))
+        if x is not None:
+            end_s = planner.responses.sample_of(cut)
+            windows = [w for w in structure.windows if w.end_s <= end_s]
+            return _Structure(windows, max_seg, np.concatenate((u_fixed, x)))
+    raise SolverFailedError("could not bring the chamber back to its end temperature")
 
 
 def plan_experiment(
@@ -1063,26 +1106,45 @@ def plan_experiment(
     params_list = robust_scenarios(params, robust_tau_s, robust_dt0_c)
     models = [model if model is not None else FirstOrderLag(p) for p in params_list]
 
-    best, planner, reasons = _synthesise(spec, params_list, limits, models, progress)
+    search = _synthesise(spec, params_list, limits, models, progress)
     notes: list[str] = []
-    sub_spec = spec
-    if best is None:
-        # cover as much of the region as possible: shrink it from the binding edge(s)
+    max_seg = int(limits.duration_max_min // spec.segment_min)
+    if search.best is not None:
+        structure, _ = search.best
+        u, margin_g, margin_t = _polish(search.planner, structure)
+    else:
+        # nothing fits in time: try the over-long structure cut at the limit, and the
+        # widest sub-regions that fit; keep whichever covers most of the region
         notes += explain_shortfall(spec, params, limits)
-        best, sub_spec, planner = _best_subregion(
-            spec, params_list, limits, models, progress)
-        if best is None:
+        options = []
+        if search.overrun is not None:
+            structure = _truncate(search.planner, search.overrun, max_seg)
+            options.append((f"all {spec.levels_required} sweeps need "
+                            f"{search.overrun.n_seg * spec.segment_min:g} min, more than the "
+                            f"limit {limits.duration_max_min:g} min; the programme is cut at "
+                            "the limit", structure.u, 0.0, 0.0, search))
+        for sub_spec, sub_search in _subregions(spec, params_list, limits, models, progress):
+            u_sub, mg, mt = _polish(sub_search.planner, sub_search.best[0])
+            options.append((f"planned for the sub-region [{sub_spec.working_lo_c:g}, "
+                            f"{sub_spec.working_hi_c:g}] degC, the widest part that fits",
+                            u_sub, mg, mt, sub_search))
+        if not options:
             msg = (f"{spec.name}: no programme covers any part of [{spec.working_lo_c:g}, "
                    f"{spec.working_hi_c:g}] degC with {spec.levels_required} gradient levels "
                    f"{spec.delta_c_per_min:g} degC/min apart within "
-                   f"{limits.duration_max_min:g} min ({'; '.join(reasons[:2])}); "
+                   f"{limits.duration_max_min:g} min ({'; '.join(search.reasons[:2])}); "
                    "best reachable coverage is 0%. "
                    "Lengthen the duration, narrow the region or lower the level count.")
             raise InfeasiblePlanError(msg, best_coverage=0.0)
-        notes.append(f"planned for the sub-region [{sub_spec.working_lo_c:g}, "
-                     f"{sub_spec.working_hi_c:g}] degC, the widest part that fits")
-    structure, sep = best
-    u, margin_g, margin_t = _polish(planner, structure)
+
+        def verified(option):
+            prog = Programme(np.full(option[1].size, float(spec.segment_min)), option[1],
+                             limits.start_c).merged(1e-6).rounded(limits)
+            return check_programme(prog, spec, limits, params_list, model)[0].coverage
+
+        note, u, margin_g, margin_t, search = max(options, key=verified)
+        notes.append(note)
+    planner = search.planner
     raw = Programme(np.full(u.size, float(spec.segment_min)), u, limits.start_c)
     programme = raw.merged(rate_tol_c_per_min=1e-6).rounded(limits)
     cov, cov01, problems, t_lo, t_hi = check_programme(programme, spec, limits, params_list,
@@ -1113,19 +1175,23 @@ def plan_experiment(
     return plan
 
 
-def _best_subregion(spec, params_list, limits, models, progress):
-    """Largest sub-region (whole bins, shrunk from either edge) that can be planned."""
-    lo, hi = spec.working_lo_c, spec.working_hi_c
+def _subregions(spec, params_list, limits, models, progress):
+    """The widest sub-regions (whole bins cut from the low, the high or both edges) for
+    which a structure fits the duration limit: at most one per side."""
     n = spec.grid.n_bins
-    for width in range(n - 1, 0, -1):
-        for a in range(0, n - width + 1):
-            lo2, hi2 = lo + a, lo + a + width
-            if a not in (0, n - width) and width < n - 2:
-                continue  # shrink from the edges only (the limits bind there)
-            sub = replace(spec, working_lo_c=lo2, working_hi_c=hi2)
-            best, planner, _ = _synthesise(sub, params_list, limits, models, None)
-            if best is not None:
+    out = []
+    for side in ("low", "high", "both"):
+        for cut in (2, 4, 7, 11):
+            if cut >= n - 1:
+                break
+            a = {"low": cut, "high": 0, "both": cut // 2}[side]
+            b = cut - a
+            sub = replace(spec, working_lo_c=spec.working_lo_c + a,
+                          working_hi_c=spec.working_hi_c - b)
+            search = _synthesise(sub, params_list, limits, models, None, max_candidates=1)
+            if search.best is not None:
                 if progress:
-                    progress(f"sub-region [{lo2:g}, {hi2:g}] fits")
-                return best, sub, planner
-    return None, spec, None
+                    progress(f"sub-region [{sub.working_lo_c:g}, {sub.working_hi_c:g}] fits")
+                out.append((sub, search))
+                break
+    return out
