@@ -92,7 +92,8 @@ def write_plan_outputs(plan: Plan, out: Path, inputs=(), model=None) -> list[Pat
         title=f"{spec.name}: phase portrait (tau {plan.params.tau_s:g} s, "
               f"dT0 {plan.params.dt0_c:g} °C)"), out / "phase.png", inputs))
     written.append(plots.save_figure(plots.coverage_plot(
-        plan.coverage, title=f"{spec.name}: coverage {plan.coverage.coverage:.0%} "
+        plan.coverage, title=f"{spec.name}: {'' if plan.complete else 'NOT COMPLETE, '}"
+                             f"coverage {plan.coverage.coverage:.0%} "
                              f"(Δ {spec.delta_c_per_min:g}), "
                              f"{plan.coverage_0p1.coverage:.0%} at Δ 0.1 °C/min"),
         out / "coverage.png", inputs))
