@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pandas as pd
 import pytest
 
 from schedsyn.cli import main
 from schedsyn.coverage import trajectory_coverage
+from schedsyn.effects import ModelSpec
+from schedsyn.models_io import write_model
 from schedsyn.params import Limits, ThermalParams
 from schedsyn.programme import read_steps
 from schedsyn.simulate import simulate
@@ -16,26 +19,46 @@ from schedsyn.simulate import simulate
 pytestmark = pytest.mark.filterwarnings("ignore:Solution may be inaccurate:UserWarning")
 
 
-def test_plan_writes_outputs_and_its_coverage_survives_re_simulation(tmp_path, capsys):
+def test_plan_with_a_model_file_writes_outputs_and_its_coverage_survives_re_simulation(
+        tmp_path, capsys):
+    # a linear augmented model (second thermal mass, 60 s) as `schedsyn diagnose` writes it
+    spec = ModelSpec(tau_s=2000.0, dt0_c=3.0, effect="second_time_constant",
+                     parameters={"tau2_s": 60.0})
+    model_path = write_model(tmp_path / "model.json", spec)
     out = tmp_path / "p"
     rc = main(["plan", "--working", "-10", "0", "--approx", "-20", "10", "--levels", "2",
-               "--name", "small", "--tau-s", "2400", "--out", str(out), "--quiet"])
+               "--name", "small", "--model", str(model_path), "--tau-s", "2400",
+               "--out", str(out), "--quiet"])
     text = capsys.readouterr().out
     for name in ("steps.csv", "plan.json", "program.png", "phase.png", "coverage.png"):
         assert (out / name).stat().st_size > 0, name
     plan = json.loads((out / "plan.json").read_text())
     assert rc == (0 if plan["complete"] else 1)
-    assert plan["experiment"] == "small" and plan["tau_s"] == 2400.0
+    assert plan["experiment"] == "small" and plan["tau_s"] == 2400.0  # --tau-s overrides
     if not plan["complete"]:
         assert "NOT COMPLETE" in text
-    # independent check with the planning model
+    # independent check: re-read the table, simulate through the model file's model
     prog = read_steps(out / "steps.csv", Limits())
-    traj = simulate(prog, ThermalParams(tau_s=2400.0), dt_min=0.1)
+    model = ModelSpec(tau_s=2400.0, dt0_c=3.0, effect="second_time_constant",
+                      parameters={"tau2_s": 60.0}).linear_model()
+    traj = simulate(prog, model=model, dt_min=0.1)
     rep = trajectory_coverage(traj, -10, 0, levels_required=2, delta_c_per_min=0.05)
     assert rep.coverage == pytest.approx(plan["coverage"])
     assert rep.min_levels == plan["min_levels"]
     assert prog.total_min == pytest.approx(plan["duration_min"])
     assert "coverage of [-10, 0] degC" in text
+    # ... and it differs from the plain first-order lag (the model was really used)
+    plain = simulate(prog, ThermalParams(tau_s=2400.0), dt_min=0.1)
+    assert np.max(np.abs(plain.t_c - traj.t_c)) > 0.01
+
+
+def test_a_nonlinear_model_file_is_refused(tmp_path, capsys):
+    path = write_model(tmp_path / "m.json", ModelSpec(
+        effect="asymmetric_tau", parameters={"tau_heat_s": 2000.0, "tau_cool_s": 2600.0}))
+    assert main(["plan", "--working", "-10", "0", "--model", str(path),
+                 "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "not linear" in err and str(path) in err
 
 
 @pytest.mark.parametrize(
