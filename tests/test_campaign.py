@@ -7,9 +7,12 @@ simulating it densely here, independently of the planner's own check.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import io
 import json
 import math
+import re
 
 import numpy as np
 import pandas as pd
@@ -166,12 +169,14 @@ def small_campaign(tmp_path_factory):
     cfg = d / "small.toml"
     cfg.write_text(SMALL_TOML.format(baseline=PAPER_BASELINE_EXP1.as_posix()))
     out = d / "out"
-    rc = main(["campaign", str(cfg), "--out", str(out), "--quiet"])
-    return cfg, out, rc
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):  # progress lines (one experiment: in-process)
+        rc = main(["campaign", str(cfg), "--out", str(out)])
+    return cfg, out, rc, err.getvalue()
 
 
 def test_campaign_writes_every_output(small_campaign):
-    _, out, rc = small_campaign
+    _, out, rc, _ = small_campaign
     summary = pd.read_csv(out / "summary.csv")
     assert tuple(summary.columns) == SUMMARY_COLUMNS
     assert summary["experiment"].tolist() == ["S"]
@@ -188,9 +193,18 @@ def test_campaign_writes_every_output(small_campaign):
     assert math.isfinite(plan["solve_s"]) and plan["solve_s"] > 0
 
 
+def test_campaign_reports_progress_with_experiment_and_solver_time(small_campaign):
+    *_, err = small_campaign
+    lines = [ln for ln in err.splitlines() if ln.startswith("S [")]
+    assert lines, err
+    times = [float(re.match(r"S \[\s*([0-9.]+) s\]", ln).group(1)) for ln in lines]
+    assert times == sorted(times) and times[-1] > 0
+    assert "done:" in lines[-1]
+
+
 def test_exported_table_gives_the_reported_coverage(small_campaign):
     """Independent check: re-read steps.csv, simulate densely, recompute coverage."""
-    _, out, _ = small_campaign
+    _, out, _, _ = small_campaign
     row = pd.read_csv(out / "summary.csv").iloc[0]
     limits = Limits()
     prog = read_steps(out / "S" / "steps.csv", limits)
@@ -214,7 +228,7 @@ def test_exported_table_gives_the_reported_coverage(small_campaign):
 
 
 def test_baseline_sits_next_to_the_plan(small_campaign):
-    _, out, _ = small_campaign
+    _, out, _, _ = small_campaign
     row = pd.read_csv(out / "summary.csv").iloc[0]
     prog = read_steps(PAPER_BASELINE_EXP1)
     traj = simulate(prog, ThermalParams(), t0_c=20.0)
