@@ -312,7 +312,7 @@ def _fit(effect: str, starts: Sequence[np.ndarray], lo: np.ndarray, hi: np.ndarr
         try:
             res = optimize.least_squares(
                 fun, x0, bounds=(lo[free_idx], hi[free_idx]), x_scale="jac",
-                method="trf", diff_step=1e-4, max_nfev=60, xtol=1e-8, ftol=1e-8,
+                method="trf", diff_step=1e-4, max_nfev=60, xtol=1e-6, ftol=1e-6,
             )
         except (ValueError, np.linalg.LinAlgError) as exc:  # pragma: no cover - defensive
             raise SolverFailedError(f"fitting {effect} failed: {exc}") from exc
