@@ -331,6 +331,19 @@ class ModelSpec:
             return LinearEffectModel(0.5 * (p["tau_heat_s"] + p["tau_cool_s"]), self.dt0_c)
         return LinearEffectModel(self.tau_s, self.dt0_c, **kw)
 
+    def planner_params(self) -> ThermalParams:
+        """First-order equivalent for the planner's heuristics (bands, reachability).
+
+        ``tau`` is the model's mean delay: ``tau/(1-s) + tau2 + delay`` (first moment of
+        the impulse response); for ``asymmetric_tau`` the mean of the two. The exact
+        response is :meth:`linear_model`; this only sizes heuristic bounds.
+        """
+        p = self.parameters
+        if self.effect == "asymmetric_tau":
+            return ThermalParams(0.5 * (p["tau_heat_s"] + p["tau_cool_s"]), self.dt0_c)
+        m = self.linear_model()
+        return ThermalParams(m.tau_eff_min * 60.0 + m.tau2_s + m.delay_s, self.dt0_c)
+
     def planner_limits(self, limits: Limits | None = None) -> Limits:
         """Chamber limits the effect implies (a rate limit lowers the usable rates)."""
         limits = Limits() if limits is None else limits

@@ -209,3 +209,16 @@ def test_model_file_round_trip(tmp_path):
         load_model(bad)
     with pytest.raises(ParameterError, match="does not exist"):
         load_model(tmp_path / "missing.json")
+
+
+def test_planner_params_match_the_mean_delay():
+    """tau of the first-order equivalent = first moment of the impulse response: the
+    large-x asymptote of the unit-ramp response is x - tau_equivalent."""
+    for spec in (ModelSpec(2400.0, 3.0, "dead_time", {"delay_s": 300.0}),
+                 ModelSpec(2400.0, 3.0, "chamber_lag", {"tau_chamber_s": 600.0}),
+                 ModelSpec(2400.0, 3.0, "selfheat_slope", {"dt0_slope_c_per_c": 0.04})):
+        m = spec.linear_model()
+        x = 2000.0
+        tau_eq_min = (x - m.ramp(np.array([x]))[0] / 1.0)
+        assert spec.planner_params().tau_min == pytest.approx(tau_eq_min, rel=1e-9)
+        assert spec.planner_params().dt0_c == 3.0
