@@ -31,6 +31,9 @@ class InfeasiblePlanError(SchedsynError):
         super().__init__(message)
         self.best_coverage = best_coverage
 
+    def __reduce__(self):  # keep best_coverage across process boundaries
+        return (type(self), (str(self), self.best_coverage))
+
 
 class SolverFailedError(SchedsynError):
     """A numerical solver failed for a reason other than infeasibility."""

@@ -826,6 +826,7 @@ class Plan:
     notes: tuple[str, ...] = field(default=())
     t_min_c: float = float("nan")
     t_max_c: float = float("nan")
+    box_check: dict | None = None
 
     @property
     def duration_min(self) -> float:
@@ -882,6 +883,7 @@ class Plan:
             "solver": "Clarabel (LP) via cvxpy",
             "violations": list(self.violations),
             "notes": list(self.notes),
+            "robust_box_check": self.box_check,
         }
 
 
@@ -920,6 +922,20 @@ def check_programme(
     return worst, worst01, problems, float(t_lo), float(t_hi)
 
 
+def _verify_robust(programme, spec, params, tau_range, dt0_range, limits) -> dict:
+    """Dense check of a robust plan over its whole box (9 x 7 grid, ends included)."""
+    from .sweep import verify_box
+
+    res = verify_box(
+        programme, (spec.working_lo_c, spec.working_hi_c),
+        tau_range if tau_range is not None else (params.tau_s, params.tau_s),
+        dt0_range if dt0_range is not None else (params.dt0_c, params.dt0_c),
+        levels_required=spec.levels_required,
+        deltas_c_per_min=(spec.delta_c_per_min, 0.1), t0_c=limits.t_init_c)
+    return {"holds": res.holds(), "full_share": res.full_share, "worst": res.worst(),
+            "covered_box": res.covered_box(), "grid_points": int(np.prod(res.shape))}
+
+
 def explain_shortfall(spec: ExperimentSpec, params: ThermalParams, limits: Limits) -> list[str]:
     """Which limit makes the region's edges hard to cover, in words with numbers."""
     notes = []
@@ -951,6 +967,22 @@ def explain_shortfall(spec: ExperimentSpec, params: ThermalParams, limits: Limit
             f"at {spec.working_hi_c:g} degC the chamber ceiling {limits.chamber_max_c:g} degC "
             f"allows heating gradients of at most {g_heat:.3f} degC/min; {n_heat} heating "
             "levels need clearly more: raise the ceiling or lower the level count")
+    # turning room between the working edges and the device limits
+    tau_s_min = params.tau_min
+    for edge, room, rate, word in (
+            (spec.working_lo_c, spec.working_lo_c - limits.device_min_c,
+             limits.rate_max_c_per_min, "heating"),
+            (spec.working_hi_c, limits.device_max_c - spec.working_hi_c,
+             -limits.rate_min_c_per_min, "cooling")):
+        v_room = math.sqrt(max(2 * TURN_ACCEL_FRACTION * rate / tau_s_min * room, 0.0))
+        n_dir = max(n_cool, n_heat)
+        if v_room < 2 * n_dir * (spec.delta_c_per_min + BAND_SAFETY_C_PER_MIN):
+            notes.append(
+                f"at {edge:g} degC the device limit leaves {room:g} degC to turn round; with "
+                f"the chamber {word} at {rate:g} degC/min the passes there cannot be faster "
+                f"than about {v_room:.2f} degC/min, so {n_dir} levels per direction there "
+                "need slow, long passes: widen the device limits, lower the level count or "
+                "lengthen the experiment")
     if spec.approx_lo_c < limits.device_min_c or spec.approx_hi_c > limits.device_max_c:
         notes.append(
             f"the approximation region [{spec.approx_lo_c:g}, {spec.approx_hi_c:g}] degC "
@@ -1125,8 +1157,9 @@ def plan_experiment(
                             "the limit", structure.u, 0.0, 0.0, search))
         for sub_spec, sub_search in _subregions(spec, params_list, limits, models, progress):
             u_sub, mg, mt = _polish(sub_search.planner, sub_search.best[0])
-            options.append((f"planned for the sub-region [{sub_spec.working_lo_c:g}, "
-                            f"{sub_spec.working_hi_c:g}] degC, the widest part that fits",
+            options.append((f"sweeps designed for the sub-region [{sub_spec.working_lo_c:g}, "
+                            f"{sub_spec.working_hi_c:g}] degC (the full region did not fit "
+                            "in time)",
                             u_sub, mg, mt, sub_search))
         if not options:
             msg = (f"{spec.name}: no programme covers any part of [{spec.working_lo_c:g}, "
@@ -1160,6 +1193,20 @@ def plan_experiment(
             f"distinct levels: " + ", ".join(f"[{a:g},{b:g}) {n}" for a, b, n in short[:10]))
         if not any("floor" in n or "ceiling" in n for n in notes):
             notes += explain_shortfall(spec, params, limits)
+    box_check = None
+    if robust:
+        box_check = _verify_robust(programme, spec, params, robust_tau_s, robust_dt0_c,
+                                   limits)
+        if not box_check["holds"]:
+            complete = False
+            part = box_check["covered_box"]
+            notes.append(
+                "coverage does not hold everywhere in the robust box (worst point tau "
+                f"{box_check['worst']['tau_s']:g} s, dT0 {box_check['worst']['dt0_c']:g} degC: "
+                f"{box_check['worst']['coverage']:.0%}); "
+                + (f"it holds for tau {part['tau_s_range'][0]:g}..{part['tau_s_range'][1]:g} s "
+                   f"x dT0 {part['dt0_c_range'][0]:g}..{part['dt0_c_range'][1]:g} degC"
+                   if part else "no grid point is fully covered"))
     status = "complete" if complete else ("incomplete" if not problems else "limits violated")
     plan = Plan(
         spec=spec, params=params, limits=limits, programme=programme, coverage=cov,
@@ -1167,6 +1214,7 @@ def plan_experiment(
         solve_s=time.perf_counter() - tic, margin_g_c_per_min=margin_g, margin_t_c=margin_t,
         n_lp=planner.n_lp, problem_size=planner.size, scenarios=tuple(params_list),
         violations=tuple(problems), notes=tuple(notes), t_min_c=t_lo, t_max_c=t_hi,
+        box_check=box_check,
     )
     if require_complete and not complete:
         raise InfeasiblePlanError(

@@ -1,0 +1,136 @@
+"""The planner: bands by construction, plans checked by independent re-simulation."""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from schedsyn import BinGrid, Limits, ThermalParams, coverage_report, read_steps, simulate
+from schedsyn.errors import InfeasiblePlanError, ParameterError
+from schedsyn.planner import (
+    BAND_SAFETY_C_PER_MIN,
+    ExperimentSpec,
+    explain_shortfall,
+    make_bands,
+    plan_experiment,
+)
+
+SMALL = dict(name="S", working_lo_c=-10.0, working_hi_c=0.0, approx_lo_c=-20.0,
+             approx_hi_c=10.0, levels_required=3)
+SMALL_LIMITS = Limits(duration_max_min=300.0)
+
+
+@pytest.fixture(scope="module")
+def small_plan():
+    return plan_experiment(ExperimentSpec(**SMALL), limits=SMALL_LIMITS)
+
+
+@pytest.mark.parametrize("region", [(-50, -30, -52, -20), (30, 60, 20, 60), (-30, 0, -40, 10)])
+@pytest.mark.parametrize("direction", [-1, +1])
+def test_bands_are_delta_apart_at_every_temperature(region, direction):
+    spec = ExperimentSpec("W", *region)
+    delta = spec.delta_c_per_min
+    bands = make_bands(spec, 3, direction, delta + BAND_SAFETY_C_PER_MIN, [ThermalParams()],
+                       Limits())
+    t = np.linspace(region[0] - 0.5, region[1] + 0.5, 500)
+    lows = [b.bounds(t)[0] for b in bands]
+    highs = [b.bounds(t)[1] for b in bands]
+    for r in range(len(bands)):
+        assert np.all(highs[r] >= lows[r] - 1e-12)
+    for r in range(len(bands) - 1):
+        assert np.all(lows[r + 1] - highs[r] >= delta - 1e-9)
+    # heating and cooling passes are delta apart: every band keeps |g| >= delta / 2
+    assert np.all(lows[0] >= delta / 2 - 1e-12)
+
+
+def test_bands_respect_the_chamber_floor_near_the_cold_edge():
+    spec = ExperimentSpec("W1", -50, -30, -52, -20)
+    p = ThermalParams()
+    bands = make_bands(spec, 3, -1, 0.062, [p], Limits(chamber_min_c=-60.0))
+    g_floor = (-60.0 + p.dt0_c - (-50.5)) / p.tau_min   # most negative g at -50.5 degC
+    assert bands[-1].bounds(-50.5)[1] <= -g_floor + 1e-9
+
+
+def test_small_plan_is_complete_within_limits(small_plan):
+    plan, lim = small_plan, SMALL_LIMITS
+    assert plan.complete, plan.notes
+    prog = plan.programme
+    assert prog.total_min <= lim.duration_max_min
+    assert np.allclose(prog.durations_min, np.round(prog.durations_min))
+    tk = prog.boundary_temps_c
+    assert np.allclose(tk * 10, np.round(tk * 10), atol=1e-6)
+    assert tk[0] == pytest.approx(20.0) and abs(tk[-1] - 20.0) <= lim.end_tol_c
+    assert np.all(prog.rates_c_per_min <= lim.rate_max_c_per_min + 1e-9)
+    assert np.all(prog.rates_c_per_min >= lim.rate_min_c_per_min - 1e-9)
+    assert tk.min() >= lim.chamber_min_c and tk.max() <= lim.chamber_max_c
+    assert plan.steps <= plan.spec.max_steps
+    assert np.all(np.abs(np.diff(prog.rates_c_per_min)) > 1e-9)  # equal rates merged
+
+
+def _ode_trajectory(prog, params, dt_min=0.1):
+    """Independent simulation of a step table: solve_ivp on the ODE, segment by segment."""
+    tau = params.tau_s / 60.0
+    t_all, temp_all, grad_all = [], [], []
+    temp, tk = 20.0, prog.start_c
+    start = 0.0
+    for dur, rate in zip(prog.durations_min, prog.rates_c_per_min, strict=True):
+        n = int(round(dur / dt_min))
+        t_eval = start + dt_min * np.arange(n + 1)
+        sol = solve_ivp(lambda t, x, r=rate, s0=start, k0=tk: [(k0 + r * (t - s0)
+                        + params.dt0_c - x[0]) / tau], (start, start + dur), [temp],
+                        t_eval=t_eval, rtol=1e-10, atol=1e-10)
+        tk_eval = tk + rate * (t_eval - start)
+        keep = slice(0, -1)  # the end sample starts the next segment
+        t_all.append(t_eval[keep])
+        temp_all.append(sol.y[0][keep])
+        grad_all.append(((tk_eval + params.dt0_c - sol.y[0]) / tau)[keep])
+        temp, tk, start = sol.y[0][-1], tk + rate * dur, start + dur
+    t_all.append([start])
+    temp_all.append([temp])
+    grad_all.append([(tk + params.dt0_c - temp) / tau])
+    return np.concatenate(t_all), np.concatenate(temp_all), np.concatenate(grad_all)
+
+
+def test_exported_table_reproduces_the_reported_coverage(small_plan, tmp_path):
+    plan = small_plan
+    path = plan.programme.to_csv(tmp_path / "steps.csv")
+    prog = read_steps(path, SMALL_LIMITS)
+    grid = BinGrid(plan.spec.working_lo_c, plan.spec.working_hi_c)
+    traj = simulate(prog, plan.params)
+    rep = coverage_report(traj.t_c, traj.g_c_per_min, grid, plan.spec.levels_required)
+    assert np.array_equal(rep.levels, plan.coverage.levels)
+    # and with separate code: the ODE integrated by scipy from the table
+    _, temp, grad = _ode_trajectory(prog, plan.params)
+    rep_ode = coverage_report(temp, grad, grid, plan.spec.levels_required)
+    assert rep_ode.complete
+    assert temp.min() >= SMALL_LIMITS.device_min_c and temp.max() <= SMALL_LIMITS.device_max_c
+
+
+def test_too_short_a_request_names_the_requirement():
+    spec = ExperimentSpec(**SMALL)
+    with pytest.raises(InfeasiblePlanError, match="best reachable coverage") as info:
+        plan_experiment(spec, limits=Limits(duration_max_min=40.0), require_complete=True)
+    assert info.value.best_coverage is not None and info.value.best_coverage < 1.0
+
+
+def test_shortfall_names_the_binding_chamber_limit():
+    w1 = ExperimentSpec("W1", -50, -30, -52, -20)
+    notes = explain_shortfall(w1, ThermalParams(), Limits(chamber_min_c=-52.0))
+    assert any("cannot bring the device below -49" in n for n in notes)
+    notes = explain_shortfall(w1, ThermalParams(), Limits(chamber_min_c=-60.0))
+    assert any("0.175" in n for n in notes)   # (Tk_min + dT0 - T)/tau at -50 degC
+    assert explain_shortfall(w1, ThermalParams(), Limits()) == []
+
+
+@pytest.mark.parametrize(
+    "changes, name",
+    [
+        ({"levels_required": 1}, "levels_required"),
+        ({"segment_min": 2.5}, "segment_min"),
+        ({"objective": "fastest"}, "objective"),
+        ({"approx_lo_c": -5.0}, "approximation region"),
+        ({"working_hi_c": -10.5}, "lo_c < hi_c"),
+    ],
+)
+def test_bad_specs_are_refused_by_name(changes, name):
+    with pytest.raises(ParameterError, match=name):
+        ExperimentSpec(**{**SMALL, **changes})
