@@ -222,3 +222,25 @@ def test_planner_params_match_the_mean_delay():
         tau_eq_min = (x - m.ramp(np.array([x]))[0] / 1.0)
         assert spec.planner_params().tau_min == pytest.approx(tau_eq_min, rel=1e-9)
         assert spec.planner_params().dt0_c == 3.0
+
+
+def test_vectorised_nonlinear_updates_equal_step_by_step_loops():
+    """The run-vectorised limiter and asymmetric lag equal plain per-step loops."""
+    from schedsyn.effects import _rate_limited_step, lag_foh_asymmetric, rate_limited
+
+    rng = np.random.default_rng(7)
+    for _ in range(30):
+        n, h = int(rng.integers(2, 400)), float(rng.uniform(0.05, 1.0))
+        s = 20.0 + np.cumsum(np.repeat(rng.uniform(-3, 3, n // 10 + 1), 10)[:n] * h)
+        c, r = rng.uniform(0.2, 2.0, 2)
+        loop = [s[0]]
+        for k in range(n - 1):
+            loop.append(_rate_limited_step(loop[-1], s[k], s[k + 1], h, c, r))
+        np.testing.assert_allclose(rate_limited(s, h, c, r), loop, atol=1e-9)
+        th, tc = rng.uniform(5.0, 60.0, 2)
+        t = [float(rng.uniform(10, 30))]
+        for k in range(n - 1):  # T[k+1] = a T + (1-a) v0 + (v1 - v0)(1 - tau (1-a)/h)
+            tau = th if 0.5 * (s[k] + s[k + 1]) > t[-1] else tc
+            a = math.exp(-h / tau)
+            t.append(a * t[-1] + (1 - a) * s[k] + (s[k + 1] - s[k]) * (1 - tau * (1 - a) / h))
+        np.testing.assert_allclose(lag_foh_asymmetric(s, t[0], th, tc, h), t, atol=1e-9)
