@@ -1229,7 +1229,7 @@ def _subregions(spec, params_list, limits, models, progress):
     n = spec.grid.n_bins
     out = []
     for side in ("low", "high", "both"):
-        for cut in (2, 4, 7, 11):
+        for cut in ((2, 4) if side != "both" else (4,)):
             if cut >= n - 1:
                 break
             a = {"low": cut, "high": 0, "both": cut // 2}[side]
