@@ -41,7 +41,7 @@ def test_diagnose_json_model_file_and_simulate(rate_limited_log, tmp_path, capsy
     assert js["rms_after_c"] < 0.5 * js["rms_before_c"]
     assert {c["effect"] for c in js["candidates"]} >= {"chamber_lag", "asymmetric_tau"}
     for name in ("model.json", "diagnosis.json", "candidates.csv", "residuals.png",
-                 "phase.png", "residual_segments.csv"):
+                 "phase.png", "residual_segments.csv", "residual_by_temperature.csv"):
         assert (out / name).is_file(), name
     model = load_model(out / "model.json")
     assert model.effect == "chamber_rate_limit"

@@ -43,7 +43,10 @@ def run(args: argparse.Namespace) -> int:
     write_json_atomic(out / "diagnosis.json", d.to_json_dict(), inputs)
     write_frame_atomic(out / "candidates.csv", d.to_frame(), inputs)
     write_frame_atomic(out / "residual_segments.csv", d.residuals_before.segments, inputs)
-    written = ["model.json", "diagnosis.json", "candidates.csv", "residual_segments.csv"]
+    write_frame_atomic(out / "residual_by_temperature.csv", d.residuals_before.by_temperature,
+                       inputs)
+    written = ["model.json", "diagnosis.json", "candidates.csv", "residual_segments.csv",
+               "residual_by_temperature.csv"]
     if not args.no_plots:
         written += _plots(d, log, out, inputs, args.log)
     msg = sys.stderr if args.json else sys.stdout
