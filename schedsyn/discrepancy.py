@@ -737,6 +737,8 @@ class Diagnosis:
         lines.append(f"held-out (after {self.holdout_start_min:.0f} min, fitted without it): "
                      f"{self.holdout_rms_before_c:.4f} -> {self.holdout_rms_after_c:.4f} degC")
         lines.append("before: " + self.residuals_before.summary())
+        if self.effect != "none":
+            lines.append("after:  " + self.residuals_after.summary())
         lines.extend(f"warning: {w}" for w in self.warnings)
         return "\n".join(lines)
 
