@@ -65,6 +65,13 @@ _LAZY = {
     "Diagnosis": "discrepancy",
     "DiagnoseSettings": "discrepancy",
     "diagnose": "discrepancy",
+    "diagnose_frame": "discrepancy",
+    "ModelSpec": "effects",
+    "EFFECTS": "effects",
+    "LinearEffectModel": "effects",
+    "simulate_effect": "models_io",
+    "synth_effect_log": "synth",
+    "blind_case": "synth",
     "load_model": "models_io",
     "write_model": "models_io",
 }
