@@ -282,13 +282,14 @@ def _available_rate(direction: int, temp_c: float, params: ThermalParams, limits
     return min(cap, LIMIT_FRACTION * limit_g, LIMIT_FRACTION * rate)
 
 
-def band_knots(spec: ExperimentSpec) -> tuple[float, ...]:
+def band_knots(spec: ExperimentSpec, insets_c: Sequence[float] | None = None) -> tuple[float, ...]:
     """Knots of the piecewise-linear bands: the extended edges and, inside each edge,
-    knots at ``KNOT_INSETS_C`` where they fit (the device must slow down near the
-    device limits to turn round, so the bands bend there)."""
+    knots at ``insets_c`` (default ``KNOT_INSETS_C``) where they fit (the device must
+    slow down near the device limits to turn round, so the bands bend there)."""
     m = spec.edge_margin_c
     lo, hi = spec.working_lo_c, spec.working_hi_c
-    inner = [k for k in KNOT_INSETS_C if 2 * k + 2 <= hi - lo]
+    insets_c = KNOT_INSETS_C if insets_c is None else insets_c
+    inner = [k for k in insets_c if 2 * k + 2 <= hi - lo]
     return (lo - m, *(lo + k for k in inner), *(hi - k for k in reversed(inner)), hi + m)
 
 
@@ -337,7 +338,8 @@ def _dynamic_tops(tops, knots, direction, tau_min, limits):
 def make_bands(spec: ExperimentSpec, n_dir: int, direction: int, sep_c_per_min: float,
                params_list: Sequence[ThermalParams], limits: Limits,
                width_c_per_min: float = BAND_WIDTH_C_PER_MIN,
-               caps: tuple[float, float] | None = None, dynamic: bool = True) -> list[Band]:
+               caps: tuple[float, float] | None = None, dynamic: bool = True,
+               knot_insets_c: Sequence[float] | None = None) -> list[Band]:
     """``n_dir`` bands ``sep`` apart, stacked down from the fastest gradient available.
 
     Slow sweeps cost time (a sweep lasts span / gradient), so the bands sit as high as
@@ -350,7 +352,7 @@ def make_bands(spec: ExperimentSpec, n_dir: int, direction: int, sep_c_per_min: 
     where a limit squeezes them, never closer than ``delta/2`` to zero, so heating and
     cooling passes stay ``delta`` apart.
     """
-    knots = band_knots(spec)
+    knots = band_knots(spec, knot_insets_c)
     v_min = spec.delta_c_per_min / 2 + BAND_SAFETY_C_PER_MIN
     cap0 = spec.max_cool_c_per_min if direction < 0 else spec.max_heat_c_per_min
     cap_lo, cap_hi = caps or (cap0, cap0)
@@ -1040,8 +1042,12 @@ def _synthesise(spec, params_list, limits, models, progress, max_candidates=None
                 cap_by_dir = {
                     -1: (caps[0] * spec.max_cool_c_per_min, caps[1] * spec.max_cool_c_per_min),
                     +1: (caps[2] * spec.max_heat_c_per_min, caps[3] * spec.max_heat_c_per_min)}
+                # several scenarios cannot all cross inner knots at the same planned
+                # samples: robust plans use bands that are affine across the region
+                insets = () if len(params_list) > 1 else None
                 bands = {d: make_bands(spec, n_by_dir[d], d, sep, params_list, limits,
-                                       caps=cap_by_dir[d], dynamic=dynamic)
+                                       caps=cap_by_dir[d], dynamic=dynamic,
+                                       knot_insets_c=insets)
                          if n_by_dir[d] else [] for d in (+1, -1)}
                 narrow = [d for d in (+1, -1) if bands[d] and _band_feasibility(bands[d]) <= 0]
                 if narrow:
@@ -1229,7 +1235,7 @@ def _subregions(spec, params_list, limits, models, progress):
     n = spec.grid.n_bins
     out = []
     for side in ("low", "high", "both"):
-        for cut in ((2, 4) if side != "both" else (4,)):
+        for cut in ((2, 4, 7) if side != "both" else (4, 7)):
             if cut >= n - 1:
                 break
             a = {"low": cut, "high": 0, "both": cut // 2}[side]
