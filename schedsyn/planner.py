@@ -66,6 +66,8 @@ MAX_TRANSITION_MIN = 150.0
 KNOT_INSETS_C = (1.5, 4.0)
 #: A sweep crosses an inner knot at a planned sample within +- this, degC.
 KNOT_TOL_C = 0.25
+#: Robust plans widen the bands by this factor (scenario gradients differ at any moment).
+ROBUST_WIDTH_FACTOR = 3.0
 #: Share of the full-rate acceleration of g (rate/tau) a turnaround is planned with.
 TURN_ACCEL_FRACTION = 0.85
 #: Preferred width of one gradient band, degC/min (room for the LP to manoeuvre).
@@ -1044,10 +1046,13 @@ def _synthesise(spec, params_list, limits, models, progress, max_candidates=None
                     +1: (caps[2] * spec.max_heat_c_per_min, caps[3] * spec.max_heat_c_per_min)}
                 # several scenarios cannot all cross inner knots at the same planned
                 # samples: robust plans use bands that are affine across the region
-                insets = () if len(params_list) > 1 else None
+                # and wider bands, since the scenarios' gradients differ at any moment
+                robust = len(params_list) > 1
+                insets = () if robust else None
+                width = BAND_WIDTH_C_PER_MIN * (ROBUST_WIDTH_FACTOR if robust else 1.0)
                 bands = {d: make_bands(spec, n_by_dir[d], d, sep, params_list, limits,
-                                       caps=cap_by_dir[d], dynamic=dynamic,
-                                       knot_insets_c=insets)
+                                       width_c_per_min=width, caps=cap_by_dir[d],
+                                       dynamic=dynamic, knot_insets_c=insets)
                          if n_by_dir[d] else [] for d in (+1, -1)}
                 narrow = [d for d in (+1, -1) if bands[d] and _band_feasibility(bands[d]) <= 0]
                 if narrow:
@@ -1197,8 +1202,7 @@ def plan_experiment(
         notes.append(
             f"{len(short)} of {spec.grid.n_bins} bins have fewer than {spec.levels_required} "
             f"distinct levels: " + ", ".join(f"[{a:g},{b:g}) {n}" for a, b, n in short[:10]))
-        if not any("floor" in n or "ceiling" in n for n in notes):
-            notes += explain_shortfall(spec, params, limits)
+        notes += [n for n in explain_shortfall(spec, params, limits) if n not in notes]
     box_check = None
     if robust:
         box_check = _verify_robust(programme, spec, params, robust_tau_s, robust_dt0_c,
