@@ -1151,6 +1151,15 @@ def plan_experiment(
 
     search = _synthesise(spec, params_list, limits, models, progress)
     notes: list[str] = []
+    if robust and search.best is None:
+        # no one programme fits the whole box: plan the nominal point with the widest
+        # band separation that fits; the box check below says which part it covers
+        notes.append("no single programme meeting the target for every scenario of the "
+                     "robust box was found; planned at the nominal point with the widest "
+                     "margins that fit")
+        spec_margin = replace(spec, objective="margin")
+        search = _synthesise(spec_margin, [params], limits, [FirstOrderLag(params)],
+                             progress)
     max_seg = int(limits.duration_max_min // spec.segment_min)
     if search.best is not None:
         structure, _ = search.best
