@@ -134,3 +134,25 @@ def test_shortfall_names_the_binding_chamber_limit():
 def test_bad_specs_are_refused_by_name(changes, name):
     with pytest.raises(ParameterError, match=name):
         ExperimentSpec(**{**SMALL, **changes})
+
+
+def test_robust_scenarios_cover_the_box_ends():
+    from schedsyn.planner import robust_scenarios
+
+    sc = robust_scenarios(ThermalParams(), (2000.0, 2800.0), (0.0, 6.0))
+    taus = sorted({p.tau_s for p in sc})
+    dt0s = sorted({p.dt0_c for p in sc})
+    assert taus[0] == 2000.0 and taus[-1] == 2800.0 and len(taus) == 3
+    assert dt0s == [0.0, 6.0]   # T and g are affine in dT0: the two ends suffice
+    assert robust_scenarios(ThermalParams(), None, None) == [ThermalParams()]
+    with pytest.raises(ParameterError, match="tau_s"):
+        robust_scenarios(ThermalParams(), (2800.0, 2000.0), None)
+
+
+def test_temperature_is_affine_in_dt0_so_box_ends_bound_it():
+    """The fact the robust formulation rests on: for fixed rates, T(dT0) is affine."""
+    from schedsyn import Programme
+
+    prog = Programme([60.0, 90.0, 120.0], [-0.8, 0.5, 0.0])
+    t = [simulate(prog, ThermalParams(dt0_c=d), dt_min=1.0).t_c for d in (0.0, 2.0, 6.0)]
+    np.testing.assert_allclose(t[1], t[0] + (t[2] - t[0]) * (2.0 / 6.0), atol=1e-9)
