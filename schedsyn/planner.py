@@ -8,25 +8,28 @@ By :func:`schedsyn.model.affine_response`, the internal temperature ``T_i`` and 
 below is a linear constraint:
 
 * rates within ``[rate_min, rate_max]``; chamber temperature at every boundary within
-  the chamber limits; ``Tk(end) = end_c``; device temperature within its limits and,
-  from the first sweep on, within the approximation region;
+  the chamber limits; ``Tk(end) = end_c``; device temperature within its limits;
 * **sweeps**: the programme is a sequence of ``levels_required`` monotone sweeps across
   the working region, alternating cooling and heating. Sweep ``k`` owns a time window
   ``[s_k, e_k]``; at its ends the device lies beyond the region's edges by
-  ``edge_margin_c`` (``T(s_k) >= hi + m``, ``T(e_k) <= lo - m`` when cooling), and inside
-  it the direction-signed gradient ``q = d * g`` lies in a **band** whose bounds are
-  affine in T: ``l_r(T) <= q_i <= v_r(T)`` -- linear because both ``q_i`` and ``T_i`` are
-  affine in ``u``. The bands of one direction are disjoint by ``delta`` plus a safety
-  gap at every temperature, and heating (``g > 0``) and cooling (``g < 0``) bands are
-  apart by at least ``delta``; every pass of a bin is a mean of samples inside its
-  sweep's band, so each bin gets ``levels_required`` passes pairwise ``delta`` apart.
+  ``edge_margin_c`` (``T(s_k) >= hi + m``, ``T(e_k) <= lo - m`` when cooling), and
+  inside it the direction-signed gradient ``q = d * g`` lies in a **band** ``l_r(T) <=
+  q_i <= v_r(T)``, piecewise linear in T: the sweep crosses each inner knot at a planned
+  sample (+-0.25 degC), so each stretch is held to one affine piece -- linear because
+  both ``q_i`` and ``T_i`` are affine in ``u``. The bands of one direction are disjoint
+  by ``delta`` plus a safety gap at every temperature, and heating (``g > 0``) and
+  cooling (``g < 0``) bands are apart by at least ``delta``; every pass of a bin is a
+  mean of samples inside its sweep's band, so each bin gets ``levels_required`` passes
+  pairwise ``delta`` apart.
 * The bands follow the physics: ``g = (Tk + dT0 - T)/tau`` and the chamber limits bound
   the gradient available at each temperature (cooling near the floor, heating near the
-  ceiling), so each direction's range ``[v_min, V(T)]`` is split into equal bands.
+  ceiling), the device must turn round before its own limits, and a sweep cannot change
+  speed faster than the chamber rates allow; the bands are stacked below that top speed.
 
 The combinatorial part -- where each sweep's window starts and ends -- is found by a
 greedy search in time: sweep after sweep, the smallest transition and window lengths for
-which the small LP over the next segments is feasible (Clarabel). A final LP over the
+which the small LP over the next segments is feasible (Clarabel), for a few band designs
+(``CANDIDATES``). A final LP over the
 whole programme keeps those windows and maximises the margin (passes deeper inside their
 bands and beyond the region edges), then a second LP keeps most of that margin and
 minimises the number of rate changes so the step table stays short. The exported step
