@@ -171,15 +171,6 @@ class ExperimentSpec:
     def to_dict(self) -> dict:
         return {f: getattr(self, f) for f in self.__dataclass_fields__}
 
-    def confinement_c(self, limits: Limits) -> tuple[float, float]:
-        """Where the device may go, degC: its own limits.
-
-        The approximation region is where the drift model is fitted, not a limit on
-        the device: measurements outside it are simply not used (paper). Turning round
-        outside it is often the fastest way to present a new gradient at the edge.
-        """
-        return limits.device_min_c, limits.device_max_c
-
 
 # ----------------------------------------------------------------------------------
 # Scenarios (nominal or a robust box) and their affine responses
@@ -227,14 +218,13 @@ class _Responses:
             affine_response(s.model, self.durations, self.times, limits.start_c, limits.t_init_c)
             for s in scenarios
         ]
-        self.scenarios = list(scenarios)
 
     def sample_of(self, j_boundary: int) -> int:
         return int(round(j_boundary * self.seg_min / SAMPLE_MIN))
 
 
 # ----------------------------------------------------------------------------------
-# Bands: the gradient levels each sweep is confined to, affine in T
+# Bands: the gradient levels each sweep is confined to, piecewise linear in T
 # ----------------------------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
 class Band:
@@ -361,7 +351,7 @@ def make_bands(spec: ExperimentSpec, n_dir: int, direction: int, sep_c_per_min: 
     v_min = spec.delta_c_per_min / 2 + BAND_SAFETY_C_PER_MIN
     cap0 = spec.max_cool_c_per_min if direction < 0 else spec.max_heat_c_per_min
     cap_lo, cap_hi = caps or (cap0, cap0)
-    d_lo, d_hi = spec.confinement_c(limits)
+    d_lo, d_hi = limits.device_min_c, limits.device_max_c
     tau_max = max(p.tau_min for p in params_list)
     tops = []
     for t in knots:
@@ -486,18 +476,17 @@ class _SubLP:
     def chamber_end(self, value_c: float) -> None:
         self.eq(self.tk_mat[-1], value_c - self.tk0)
 
-    def device(self, confine_from: int | None) -> None:
-        """Device limits everywhere; the approximation region from sample ``confine_from``."""
-        lim, spec = self.planner.limits, self.planner.spec
-        c_lo, c_hi = spec.confinement_c(lim)
+    def device(self) -> None:
+        """The device stays within its limits at every sample.
+
+        The approximation region is where the drift model is fitted, not a limit on the
+        device: measurements outside it are simply not used (paper), and turning round
+        outside it is often the fastest way to present a new gradient at the edge.
+        """
+        lim = self.planner.limits
         for at, bt, _, _ in self.scen:
             self.le(at, lim.device_max_c - bt)
             self.ge(at, lim.device_min_c - bt)
-            if confine_from is not None:
-                a = max(confine_from - self.s_from, 0)
-                if a < at.shape[0]:
-                    self.le(at[a:], c_hi - bt[a:])
-                    self.ge(at[a:], c_lo - bt[a:])
 
     def window(self, win: _Window, margin_g: int | None = None,
                margin_t: int | None = None) -> None:
@@ -661,7 +650,7 @@ class _Structure:
     u: np.ndarray
 
 
-def _place_sweep(planner: _Planner, u_fixed, d, band, confine_from, max_seg):
+def _place_sweep(planner: _Planner, u_fixed, d, band, max_seg):
     """Shortest transition + window for one sweep.
 
     The window may start at any planner sample after the fixed segments; its length is
@@ -692,16 +681,15 @@ def _place_sweep(planner: _Planner, u_fixed, d, band, confine_from, max_seg):
                 return None
             j1 = min(int(math.ceil(s1 * SAMPLE_MIN / seg - 1e-9)), max_seg)
             win = _Window(d, band, s0, s1, tuple(int(c) for c in bounds[1:-1]))
-            cf = confine_from if confine_from is not None else s0
             lp = _SubLP(planner, u_fixed, j1, extra=1)
             lp.chamber()
-            lp.device(cf)
+            lp.device()
             lp.window(win)
             lp.exit_speed(win, 0)
             # leave the window slowly: the next turnaround is then shorter
             sol = lp.solve(lambda v: v[-1] + 1e-4 * cp.norm1(v[:-1]))
             if sol is not None:
-                return sol[:-1], win, cf
+                return sol[:-1], win
         return None
 
     hi_x = min(s_max - s_start - d_fast, int(MAX_TRANSITION_MIN / SAMPLE_MIN))
@@ -737,16 +725,15 @@ def _greedy(planner: _Planner, directions, sweep_bands, max_seg,
     seg = spec.segment_min
     u_fixed = np.zeros(0)
     windows: list[_Window] = []
-    confine_from: int | None = None
     for k, (d, band) in enumerate(zip(directions, sweep_bands, strict=True)):
-        res = _place_sweep(planner, u_fixed, d, band, confine_from, max_seg)
+        res = _place_sweep(planner, u_fixed, d, band, max_seg)
         if res is None:
             where = "cooling" if d < 0 else "heating"
             return None, (
                 f"sweep {k + 1} of {len(directions)} ({where}, gradient band {band.rank}) "
                 f"does not fit within {max_seg * seg:g} min"
             )
-        u_new, win, confine_from = res
+        u_new, win = res
         u_fixed = np.concatenate((u_fixed, np.clip(u_new, limits.rate_min_c_per_min,
                                                    limits.rate_max_c_per_min)))
         windows.append(win)
@@ -758,7 +745,7 @@ def _greedy(planner: _Planner, directions, sweep_bands, max_seg,
     for n_r in range(1, max_seg - j0 + 1):
         lp = _SubLP(planner, u_fixed, j0 + n_r)
         lp.chamber()
-        lp.device(None)
+        lp.device()
         lp.chamber_end(limits.end_c)
         x = lp.solve(lambda x: cp.norm1(x))
         if x is not None:
@@ -773,7 +760,7 @@ def _whole_lp(planner: _Planner, windows: Sequence[_Window], n_seg: int, extra: 
     lp = _SubLP(planner, np.zeros(0), n_seg, extra=extra)
     lp.chamber()
     lp.chamber_end(planner.limits.end_c)
-    lp.device(windows[0].start_s)
+    lp.device()
     for w in windows:
         if extra:
             lp.window(w, margin_g=0, margin_t=1)
@@ -1094,7 +1081,7 @@ def _truncate(planner: _Planner, structure: _Structure, max_seg: int) -> _Struct
         u_fixed = structure.u[:cut]
         lp = _SubLP(planner, u_fixed, max_seg)
         lp.chamber()
-        lp.device(None)
+        lp.device()
         lp.chamber_end(limits.end_c)
         x = lp.solve(lambda v: cp.norm1(v))
         if x is not None:
