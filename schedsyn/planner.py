@@ -288,7 +288,8 @@ def band_knots(spec: ExperimentSpec, insets_c: Sequence[float] | None = None) ->
     return (lo - m, *(lo + k for k in inner), *(hi - k for k in reversed(inner)), hi + m)
 
 
-def _dynamic_tops(tops, knots, direction, tau_min, limits):
+def _dynamic_tops(tops, knots, direction, tau_min, limits,
+                  turn_fraction: float = TURN_ACCEL_FRACTION):
     """Lower the band tops so that a sweep can follow them.
 
     Along a sweep the speed ``v = |g|`` obeys ``dv/dt = (|U| - v)/tau`` at most when
@@ -296,11 +297,11 @@ def _dynamic_tops(tops, knots, direction, tau_min, limits):
     ``dv/dt = -(|U'| + v)/tau`` at most when slowing down (``U'`` the full rate the other
     way). With ``dT = v dt`` that is ``dv/dT <= (|U| - v)/(tau v)`` and
     ``dv/dT >= -(|U'| + v)/(tau v)``, integrated in closed form between the knots with a
-    share ``TURN_ACCEL_FRACTION`` of the rates.
+    share ``turn_fraction`` of the rates.
     """
     up = limits.rate_max_c_per_min if direction > 0 else -limits.rate_min_c_per_min
     down = -limits.rate_min_c_per_min if direction > 0 else limits.rate_max_c_per_min
-    k = TURN_ACCEL_FRACTION
+    k = turn_fraction
     a, b = k * up, k * down
 
     def f(v):  # distance (degC) to speed up from 0 to v: tau (-v - a ln(1 - v/a))
@@ -330,11 +331,61 @@ def _dynamic_tops(tops, knots, direction, tau_min, limits):
     return v
 
 
+def turning_speed(room_c: float, reverse_rate_c_per_min: float, tau_min: float,
+                  turn_fraction: float = TURN_ACCEL_FRACTION) -> float:
+    """Fastest speed |g| from which the device stops within ``room_c`` (degC/min).
+
+    Reversing at a constant rate ``b`` (a share ``turn_fraction`` of the full reverse
+    chamber rate), ``dv/dt = -(b + v)/tau``, so the distance to stop from ``v`` is
+    ``tau (v - b ln(1 + v/b))`` (exact for the first-order lag); inverted by bisection.
+    """
+    if room_c <= 0:
+        return 0.0
+    b = turn_fraction * reverse_rate_c_per_min
+
+    def dist(v):
+        return tau_min * (v - b * math.log1p(v / b))
+
+    lo_v, hi_v = 0.0, 20.0
+    for _ in range(60):
+        mid = 0.5 * (lo_v + hi_v)
+        if dist(mid) < room_c:
+            lo_v = mid
+        else:
+            hi_v = mid
+    return lo_v
+
+
+@dataclass(frozen=True, slots=True)
+class BandDesign:
+    """How band tops are derived from the physics.
+
+    ``room``: ``"sqrt"`` bounds the speed near a device limit by ``sqrt(a * room)`` (a
+    conservative constant-deceleration estimate, a = share of rate/tau), ``"exact"`` by
+    the exact first-order stopping distance (:func:`turning_speed`), which allows faster
+    passes near the edges. ``knot_insets_c``: inner knots (more knots let the bands
+    follow the curved speed limits). ``turn_fraction``: share of the full chamber rate
+    assumed when speeding up or turning.
+    """
+
+    room: str = "sqrt"
+    knot_insets_c: tuple[float, ...] = KNOT_INSETS_C
+    turn_fraction: float = TURN_ACCEL_FRACTION
+
+
+#: The band designs the search tries (see ``CANDIDATES``).
+DESIGNS = {
+    "sqrt": BandDesign(),
+    "exact": BandDesign(room="exact", knot_insets_c=(1.5, 4.0, 8.0, 12.0), turn_fraction=0.9),
+}
+
+
 def make_bands(spec: ExperimentSpec, n_dir: int, direction: int, sep_c_per_min: float,
                params_list: Sequence[ThermalParams], limits: Limits,
                width_c_per_min: float = BAND_WIDTH_C_PER_MIN,
                caps: tuple[float, float] | None = None, dynamic: bool = True,
-               knot_insets_c: Sequence[float] | None = None) -> list[Band]:
+               knot_insets_c: Sequence[float] | None = None,
+               design: BandDesign | None = None) -> list[Band]:
     """``n_dir`` bands ``sep`` apart, stacked down from the fastest gradient available.
 
     Slow sweeps cost time (a sweep lasts span / gradient), so the bands sit as high as
@@ -342,11 +393,14 @@ def make_bands(spec: ExperimentSpec, n_dir: int, direction: int, sep_c_per_min: 
     of: the cap of that side (``caps = (cap at lo, cap at hi)``, linear in between), the
     gradient the chamber limits allow at T (``g = (Tk + dT0 - T)/tau``, for the least
     favourable scenario), and the speed from which the device can still turn round
-    before its limit, ``sqrt(a * room)`` with ``a`` a share of the full-rate
-    acceleration ``rate/tau``. Bands are ``width`` wide where there is room and narrower
+    before its limit (``design.room``: ``sqrt(a * room)`` with ``a`` a share of the
+    full-rate acceleration ``rate/tau``, or the exact stopping distance). Bands are ``width`` wide where there is room and narrower
     where a limit squeezes them, never closer than ``delta/2`` to zero, so heating and
     cooling passes stay ``delta`` apart.
     """
+    design = DESIGNS["sqrt"] if design is None else design
+    if knot_insets_c is None:
+        knot_insets_c = design.knot_insets_c
     knots = band_knots(spec, knot_insets_c)
     v_min = spec.delta_c_per_min / 2 + BAND_SAFETY_C_PER_MIN
     cap0 = spec.max_cool_c_per_min if direction < 0 else spec.max_heat_c_per_min
@@ -361,12 +415,18 @@ def make_bands(spec: ExperimentSpec, n_dir: int, direction: int, sep_c_per_min: 
         # turning up near the floor of the device range uses the heating rate, turning
         # down near its ceiling the cooling rate
         room_lo, room_hi = t - d_lo, d_hi - t
-        a_lo = TURN_ACCEL_FRACTION * limits.rate_max_c_per_min / tau_max
-        a_hi = TURN_ACCEL_FRACTION * -limits.rate_min_c_per_min / tau_max
-        v_room = min(math.sqrt(max(a_lo * room_lo, 0.0)), math.sqrt(max(a_hi * room_hi, 0.0)))
+        k = design.turn_fraction
+        if design.room == "exact":
+            v_room = min(turning_speed(room_lo, limits.rate_max_c_per_min, tau_max, k),
+                         turning_speed(room_hi, -limits.rate_min_c_per_min, tau_max, k))
+        else:
+            a_lo = k * limits.rate_max_c_per_min / tau_max
+            a_hi = k * -limits.rate_min_c_per_min / tau_max
+            v_room = min(math.sqrt(max(a_lo * room_lo, 0.0)),
+                         math.sqrt(max(a_hi * room_hi, 0.0)))
         tops.append(min(v_lim, v_room))
     if dynamic:
-        tops = _dynamic_tops(tops, knots, direction, tau_max, limits)
+        tops = _dynamic_tops(tops, knots, direction, tau_max, limits, design.turn_fraction)
     widths = [min(width_c_per_min, (v - v_min - (n_dir - 1) * sep_c_per_min) / n_dir)
               for v in tops]
     bands = []
@@ -986,16 +1046,21 @@ def explain_shortfall(spec: ExperimentSpec, params: ThermalParams, limits: Limit
 
 #: Structures tried by the search: edge caps (cooling at lo, cooling at hi, heating at
 #: lo, heating at hi) as fractions of ``max_cool_c_per_min`` / ``max_heat_c_per_min``, and
-#: whether the band tops are lowered to what the sweep dynamics can follow. Heating ->
+#: whether the band tops are lowered to what the sweep dynamics can follow, and the band
+#: design (``DESIGNS``: how the turning room near the device limits is modelled). Heating ->
 #: cooling turnarounds happen at the upper edge and are slow (the chamber cools at only
 #: 1 degC/min), so sweeps are slower there; cooling -> heating turnarounds at the lower
 #: edge are quick (3 degC/min). The list was tuned on the paper's four regions (see
 #: docs/planner.md); every candidate yields a valid plan or none.
 CANDIDATES = (
-    ((1.0, 0.7, 1.0, 0.9), True),
-    ((1.0, 0.7, 1.0, 0.9), False),
-    ((1.0, 0.7, 1.4, 0.9), False),
-    ((0.7, 0.7, 1.0, 0.9), True),
+    ((1.0, 0.7, 1.0, 0.9), True, "sqrt"),
+    ((1.0, 0.7, 1.0, 0.9), False, "sqrt"),
+    ((1.0, 0.7, 1.4, 0.9), False, "sqrt"),
+    ((0.7, 0.7, 1.0, 0.9), True, "sqrt"),
+    # exact turning room and more knots: faster passes near a device limit (W4's hot
+    # edge has 2 degC of room below +62 degC and a chamber that cools at 1 degC/min)
+    ((1.0, 0.7, 1.0, 0.9), True, "exact"),
+    ((1.0, 1.0, 1.0, 1.0), True, "exact"),
 )
 #: The greedy may run past the duration limit by this factor; such a structure is only
 #: used (cut at the limit) when nothing fits, to give the best reachable coverage.
@@ -1030,7 +1095,7 @@ def _synthesise(spec, params_list, limits, models, progress, max_candidates=None
         for first in _first_directions(spec, limits):
             directions = _sweep_directions(spec, first)
             n_by_dir = {d: directions.count(d) for d in (+1, -1)}
-            for caps, dynamic in CANDIDATES[:max_candidates]:
+            for caps, dynamic, design in CANDIDATES[:max_candidates]:
                 cap_by_dir = {
                     -1: (caps[0] * spec.max_cool_c_per_min, caps[1] * spec.max_cool_c_per_min),
                     +1: (caps[2] * spec.max_heat_c_per_min, caps[3] * spec.max_heat_c_per_min)}
@@ -1042,7 +1107,8 @@ def _synthesise(spec, params_list, limits, models, progress, max_candidates=None
                 width = BAND_WIDTH_C_PER_MIN * (ROBUST_WIDTH_FACTOR if robust else 1.0)
                 bands = {d: make_bands(spec, n_by_dir[d], d, sep, params_list, limits,
                                        width_c_per_min=width, caps=cap_by_dir[d],
-                                       dynamic=dynamic, knot_insets_c=insets)
+                                       dynamic=dynamic, knot_insets_c=insets,
+                                       design=DESIGNS[design])
                          if n_by_dir[d] else [] for d in (+1, -1)}
                 narrow = [d for d in (+1, -1) if bands[d] and _band_feasibility(bands[d]) <= 0]
                 if narrow:
