@@ -8,10 +8,12 @@ from schedsyn import BinGrid, Limits, ThermalParams, coverage_report, read_steps
 from schedsyn.errors import InfeasiblePlanError, ParameterError
 from schedsyn.planner import (
     BAND_SAFETY_C_PER_MIN,
+    DESIGNS,
     ExperimentSpec,
     explain_shortfall,
     make_bands,
     plan_experiment,
+    turning_speed,
 )
 
 SMALL = dict(name="S", working_lo_c=-10.0, working_hi_c=0.0, approx_lo_c=-20.0,
@@ -24,13 +26,14 @@ def small_plan():
     return plan_experiment(ExperimentSpec(**SMALL), limits=SMALL_LIMITS)
 
 
+@pytest.mark.parametrize("design", sorted(DESIGNS))
 @pytest.mark.parametrize("region", [(-50, -30, -52, -20), (30, 60, 20, 60), (-30, 0, -40, 10)])
 @pytest.mark.parametrize("direction", [-1, +1])
-def test_bands_are_delta_apart_at_every_temperature(region, direction):
+def test_bands_are_delta_apart_at_every_temperature(region, direction, design):
     spec = ExperimentSpec("W", *region)
     delta = spec.delta_c_per_min
     bands = make_bands(spec, 3, direction, delta + BAND_SAFETY_C_PER_MIN, [ThermalParams()],
-                       Limits())
+                       Limits(), design=DESIGNS[design])
     t = np.linspace(region[0] - 0.5, region[1] + 0.5, 500)
     lows = [b.bounds(t)[0] for b in bands]
     highs = [b.bounds(t)[1] for b in bands]
@@ -40,6 +43,51 @@ def test_bands_are_delta_apart_at_every_temperature(region, direction):
         assert np.all(lows[r + 1] - highs[r] >= delta - 1e-9)
     # heating and cooling passes are delta apart: every band keeps |g| >= delta / 2
     assert np.all(lows[0] >= delta / 2 - 1e-12)
+
+
+@pytest.mark.parametrize("v0", [0.1, 0.3, 0.8])
+def test_turning_speed_matches_a_simulated_stop(v0):
+    """From the speed turning_speed allows, reversing at the chamber rate stops the device
+    within the room: checked by integrating the lag ODE with scipy."""
+    tau_min, rate = 40.0, 1.0
+    # distance travelled from v0 to standstill under U = -rate (heating device, cooling air)
+    sol = solve_ivp(lambda t, y: [y[1], (-rate - y[1]) / tau_min], (0, 400), [0.0, v0],
+                    events=lambda t, y: y[1], max_step=0.1, rtol=1e-9, atol=1e-12)
+    room = float(sol.y_events[0][0][0])
+    assert turning_speed(room, rate, tau_min, turn_fraction=1.0) == pytest.approx(v0, rel=1e-4)
+    # with less of the rate available the allowed speed is lower
+    assert turning_speed(room, rate, tau_min, turn_fraction=0.8) < v0
+
+
+def test_direct_probe_lp_matches_cvxpy():
+    """The search's probe LPs go to Clarabel without cvxpy: same optimum as through cvxpy."""
+    import cvxpy as cp
+
+    from schedsyn.model import FirstOrderLag
+    from schedsyn.planner import _Planner, _Responses, _SubLP, Scenario
+
+    spec = ExperimentSpec(**SMALL)
+    p = ThermalParams()
+    planner = _Planner(spec, SMALL_LIMITS, _Responses([Scenario(p, FirstOrderLag(p))], 24, 5.0,
+                                                      SMALL_LIMITS))
+    lp = _SubLP(planner, np.zeros(0), 24, extra=1)
+    lp.chamber()
+    lp.device()
+    lp.chamber_end(20.0)
+    # the device must reach -5 degC at sample 60 while the extra column bounds g there
+    lp.le(lp.scen[0][0][60], -5.0 - lp.scen[0][1][60])
+    lp.le(lp.scen[0][2][100], -lp.scen[0][3][100], {0: -1.0})
+    cost = np.zeros(lp.n + 1)
+    cost[-1] = 1.0
+    x_direct = lp.solve_direct(cost, l1_weight=1e-3)
+    x_cvx = lp.solve(lambda v: v[-1] + 1e-3 * cp.norm1(v[:-1]))
+    assert x_direct is not None and x_cvx is not None
+    obj = lambda x: x[-1] + 1e-3 * np.abs(x[:-1]).sum()  # noqa: E731
+    assert obj(x_direct) == pytest.approx(obj(x_cvx), abs=1e-5)
+    # an impossible target is reported as infeasible by both
+    lp.le(lp.scen[0][0][30], -60.0 - lp.scen[0][1][30])
+    assert lp.solve_direct(cost) is None
+    assert lp.solve(lambda v: v[-1]) is None
 
 
 def test_bands_respect_the_chamber_floor_near_the_cold_edge():
