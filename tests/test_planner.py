@@ -64,7 +64,7 @@ def test_direct_probe_lp_matches_cvxpy():
     import cvxpy as cp
 
     from schedsyn.model import FirstOrderLag
-    from schedsyn.planner import _Planner, _Responses, _SubLP, Scenario
+    from schedsyn.planner import Scenario, _Planner, _Responses, _SubLP
 
     spec = ExperimentSpec(**SMALL)
     p = ThermalParams()
