@@ -395,8 +395,8 @@ def make_bands(spec: ExperimentSpec, n_dir: int, direction: int, sep_c_per_min: 
     favourable scenario), and the speed from which the device can still turn round
     before its limit (``design.room``: ``sqrt(a * room)`` with ``a`` a share of the
     full-rate acceleration ``rate/tau``, or the exact stopping distance). Bands are
-    ``width`` wide where there is room and narrower where a limit squeezes them, never closer than ``delta/2`` to zero, so heating and
-    cooling passes stay ``delta`` apart.
+    ``width`` wide where there is room and narrower where a limit squeezes them, never
+    closer than ``delta/2`` to zero, so heating and cooling passes stay ``delta`` apart.
     """
     design = DESIGNS["sqrt"] if design is None else design
     if knot_insets_c is None:
