@@ -70,7 +70,10 @@ KNOT_INSETS_C = (1.5, 4.0)
 #: A sweep crosses an inner knot at a planned sample within +- this, degC.
 KNOT_TOL_C = 0.25
 #: Robust plans widen the bands by this factor (scenario gradients differ at any moment).
-ROBUST_WIDTH_FACTOR = 3.0
+ROBUST_WIDTH_FACTOR = 1.0
+#: Robust plans: how far outside its band a scenario other than the reference (box
+#: centre) may pass, degC/min; the bands are spaced by twice this more than delta.
+ROBUST_SLACK_C_PER_MIN = 0.05
 #: Share of the full-rate acceleration of g (rate/tau) a turnaround is planned with.
 TURN_ACCEL_FRACTION = 0.85
 #: Preferred width of one gradient band, degC/min (room for the LP to manoeuvre).
@@ -212,6 +215,7 @@ class _Responses:
     def __init__(self, scenarios: Sequence[Scenario], n_seg: int, seg_min: float,
                  limits: Limits):
         self.seg_min = seg_min
+        self.scenarios = list(scenarios)
         self.durations = np.full(n_seg, float(seg_min))
         self.times = np.arange(0.0, n_seg * seg_min + 0.5 * SAMPLE_MIN, SAMPLE_MIN)
         self.resp = [
@@ -240,6 +244,9 @@ class Band:
     knots_c: tuple[float, ...]
     lo_c_per_min: tuple[float, ...]
     hi_c_per_min: tuple[float, ...]
+    #: the fastest band of its direction: no band above it, so its upper bound only
+    #: shapes the plan, it is not needed for distinct levels
+    top: bool = False
 
     def bounds(self, temp_c):
         t = np.asarray(temp_c, dtype=float)
@@ -433,7 +440,7 @@ def make_bands(spec: ExperimentSpec, n_dir: int, direction: int, sep_c_per_min: 
     for r in range(1, n_dir + 1):  # rank 1 = slowest
         hi = tuple(v - (n_dir - r) * (w + sep_c_per_min) for v, w in zip(tops, widths, strict=True))
         lo = tuple(h - w for h, w in zip(hi, widths, strict=True))
-        bands.append(Band(direction, r, tuple(knots), lo, hi))
+        bands.append(Band(direction, r, tuple(knots), lo, hi, top=r == n_dir))
     return bands
 
 
@@ -458,12 +465,24 @@ class _Window:
     start_s: int
     end_s: int
     cuts: tuple[int, ...] = ()
+    #: robust plans: ``(start_s, end_s, cuts)`` for each scenario (the scenarios lag one
+    #: another, so each crosses the edges and knots at its own samples); None: shared
+    per_scenario: tuple[tuple[int, int, tuple[int, ...]], ...] | None = None
+    #: robust plans: knot tolerance (degC) of each scenario's cuts; a scenario that is
+    #: not the reference crosses a knot between two samples wherever it happens to
+    knot_tol_c: tuple[tuple[float, ...], ...] | None = None
 
-    def pieces(self):
+    def bounds_of(self, scenario: int) -> tuple[int, int, tuple[int, ...]]:
+        if self.per_scenario is None:
+            return self.start_s, self.end_s, self.cuts
+        return self.per_scenario[scenario]
+
+    def pieces(self, scenario: int = 0):
         """``(first_sample, last_sample, piece_index, knot_at_last_or_None)`` in travel order."""
         n_piece = len(self.band.knots_c) - 1
         order = list(range(n_piece)) if self.direction > 0 else list(range(n_piece))[::-1]
-        bounds = [self.start_s, *self.cuts, self.end_s]
+        start_s, end_s, cuts = self.bounds_of(scenario)
+        bounds = [start_s, *cuts, end_s]
         out = []
         for j, pi in enumerate(order):
             knot = None
@@ -480,7 +499,8 @@ class _SubLP:
     epigraph variable). Rows are accumulated as ``G @ x <= h`` and ``E @ x == f``.
     """
 
-    def __init__(self, planner: _Planner, u_fixed: np.ndarray, j1: int, extra: int = 0):
+    def __init__(self, planner: _Planner, u_fixed: np.ndarray, j1: int, extra: int = 0,
+                 scenarios: Sequence[int] | None = None):
         r = planner.responses
         self.planner = planner
         self.j0 = int(u_fixed.size)
@@ -490,7 +510,8 @@ class _SubLP:
         self.s_to = r.sample_of(j1)
         rows = slice(self.s_from, self.s_to + 1)
         self.scen = []
-        for resp in r.resp:
+        self.scen_idx = list(range(len(r.resp))) if scenarios is None else list(scenarios)
+        for resp in (r.resp[i] for i in self.scen_idx):
             at = resp.a_t[rows, self.j0:j1]
             ag = resp.a_g[rows, self.j0:j1]
             bt = resp.b_t[rows] + resp.a_t[rows, : self.j0] @ u_fixed
@@ -556,23 +577,39 @@ class _SubLP:
         the edge conditions (maximised by the polish LP).
         """
         spec = self.planner.spec
-        s0 = win.start_s - self.s_from
-        s1 = win.end_s - self.s_from
         d, m = win.direction, spec.edge_margin_c
         mg = {margin_g: 1.0} if margin_g is not None else None
         mt = {margin_t: 1.0} if margin_t is not None else None
-        for at, bt, ag, bg in self.scen:
-            for a, b_, pi, knot in win.pieces():
+        for si, (at, bt, ag, bg) in zip(self.scen_idx, self.scen, strict=True):
+            start_s, end_s, _ = win.bounds_of(si)
+            s0, s1 = start_s - self.s_from, end_s - self.s_from
+            pieces_done = 0
+            for a, b_, pi, knot in win.pieces(si):
                 w = slice(a - self.s_from, b_ - self.s_from + 1)
                 t_ref, lo0, lo1, hi0, hi1 = win.band.piece(pi)
+                # robust: a scenario's bands follow its own offset dT0 - dT0_ref (all its
+                # sweeps shift alike, so its bands stay disjoint at every temperature)
+                off = self.planner.offsets_c[si]
+                t_ref += off
+                if si != 0 and len(self.planner.responses.resp) > 1:
+                    # robust: the other scenarios may stray ROBUST_SLACK outside the band
+                    # (the bands are 2 ROBUST_SLACK further apart, so still disjoint)
+                    lo0, hi0 = lo0 - ROBUST_SLACK_C_PER_MIN, hi0 + ROBUST_SLACK_C_PER_MIN
                 # q = d g >= lo0 + lo1 (T - t_ref) + margin
                 self.ge(d * ag[w] - lo1 * at[w], lo0 + lo1 * (bt[w] - t_ref) - d * bg[w], mg)
-                # q <= hi0 + hi1 (T - t_ref) - margin
-                self.le(d * ag[w] - hi1 * at[w], hi0 + hi1 * (bt[w] - t_ref) - d * bg[w], mg)
+                # q <= hi0 + hi1 (T - t_ref) - margin (robust: not for the fastest band,
+                # whose top bounds no other band; the scenarios spread most when fast)
+                if not (win.band.top and len(self.planner.responses.resp) > 1):
+                    self.le(d * ag[w] - hi1 * at[w], hi0 + hi1 * (bt[w] - t_ref) - d * bg[w],
+                            mg)
                 if knot is not None:  # cross the knot at the planned sample
                     k = b_ - self.s_from
-                    self.le(at[k], knot + KNOT_TOL_C - bt[k])
-                    self.ge(at[k], knot - KNOT_TOL_C - bt[k])
+                    tol = self.planner.knot_tol_c
+                    if win.knot_tol_c is not None:
+                        tol = win.knot_tol_c[si][pieces_done]
+                    pieces_done += 1
+                    self.le(at[k], knot + off + tol - bt[k])
+                    self.ge(at[k], knot + off - tol - bt[k])
             lo_edge, hi_edge = spec.working_lo_c - m, spec.working_hi_c + m
             if d < 0:   # starts above the region, ends below it
                 self.ge(at[s0], hi_edge - bt[s0], mt)
@@ -583,8 +620,8 @@ class _SubLP:
 
     def exit_speed(self, win: _Window, column: int) -> None:
         """Extra column ``column`` >= d * g at the window end, for every scenario."""
-        s1 = win.end_s - self.s_from
-        for _, _, ag, bg in self.scen:
+        for si, (_, _, ag, bg) in zip(self.scen_idx, self.scen, strict=True):
+            s1 = win.bounds_of(si)[1] - self.s_from
             self.le(win.direction * ag[s1], -win.direction * bg[s1], {column: -1.0})
 
     # -- solving ---------------------------------------------------------------------
@@ -672,6 +709,9 @@ class _Planner:
         self.spec, self.limits, self.responses = spec, limits, responses
         self.n_lp = 0
         self.lp_s = 0.0
+        self.knot_tol_c = KNOT_TOL_C
+        ref = responses.scenarios[0].params
+        self.offsets_c = [sc.params.dt0_c - ref.dt0_c for sc in responses.scenarios]
         self.size = {"variables": 0, "constraints": 0}
 
     def solve(self, problem: cp.Problem) -> bool:
@@ -783,6 +823,20 @@ def _place_sweep(planner: _Planner, u_fixed, d, band, max_seg):
         options.append(np.maximum(1, np.round(minutes / SAMPLE_MIN)).astype(int))
     d_fast = int(options[0].sum())
 
+    robust = len(r.resp) > 1
+
+    def solve_window(win, j1, scenarios):
+        lp = _SubLP(planner, u_fixed, j1, extra=1, scenarios=scenarios)
+        lp.chamber()
+        lp.device()
+        lp.window(win)
+        lp.exit_speed(win, 0)
+        # leave the window slowly: the next turnaround is then shorter
+        cost = np.zeros(lp.n + 1)
+        cost[-1] = 1.0
+        sol = lp.solve_direct(cost, l1_weight=1e-4)
+        return None if sol is None else sol[:-1]
+
     def attempt(x: int):
         for steps in options:
             s0 = s_start + x
@@ -792,17 +846,24 @@ def _place_sweep(planner: _Planner, u_fixed, d, band, max_seg):
                 return None
             j1 = min(int(math.ceil(s1 * SAMPLE_MIN / seg - 1e-9)), max_seg)
             win = _Window(d, band, s0, s1, tuple(int(c) for c in bounds[1:-1]))
-            lp = _SubLP(planner, u_fixed, j1, extra=1)
-            lp.chamber()
-            lp.device()
-            lp.window(win)
-            lp.exit_speed(win, 0)
-            # leave the window slowly: the next turnaround is then shorter
-            cost = np.zeros(lp.n + 1)
-            cost[-1] = 1.0
-            sol = lp.solve_direct(cost, l1_weight=1e-4)
-            if sol is not None:
-                return sol[:-1], win
+            if not robust:
+                sol = solve_window(win, j1, None)
+                if sol is not None:
+                    return sol, win
+                continue
+            # robust: place the sweep for the reference scenario (the box centre), read
+            # off where every scenario then crosses the edges and knots, and solve for
+            # all scenarios at once with those per-scenario windows
+            sol = solve_window(win, j1, [0])
+            if sol is None:
+                continue
+            found = _scenario_windows(planner, u_fixed, sol, win, max_seg)
+            if found is None:
+                continue
+            win_all, j1_all = found
+            sol_all = solve_window(win_all, j1_all, None)
+            if sol_all is not None:
+                return sol_all, win_all
         return None
 
     hi_x = min(s_max - s_start - d_fast, int(MAX_TRANSITION_MIN / SAMPLE_MIN))
@@ -829,6 +890,70 @@ def _place_sweep(planner: _Planner, u_fixed, d, band, max_seg):
         else:
             lo_x = mid
     return found[1]
+
+
+#: Robust plans: segments simulated past a sweep's planned end to find where the lagging
+#: scenarios leave the region (the last rate is held).
+SCENARIO_LOOKAHEAD_SEG = 6
+
+
+def _scenario_windows(planner: _Planner, u_fixed: np.ndarray, u_new: np.ndarray,
+                      win: _Window, max_seg: int) -> tuple[_Window, int] | None:
+    """Per-scenario windows of a sweep placed for the reference scenario.
+
+    Every scenario is simulated (affine responses) under the reference solution; its
+    window starts at the last sample before it passes the starting edge, crosses each
+    inner knot at the sample nearest to it and ends at the first sample beyond the far
+    edge. Returns the window and the number of segments it needs, or None when some
+    scenario does not make the sweep in the look-ahead.
+    """
+    r, spec = planner.responses, planner.spec
+    seg_min = r.seg_min
+    j_end = min(u_fixed.size + u_new.size + SCENARIO_LOOKAHEAD_SEG, max_seg)
+    pad = j_end - u_fixed.size - u_new.size
+    u = np.concatenate((u_fixed, u_new, np.full(max(pad, 0), u_new[-1] if u_new.size else 0.0)))
+    u = u[:j_end]
+    s_from = r.sample_of(u_fixed.size)
+    s_to = r.sample_of(j_end)
+    d, m = win.direction, spec.edge_margin_c
+    e_start = spec.working_hi_c + m if d < 0 else spec.working_lo_c - m
+    e_end = spec.working_lo_c - m if d < 0 else spec.working_hi_c + m
+    knots = [k for _, _, _, k in win.pieces() if k is not None]
+    per, tol_all = [], []
+    for resp, off in zip(r.resp, planner.offsets_c, strict=True):
+        t = resp.a_t[s_from:s_to + 1, :j_end] @ u + resp.b_t[s_from:s_to + 1]
+        q = d * t  # increases along the sweep
+
+        def first_past(level, after, q=q):
+            idx = np.flatnonzero(q[after:] >= d * level)
+            return None if idx.size == 0 else int(after + idx[0])
+
+        c0 = first_past(e_start, 0)
+        if c0 is None or c0 == 0:
+            return None  # never reaches the region, or already inside it at the start
+        cuts, tols, after = [], [], c0
+        for k in knots:
+            k = k + off
+            c = first_past(k, after)
+            if c is None:
+                return None
+            if c - 1 > after and abs(t[c - 1] - k) < abs(t[c] - k):
+                c -= 1
+            cuts.append(c)
+            tols.append(KNOT_TOL_C + abs(float(t[c]) - k))
+            after = c + 1
+        c1 = first_past(e_end, after)
+        if c1 is None:
+            return None
+        per.append((s_from + c0 - 1, s_from + c1, tuple(s_from + c for c in cuts)))
+        tol_all.append(tuple(tols))
+    j_need = max(int(math.ceil(p[1] * SAMPLE_MIN / seg_min - 1e-9)) for p in per)
+    if j_need > max_seg:
+        return None
+    ref = per[0]
+    tol_all[0] = (planner.knot_tol_c,) * len(knots)  # the reference keeps its plan
+    return replace(win, start_s=ref[0], end_s=ref[1], cuts=ref[2],
+                   per_scenario=tuple(per), knot_tol_c=tuple(tol_all)), j_need
 
 
 def _greedy(planner: _Planner, directions, sweep_bands, max_seg,
@@ -1142,6 +1267,8 @@ def _synthesise(spec, params_list, limits, models, progress, max_candidates=None
     planner = _Planner(spec, limits, _Responses(scenarios, ext_seg, seg, limits))
     search = _Search(None, None, planner, [])
     base_sep = spec.delta_c_per_min + BAND_SAFETY_C_PER_MIN
+    if len(params_list) > 1:
+        base_sep += 2 * ROBUST_SLACK_C_PER_MIN
     seps = [base_sep] if spec.objective == "shortest" else [
         base_sep + x for x in (0.04, 0.02, 0.0)]
     for sep in seps:
@@ -1156,7 +1283,7 @@ def _synthesise(spec, params_list, limits, models, progress, max_candidates=None
                 # samples: robust plans use bands that are affine across the region
                 # and wider bands, since the scenarios' gradients differ at any moment
                 robust = len(params_list) > 1
-                insets = () if robust else None
+                insets = None
                 width = BAND_WIDTH_C_PER_MIN * (ROBUST_WIDTH_FACTOR if robust else 1.0)
                 bands = {d: make_bands(spec, n_by_dir[d], d, sep, params_list, limits,
                                        width_c_per_min=width, caps=cap_by_dir[d],
@@ -1262,6 +1389,14 @@ def plan_experiment(
         raise ParameterError("robust planning uses the first-order model of each scenario; "
                              "give either a model or a robust box, not both")
     params_list = robust_scenarios(params, robust_tau_s, robust_dt0_c)
+    if robust:
+        # the reference scenario (first) is the centre of the box: sweeps are placed for
+        # it and every scenario's windows are read off its simulation
+        params_list = [replace(
+            params,
+            tau_s=float(np.mean(robust_tau_s)) if robust_tau_s else params.tau_s,
+            dt0_c=float(np.mean(robust_dt0_c)) if robust_dt0_c else params.dt0_c),
+            *params_list]
     models = [model if model is not None else FirstOrderLag(p) for p in params_list]
 
     search = _synthesise(spec, params_list, limits, models, progress)
