@@ -628,9 +628,9 @@ class _SubLP:
     def solve_direct(self, cost: np.ndarray, l1_weight: float = 0.0):
         """Minimise ``cost @ x + l1_weight * ||rates||_1`` by calling Clarabel directly.
 
-        The search solves hundreds of these small feasibility LPs; building each through
-        cvxpy cost about 25 ms against 6 ms in the solver, so they go to the same solver
-        without the modelling layer (``scripts/bench_plan.py`` measures both). The
+        The search solves hundreds of these small feasibility LPs and cvxpy's compile
+        step took longer than the solve itself, so they go to the same solver without the
+        modelling layer (``scripts/bench_plan.py`` times one probe both ways). The
         whole-programme LPs (:func:`_polish`) are written in cvxpy. Returns the optimal
         ``x`` or None when the LP is infeasible.
         """

@@ -7,7 +7,8 @@ For every experiment of the default campaign (or CONFIG.toml):
 * solve time per experiment (serial, median of ``--runs``) and wall time of the whole
   campaign planned in parallel over the local cores (median of ``--runs``);
 * the shortest duration that still reaches full coverage, for segment lengths 5 and
-  10 min (objective "shortest" gives it directly; "-" when the plan is incomplete).
+  10 min (objective "shortest" gives it directly; "-" when the plan is incomplete);
+* one typical search probe LP solved straight by Clarabel vs through cvxpy (median).
 
 Writes ``out/bench_plan.csv`` and prints a markdown table. Usage::
 
@@ -37,6 +38,63 @@ def _with_segment(config, segment_min: float):
 
 def _fmt(x, spec=".1f"):
     return "-" if x is None or x != x else format(x, spec)
+
+
+def probe_lp_timing(repeats: int = 30) -> dict:
+    """Median time of one search probe LP solved directly by Clarabel vs through cvxpy.
+
+    The probe is a typical one: W1's first cooling sweep window over the first 100 min
+    (chamber and device limits, band, knot and edge rows), the same LP both ways.
+    """
+    import cvxpy as cp
+    import numpy as np
+
+    from schedsyn import Limits, ThermalParams
+    from schedsyn.model import FirstOrderLag
+    from schedsyn.planner import (
+        ExperimentSpec,
+        Scenario,
+        _Planner,
+        _Responses,
+        _SubLP,
+        _Window,
+        make_bands,
+    )
+
+    spec = ExperimentSpec("W1", -50, -30, -52, -20)
+    p, lim = ThermalParams(), Limits()
+    planner = _Planner(spec, lim, _Responses([Scenario(p, FirstOrderLag(p))], 40, 5.0, lim))
+    band = make_bands(spec, 3, -1, 0.062, [p], lim)[2]
+    steps = np.maximum(1, np.round(band.minutes(1.0)[::-1])).astype(int)
+    s0 = 60
+    bounds = s0 + np.concatenate(([0], np.cumsum(steps)))
+    win = _Window(-1, band, s0, int(bounds[-1]), tuple(int(c) for c in bounds[1:-1]))
+    j1 = int(np.ceil(bounds[-1] / 5.0))
+
+    def build():
+        lp = _SubLP(planner, np.zeros(0), j1, extra=1)
+        lp.chamber()
+        lp.device()
+        lp.window(win)
+        lp.exit_speed(win, 0)
+        return lp
+
+    cost = np.zeros(j1 + 1)
+    cost[-1] = 1.0
+    out = {}
+    for name, run in (
+            ("direct", lambda: build().solve_direct(cost, l1_weight=1e-4)),
+            ("cvxpy", lambda: build().solve(lambda v: v[-1] + 1e-4 * cp.norm1(v[:-1])))):
+        times = []
+        for _ in range(repeats):
+            tic = time.perf_counter()
+            run()
+            times.append(time.perf_counter() - tic)
+        out[name] = statistics.median(times)
+    size = build()
+    out["rows"] = int(sum(len(h) for h in size.h_rows))
+    out["variables"] = j1 + 1
+    return out
 
 
 def main() -> None:
@@ -86,7 +144,10 @@ def main() -> None:
         for seg in args.segments:
             row[f"shortest_full_min_seg{seg:g}"] = shortest[seg][i]
         rows.append(row)
+    probe = probe_lp_timing()
     frame = pd.DataFrame(rows)
+    frame["probe_lp_direct_ms"] = 1e3 * probe["direct"]
+    frame["probe_lp_cvxpy_ms"] = 1e3 * probe["cvxpy"]
     frame["campaign_wall_s_median"] = statistics.median(campaign_s)
     frame["cores"] = os.cpu_count()
     out = Path(args.out)
@@ -109,6 +170,9 @@ def main() -> None:
     print(f"\nwhole campaign in parallel over {os.cpu_count()} cores: "
           f"{statistics.median(campaign_s):.1f} s (median of {args.runs}; runs "
           + ", ".join(f"{x:.1f}" for x in campaign_s) + " s)")
+    print(f"one search probe LP ({probe['variables']} variables, {probe['rows']} rows): "
+          f"{1e3 * probe['direct']:.1f} ms straight to Clarabel vs {1e3 * probe['cvxpy']:.1f} "
+          f"ms through cvxpy (median of 30; ratio {probe['cvxpy'] / probe['direct']:.1f})")
     print(f"wrote {out / 'bench_plan.csv'}")
 
 
