@@ -168,12 +168,14 @@ def sweep_heatmap(
 
 
 def sweep_panels(panels, nominal: tuple[float, float] | None = (2400.0, 3.0),
-                 suptitle: str | None = None):
+                 suptitle: str | None = None,
+                 box: tuple[tuple[float, float], tuple[float, float]] | None = None):
     """Side-by-side :func:`sweep_heatmap` panels in one figure; returns the list of axes.
 
     ``panels`` is a sequence of ``(frame, column, title)``, e.g. the coverage and the
     minimum levels of one sweep, or the coverage of a nominal and of a robust plan.
-    Save with ``save_figure(axes[0], path)``.
+    ``box`` = ``((tau_lo_s, tau_hi_s), (dt0_lo_c, dt0_hi_c))`` outlines a robust box on
+    every panel. Save with ``save_figure(axes[0], path)``.
     """
     import matplotlib
 
@@ -185,6 +187,14 @@ def sweep_panels(panels, nominal: tuple[float, float] | None = (2400.0, 3.0),
                              constrained_layout=True, squeeze=False)
     for ax, (frame, column, title) in zip(axes[0], panels, strict=True):
         sweep_heatmap(frame, column, ax=ax, nominal=nominal, title=title)
+        if box is not None:
+            from matplotlib.patches import Rectangle
+
+            (t0, t1), (d0, d1) = box
+            ax.add_patch(Rectangle((t0, d0), t1 - t0, d1 - d0, fill=False, ec="red",
+                                   lw=1.8, ls="-", label="robust box"))
+            ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2,
+                      fontsize=8, frameon=False)
     if suptitle:
         fig.suptitle(suptitle)
     return list(axes[0])

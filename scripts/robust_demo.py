@@ -67,7 +67,8 @@ def main() -> None:
           f"robust plan, box tau {tau_box[0]:g}-{tau_box[1]:g} s, dT0 {dt0_box[0]:g}-"
           f"{dt0_box[1]:g} °C ({plans['robust'].duration_min:g} min"
           f"{'' if plans['robust'].complete else ', NOT complete'})")],
-        suptitle=f"coverage of [{spec.working_lo_c:g}, {spec.working_hi_c:g}] °C")
+        suptitle=f"coverage of [{spec.working_lo_c:g}, {spec.working_hi_c:g}] °C",
+        box=(tau_box, dt0_box))
     plots.save_figure(axes[0], args.figure)
     print(f"wrote {out}/price.csv and {args.figure}")
 

@@ -153,6 +153,42 @@ def test_exported_table_reproduces_the_reported_coverage(small_plan, tmp_path):
     assert temp.min() >= SMALL_LIMITS.device_min_c and temp.max() <= SMALL_LIMITS.device_max_c
 
 
+ROBUST_BOX = dict(robust_tau_s=(2200.0, 2600.0), robust_dt0_c=(2.0, 4.0))
+
+
+@pytest.fixture(scope="module")
+def small_robust_plan():
+    return plan_experiment(ExperimentSpec(**SMALL), limits=SMALL_LIMITS, **ROBUST_BOX)
+
+
+def test_robust_plan_holds_across_its_box_by_independent_resimulation(small_robust_plan,
+                                                                       tmp_path):
+    """One programme for the whole box: the exported table, integrated by scipy at points
+    between and beyond the planner's own 9 x 7 check grid, covers the region everywhere."""
+    plan = small_robust_plan
+    assert plan.complete, plan.notes
+    assert plan.box_check["holds"] and plan.box_check["grid_points"] >= 63
+    prog = read_steps(plan.programme.to_csv(tmp_path / "robust.csv"), SMALL_LIMITS)
+    grid = BinGrid(plan.spec.working_lo_c, plan.spec.working_hi_c)
+    for tau_s in (2200.0, 2325.0, 2475.0, 2600.0):
+        for dt0_c in (2.0, 2.7, 3.6, 4.0):
+            p = ThermalParams(tau_s=tau_s, dt0_c=dt0_c)
+            _, temp, grad = _ode_trajectory(prog, p)
+            rep = coverage_report(temp, grad, grid, plan.spec.levels_required)
+            assert rep.complete, (tau_s, dt0_c, rep.summary())
+            assert temp.max() <= SMALL_LIMITS.device_max_c
+            assert temp.min() >= SMALL_LIMITS.device_min_c
+
+
+def test_robust_plan_reports_its_scenarios_and_spaces_levels_wider(small_plan,
+                                                                   small_robust_plan):
+    """A robust plan carries its box check and scenarios; its bands are further apart, so
+    its levels are spaced at least as wide as the nominal plan's."""
+    assert small_plan.box_check is None
+    assert small_robust_plan.coverage_0p1.coverage >= small_plan.coverage_0p1.coverage
+    assert len(small_robust_plan.scenarios) == 7  # box centre + 3 tau x 2 dT0
+
+
 def test_too_short_a_request_names_the_requirement():
     spec = ExperimentSpec(**SMALL)
     with pytest.raises(InfeasiblePlanError, match="best reachable coverage") as info:
