@@ -1405,28 +1405,31 @@ def plan_experiment(
         # no one programme fits the whole box: plan for the inner half of the box (half
         # of each range, same centre), else for the nominal point with the widest band
         # separation that fits; the box check below says which part of the box it covers
-        def inner(rng):
+        def inner(rng, share):
             if rng is None:
                 return None
-            mid, half = 0.5 * (rng[0] + rng[1]), 0.25 * (rng[1] - rng[0])
+            mid, half = 0.5 * (rng[0] + rng[1]), 0.5 * share * (rng[1] - rng[0])
             return (mid - half, mid + half)
 
-        in_tau, in_dt0 = inner(robust_tau_s), inner(robust_dt0_c)
-        if progress:
-            progress("no programme fits the whole robust box; trying its inner half")
-        inner_list = [params_list[0], *robust_scenarios(params, in_tau, in_dt0)]
-        search = _synthesise(spec, inner_list, limits,
-                             [FirstOrderLag(p) for p in inner_list], progress)
-        if search.best is not None:
-            box = " x ".join(
-                f"{name} {r[0]:g}..{r[1]:g} {unit}" for name, r, unit in (
-                    ("tau", in_tau, "s"), ("dT0", in_dt0, "degC")) if r is not None)
-            notes.append("no single programme meeting the target for every scenario of the "
-                         f"robust box was found; planned robustly for its inner half ({box})")
+        for share, word in ((0.5, "half"), (0.25, "quarter")):
+            in_tau, in_dt0 = inner(robust_tau_s, share), inner(robust_dt0_c, share)
+            if progress:
+                progress(f"no programme fits the robust box; trying its inner {word}")
+            inner_list = [params_list[0], *robust_scenarios(params, in_tau, in_dt0)]
+            search = _synthesise(spec, inner_list, limits,
+                                 [FirstOrderLag(p) for p in inner_list], progress)
+            if search.best is not None:
+                box = " x ".join(
+                    f"{name} {r[0]:g}..{r[1]:g} {unit}" for name, r, unit in (
+                        ("tau", in_tau, "s"), ("dT0", in_dt0, "degC")) if r is not None)
+                notes.append("no single programme meeting the target for every scenario of "
+                             f"the robust box was found; planned robustly for its inner {word} "
+                             f"({box})")
+                break
         else:
             notes.append("no single programme meeting the target for every scenario of the "
-                         "robust box (or its inner half) was found; planned at the nominal "
-                         "point with the widest margins that fit")
+                         "robust box (or its inner half or quarter) was found; planned at the "
+                         "nominal point with the widest margins that fit")
             spec_margin = replace(spec, objective="margin")
             search = _synthesise(spec_margin, [params], limits, [FirstOrderLag(params)],
                                  progress)

@@ -49,9 +49,11 @@ def main() -> None:
                               & frames[name].dt0_c.between(*dt0_box)]
         rows.append({
             "plan": name, "duration_min": plan.duration_min, "steps": plan.steps,
-            "coverage_nominal": plan.coverage.coverage if name == "nominal" else np.nan,
+            "coverage_at_scenarios": plan.coverage.coverage,
+            "coverage_delta_0p1": plan.coverage_0p1.coverage,
             "margin_g_c_per_min": plan.margin_g_c_per_min,
             "box_min_coverage": float(in_box.coverage.min()),
+            "box_min_levels": int(in_box.min_levels.min()),
             "box_full_share": float((in_box.coverage >= 1).mean()),
             "grid_full_share": float((frames[name].coverage >= 1).mean()),
             "complete": plan.complete, "notes": " | ".join(plan.notes),
