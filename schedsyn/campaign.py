@@ -39,7 +39,7 @@ import pandas as pd
 from .coverage import coverage_report
 from .errors import InfeasiblePlanError, ParameterError, SchedsynError
 from .params import Limits, ThermalParams
-from .planner import ExperimentSpec, Plan, plan_experiment
+from .planner import ExperimentSpec, Plan, plan_experiment, planning_effort
 from .programme import read_steps
 from .simulate import simulate
 from .sweep import run_map
@@ -399,8 +399,13 @@ def plan_campaign(
     tic = time.perf_counter()
     jobs = [_PlanJob(s, config.params, config.limits, config.robust_tau_s, config.robust_dt0_c)
             for s in config.experiments]
-    out = run_map(partial(_plan_job, progress=progress), jobs, backend, workers=workers,
-                  progress=progress is not None, desc="experiments")
+    # longest first, so that the pool is not left waiting on one long experiment at the end
+    order = sorted(range(len(jobs)), key=lambda i: -planning_effort(jobs[i].spec, jobs[i].limits))
+    done = run_map(partial(_plan_job, progress=progress), [jobs[i] for i in order], backend,
+                   workers=workers, progress=progress is not None, desc="experiments")
+    out = [None] * len(jobs)
+    for k, i in enumerate(order):
+        out[i] = done[k]
     plans = tuple(p if isinstance(p, Plan) else None for p in out)
     errors = tuple("" if isinstance(p, Plan) else str(p) for p in out)
     baselines = tuple(

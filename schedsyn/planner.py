@@ -640,25 +640,31 @@ class _SubLP:
         lim = self.planner.limits
         n, m = self.n, self.n + self.extra
         n_t = n if l1_weight > 0 else 0
-        blocks, rhs = [], []
-        eq = sparse.csr_matrix(np.vstack(self.e_rows)) if self.e_rows else None
-        if eq is not None:
-            blocks.append(sparse.hstack([eq, sparse.csr_matrix((eq.shape[0], n_t))]))
-            rhs.append(np.concatenate(self.f_rows))
-        n_eq = 0 if eq is None else eq.shape[0]
-        g = sparse.csr_matrix(np.vstack(self.g_rows))
-        blocks.append(sparse.hstack([g, sparse.csr_matrix((g.shape[0], n_t))]))
-        rhs.append(np.concatenate(self.h_rows))
-        eye = sparse.eye(n, m + n_t, format="csr")
-        blocks += [eye, -eye]
-        rhs += [np.full(n, lim.rate_max_c_per_min), np.full(n, -lim.rate_min_c_per_min)]
-        if n_t:  # |x| <= t
-            pick = sparse.hstack([sparse.eye(n, m), -sparse.eye(n)])
-            pick_neg = sparse.hstack([-sparse.eye(n, m), -sparse.eye(n)])
-            blocks += [pick, pick_neg]
-            rhs += [np.zeros(n), np.zeros(n)]
-        a = sparse.vstack(blocks, format="csc")
-        b = np.concatenate(rhs)
+        # the matrix is small (hundreds of rows, tens of columns): build it dense, convert
+        # once (assembling it from sparse blocks cost more than the solve)
+        eq = np.vstack(self.e_rows) if self.e_rows else np.zeros((0, m))
+        g = np.vstack(self.g_rows)
+        n_eq, n_g = eq.shape[0], g.shape[0]
+        n_rows = n_eq + n_g + 2 * n + 2 * n_t
+        a = np.zeros((n_rows, m + n_t))
+        a[:n_eq, :m] = eq
+        a[n_eq:n_eq + n_g, :m] = g
+        r0 = n_eq + n_g
+        idx = np.arange(n)
+        a[r0 + idx, idx] = 1.0            # rate <= max
+        a[r0 + n + idx, idx] = -1.0       # -rate <= -min
+        b = np.concatenate((
+            np.concatenate(self.f_rows) if self.f_rows else np.zeros(0),
+            np.concatenate(self.h_rows),
+            np.full(n, lim.rate_max_c_per_min), np.full(n, -lim.rate_min_c_per_min),
+            np.zeros(2 * n_t)))
+        if n_t:  # |rate| <= t
+            r1 = r0 + 2 * n
+            a[r1 + idx, idx] = 1.0
+            a[r1 + idx, m + idx] = -1.0
+            a[r1 + n + idx, idx] = -1.0
+            a[r1 + n + idx, m + idx] = -1.0
+        a = sparse.csc_matrix(a)
         q = np.concatenate((np.asarray(cost, dtype=float), np.full(n_t, float(l1_weight))))
         cones = ([clarabel.ZeroConeT(n_eq)] if n_eq else []) + [
             clarabel.NonnegativeConeT(a.shape[0] - n_eq)]
@@ -747,6 +753,15 @@ def _first_directions(spec: ExperimentSpec, limits: Limits) -> list[int]:
     if spec.working_lo_c - spec.edge_margin_c >= limits.t_init_c:
         return [+1]
     return [-1, +1]
+
+
+def planning_effort(spec: ExperimentSpec, limits: Limits) -> float:
+    """Rough relative cost of planning ``spec`` (for scheduling a campaign, longest first).
+
+    A region that contains the start temperature is searched starting both ways (twice
+    the structures), and wider regions need longer sweeps.
+    """
+    return len(_first_directions(spec, limits)) * (spec.working_hi_c - spec.working_lo_c)
 
 
 def _turnaround_minutes(v_from: float, d_to: int, v_to: float, params: ThermalParams,
