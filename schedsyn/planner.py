@@ -1180,7 +1180,37 @@ def _verify_robust(programme, spec, params, tau_range, dt0_range, limits) -> dic
         levels_required=spec.levels_required,
         deltas_c_per_min=(spec.delta_c_per_min, 0.1), t0_c=limits.t_init_c)
     return {"holds": res.holds(), "full_share": res.full_share, "worst": res.worst(),
+            "min_levels": int(res.min_levels_grid.min()),
             "covered_box": res.covered_box(), "grid_points": int(np.prod(res.shape))}
+
+
+def robustness_price(nominal: Plan, robust: Plan, tau_s_range: tuple[float, float] | None,
+                     dt0_c_range: tuple[float, float] | None) -> pd.DataFrame:
+    """The price of robustness: a nominal and a robust plan side by side.
+
+    Both plans are checked on the same dense grid over the box (:func:`_verify_robust`,
+    at least 9 x 7 points); one row per plan with its duration, steps, coverage at
+    delta and at 0.1 degC/min (worst design scenario), and over the box the worst
+    coverage, the fewest levels and the share of grid points fully covered. The extra
+    duration of the robust plan is in ``extra_min``.
+    """
+    rows = []
+    for name, plan in (("nominal", nominal), ("robust", robust)):
+        box = _verify_robust(plan.programme, plan.spec, nominal.params, tau_s_range,
+                             dt0_c_range, plan.limits)
+        rows.append({
+            "plan": name,
+            "duration_min": plan.duration_min,
+            "extra_min": plan.duration_min - nominal.duration_min,
+            "steps": plan.steps,
+            "coverage": plan.coverage.coverage,
+            "coverage_delta_0p1": plan.coverage_0p1.coverage,
+            "box_worst_coverage": box["worst"]["coverage"],
+            "box_min_levels": box["min_levels"],
+            "box_full_share": box["full_share"],
+            "complete_over_box": bool(box["holds"]),
+        })
+    return pd.DataFrame(rows)
 
 
 def explain_shortfall(spec: ExperimentSpec, params: ThermalParams, limits: Limits) -> list[str]:

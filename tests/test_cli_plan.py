@@ -136,3 +136,28 @@ def test_chamber_csv_from_several_floors(tmp_path, capsys):
     else:
         assert rc == 1
     assert "coverage vs chamber floor/ceiling" in capsys.readouterr().out
+
+
+def test_robust_plan_writes_the_price_of_robustness(tmp_path, capsys):
+    out = tmp_path / "r"
+    rc = main(["plan", "--working", "-10", "0", "--approx", "-20", "10", "--levels", "3",
+               "--duration-max-min", "300", "--robust-tau-s", "2200:2600",
+               "--robust-dt0-c", "2:4", "--out", str(out), "--quiet"])
+    plan = json.loads((out / "plan.json").read_text())
+    assert rc == (0 if plan["complete"] else 1)
+    assert plan["robust_box_check"]["grid_points"] >= 63
+    assert len(plan["robust_scenarios"]) == 7
+    price = pd.read_csv(out / "price.csv")
+    assert price["plan"].tolist() == ["nominal", "robust"]
+    robust = price.set_index("plan").loc["robust"]
+    assert robust["duration_min"] == pytest.approx(plan["duration_min"])
+    assert bool(robust["complete_over_box"]) == plan["robust_box_check"]["holds"]
+    # the robust row's box figures agree with an independent sweep of the exported table
+    from schedsyn.sweep import verify_box
+
+    res = verify_box(read_steps(out / "steps.csv", Limits(duration_max_min=300.0)),
+                     (-10.0, 0.0), (2200.0, 2600.0), (2.0, 4.0), levels_required=3)
+    assert robust["box_full_share"] == pytest.approx(res.full_share)
+    assert robust["extra_min"] == pytest.approx(
+        robust["duration_min"] - price.set_index("plan").loc["nominal", "duration_min"])
+    assert "price of robustness" in capsys.readouterr().out

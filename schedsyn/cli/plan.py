@@ -58,6 +58,9 @@ def register(sub) -> None:
                    help="plan for every tau in LO..HI s (robust box), e.g. 2200:2600")
     p.add_argument("--robust-dt0-c", default=None, metavar="LO:HI",
                    help="plan for every dT0 in LO..HI °C (robust box), e.g. 2:4")
+    p.add_argument("--no-price", action="store_true",
+                   help="with a robust box: skip the nominal plan that prices robustness "
+                        "(price.csv)")
     p.add_argument("--model", default=None, metavar="MODEL.json",
                    help="plan with a linear augmented model file (from `schedsyn diagnose`); "
                         "--tau-s/--dt0-c then override its base")
@@ -218,4 +221,15 @@ def run(args: argparse.Namespace) -> int:
     write_plan_outputs(plan, out, inputs, model=model)
     print("\n".join(report_plan(plan)))
     print(f"wrote {out}/steps.csv, plan.json, program.png, phase.png, coverage.png")
+    if (robust_tau is not None or robust_dt0 is not None) and not args.no_price:
+        from ..planner import robustness_price
+
+        if progress:
+            progress(f"{spec.name}: planning the nominal point for the price of robustness")
+        nominal = plan_experiment(spec, params, plan.limits, progress=progress)
+        price = robustness_price(nominal, plan, robust_tau, robust_dt0)
+        write_frame_atomic(out / "price.csv", price, inputs)
+        print("price of robustness (both plans checked on the same grid over the box):")
+        print(price.to_string(index=False))
+        print(f"wrote {out}/price.csv")
     return 0 if plan.complete else 1
