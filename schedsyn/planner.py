@@ -80,6 +80,8 @@ TURN_ACCEL_FRACTION = 0.85
 BAND_WIDTH_C_PER_MIN = 0.05
 #: Fraction of the gradient the chamber limits allow at T that the fastest band may use.
 LIMIT_FRACTION = 0.92
+#: LP solves in this process so far (``plan_experiment`` reports the ones it made).
+_LP_COUNT = [0]
 
 
 @dataclass(frozen=True, slots=True)
@@ -677,6 +679,7 @@ class _SubLP:
         finally:
             self.planner.lp_s += time.perf_counter() - tic
             self.planner.n_lp += 1
+            _LP_COUNT[0] += 1
         self.last_size = {"variables": int(m + n_t), "constraints": int(a.shape[0])}
         if str(sol.status) not in ("Solved", "AlmostSolved"):
             return None
@@ -740,6 +743,7 @@ class _Planner:
         finally:
             self.lp_s += time.perf_counter() - tic
             self.n_lp += 1
+            _LP_COUNT[0] += 1
         return problem.status in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
 
 
@@ -1444,6 +1448,7 @@ def plan_experiment(
             *params_list]
     models = [model if model is not None else FirstOrderLag(p) for p in params_list]
 
+    lp_count0 = _LP_COUNT[0]
     search = _synthesise(spec, params_list, limits, models, progress)
     notes: list[str] = []
     if robust and search.best is None:
@@ -1559,7 +1564,7 @@ def plan_experiment(
         spec=spec, params=params, limits=limits, programme=programme, coverage=cov,
         coverage_0p1=cov01, complete=complete, status=status,
         solve_s=time.perf_counter() - tic, margin_g_c_per_min=margin_g, margin_t_c=margin_t,
-        n_lp=planner.n_lp, problem_size=planner.size, scenarios=tuple(params_list),
+        n_lp=_LP_COUNT[0] - lp_count0, problem_size=planner.size, scenarios=tuple(params_list),
         violations=tuple(problems), notes=tuple(notes), t_min_c=t_lo, t_max_c=t_hi,
         box_check=box_check,
     )
