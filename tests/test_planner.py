@@ -240,3 +240,32 @@ def test_temperature_is_affine_in_dt0_so_box_ends_bound_it():
     prog = Programme([60.0, 90.0, 120.0], [-0.8, 0.5, 0.0])
     t = [simulate(prog, ThermalParams(dt0_c=d), dt_min=1.0).t_c for d in (0.0, 2.0, 6.0)]
     np.testing.assert_allclose(t[1], t[0] + (t[2] - t[0]) * (2.0 / 6.0), atol=1e-9)
+
+
+def test_check_tables_script_agrees_with_the_plan(small_plan, tmp_path):
+    """scripts/check_tables.py (separate code: scipy ODE, its own counting) on the exported
+    table reproduces the plan's coverage and limits."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "check_tables.py"
+    spec_ = importlib.util.spec_from_file_location("check_tables", path)
+    mod = importlib.util.module_from_spec(spec_)
+    spec_.loader.exec_module(mod)
+    plan = small_plan
+    steps = plan.programme.to_csv(tmp_path / "steps.csv")
+    res = mod.check(steps, plan.params.tau_s, plan.params.dt0_c, plan.spec.working_lo_c,
+                    plan.spec.working_hi_c, plan.spec.levels_required,
+                    plan.spec.delta_c_per_min)
+    assert res["coverage"] == pytest.approx(plan.coverage.coverage)
+    assert res["min_levels"] == plan.coverage.min_levels
+    assert res["chamber_start_c"] == 20.0 and abs(res["chamber_end_c"] - 20.0) <= 0.5
+    assert SMALL_LIMITS.rate_min_c_per_min - 1e-9 <= res["rate_min"]
+    assert res["rate_max"] <= SMALL_LIMITS.rate_max_c_per_min + 1e-9
+    # a table that stops half-way is caught: its coverage drops
+    half = plan.programme.to_frame().iloc[: plan.steps // 2]
+    half.to_csv(tmp_path / "half.csv", index=False)
+    cut = mod.check(tmp_path / "half.csv", plan.params.tau_s, plan.params.dt0_c,
+                    plan.spec.working_lo_c, plan.spec.working_hi_c,
+                    plan.spec.levels_required, plan.spec.delta_c_per_min)
+    assert cut["coverage"] < res["coverage"]
