@@ -69,7 +69,8 @@ MAX_TRANSITION_MIN = 150.0
 KNOT_INSETS_C = (1.5, 4.0)
 #: A sweep crosses an inner knot at a planned sample within +- this, degC.
 KNOT_TOL_C = 0.25
-#: Robust plans widen the bands by this factor (scenario gradients differ at any moment).
+#: Robust plans may widen the bands by this factor (1: the per-scenario slack below
+#: absorbs the scenarios' spread better than wider bands, which slow every sweep down).
 ROBUST_WIDTH_FACTOR = 1.0
 #: Robust plans: how far outside its band a scenario other than the reference (box
 #: centre) may pass, degC/min; the bands are spaced by twice this more than delta.
