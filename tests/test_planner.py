@@ -189,6 +189,34 @@ def test_robust_plan_reports_its_scenarios_and_spaces_levels_wider(small_plan,
     assert len(small_robust_plan.scenarios) == 7  # box centre + 3 tau x 2 dT0
 
 
+def test_too_wide_a_robust_box_says_which_part_is_covered(tmp_path):
+    """A box too wide for the time limit: the planner falls back (inner half or quarter of
+    the box, else the nominal point), never calls the plan complete, and names the part
+    of the box it covers -- which an independent sweep of the exported table confirms."""
+    from schedsyn.sweep import verify_box
+
+    limits = Limits(duration_max_min=240.0)
+    box = dict(robust_tau_s=(1800.0, 3000.0), robust_dt0_c=(0.0, 6.0))
+    plan = plan_experiment(ExperimentSpec(**SMALL), limits=limits, **box)
+    assert not plan.complete
+    assert any("inner" in n or "nominal point" in n for n in plan.notes), plan.notes
+    check = plan.box_check
+    assert not check["holds"] and check["grid_points"] >= 63
+    res = verify_box(read_steps(plan.programme.to_csv(tmp_path / "s.csv"), limits),
+                     (-10.0, 0.0), box["robust_tau_s"], box["robust_dt0_c"],
+                     levels_required=3)
+    assert res.full_share == pytest.approx(check["full_share"])
+    assert res.worst()["coverage"] == pytest.approx(check["worst"]["coverage"])
+    assert res.worst()["coverage"] < 1.0
+    part = check["covered_box"]
+    if part is not None:  # the named part of the box is covered at every grid point in it
+        frame = res.to_frame()
+        inside = frame[frame.tau_s.between(*part["tau_s_range"])
+                       & frame.dt0_c.between(*part["dt0_c_range"])]
+        assert len(inside) == part["n_points"] and (inside.coverage >= 1.0).all()
+        assert f"{part['tau_s_range'][0]:g}..{part['tau_s_range'][1]:g} s" in plan.notes[-1]
+
+
 def test_too_short_a_request_names_the_requirement():
     spec = ExperimentSpec(**SMALL)
     with pytest.raises(InfeasiblePlanError, match="best reachable coverage") as info:
