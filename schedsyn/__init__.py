@@ -56,6 +56,7 @@ _LAZY = {
     "ExperimentSpec": "planner",
     "Plan": "planner",
     "plan_experiment": "planner",
+    "robustness_price": "planner",
     "CampaignConfig": "campaign",
     "CampaignResult": "campaign",
     "default_campaign": "campaign",
