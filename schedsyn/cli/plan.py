@@ -192,7 +192,14 @@ def run(args: argparse.Namespace) -> int:
     robust_tau = _robust(args.robust_tau_s, "--robust-tau-s")
     robust_dt0 = _robust(args.robust_dt0_c, "--robust-dt0-c")
     out = _common.out_dir(args.out, "out/plan")
-    progress = None if args.quiet else stderr_progress
+    progress = None
+    if not args.quiet:
+        import time
+
+        tic = time.perf_counter()
+
+        def progress(message: str) -> None:  # experiment, solver time so far, message
+            stderr_progress(f"{spec.name} [{time.perf_counter() - tic:6.1f} s] {message}")
     inputs = [args.model] if args.model else []
 
     if len(floors) == 1 and len(ceilings) == 1:
@@ -204,7 +211,8 @@ def run(args: argparse.Namespace) -> int:
                                  "supported; give one --chamber-min-c/--chamber-max-c")
         pairs, results = chamber_plans(spec, floors, ceilings, params, limits,
                                        robust_tau_s=robust_tau, robust_dt0_c=robust_dt0,
-                                       progress=progress)
+                                       # runs in worker processes: a picklable callable
+                                       progress=None if args.quiet else stderr_progress)
         frame = chamber_frame(pairs, results)
         write_frame_atomic(out / "chamber.csv", frame, inputs)
         print("coverage vs chamber floor/ceiling:")
