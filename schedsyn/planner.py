@@ -1168,8 +1168,10 @@ def check_programme(
             worst01 = rep01
         t_lo, t_hi = min(t_lo, traj.t_c.min()), max(t_hi, traj.t_c.max())
     if t_lo < limits.device_min_c - 1e-6 or t_hi > limits.device_max_c + 1e-6:
+        where = "" if len(scenarios) == 1 else (
+            f" (over the {len(scenarios)} design scenarios of the robust box)")
         problems.append(
-            f"the device reaches {t_lo:.2f} .. {t_hi:.2f} degC, outside its limits "
+            f"the device reaches {t_lo:.2f} .. {t_hi:.2f} degC{where}, outside its limits "
             f"{limits.device_min_c:g} .. {limits.device_max_c:g} degC")
     return worst, worst01, problems, float(t_lo), float(t_hi)
 
