@@ -67,7 +67,8 @@ BAND_SAFETY_C_PER_MIN = 0.012
 MAX_TRANSITION_MIN = 150.0
 #: Distances of the inner band knots from the working edges, degC.
 KNOT_INSETS_C = (1.5, 4.0)
-#: A sweep crosses an inner knot at a planned sample within +- this, degC.
+#: A sweep crosses an inner knot at a planned sample within +- this plus half the
+#: distance its band's top speed covers in one sample, degC.
 KNOT_TOL_C = 0.25
 #: Robust plans may widen the bands by this factor (1: the per-scenario slack below
 #: absorbs the scenarios' spread better than wider bands, which slow every sweep down).
@@ -568,9 +569,10 @@ class _SubLP:
         outside it is often the fastest way to present a new gradient at the edge.
         """
         lim = self.planner.limits
+        pad = self.planner.device_margin_c
         for at, bt, _, _ in self.scen:
-            self.le(at, lim.device_max_c - bt)
-            self.ge(at, lim.device_min_c - bt)
+            self.le(at, lim.device_max_c - pad - bt)
+            self.ge(at, lim.device_min_c + pad - bt)
 
     def window(self, win: _Window, margin_g: int | None = None,
                margin_t: int | None = None) -> None:
@@ -607,7 +609,9 @@ class _SubLP:
                             mg)
                 if knot is not None:  # cross the knot at the planned sample
                     k = b_ - self.s_from
-                    tol = self.planner.knot_tol_c
+                    # a fast sweep moves far in one sample: half a sample's travel more
+                    tol = self.planner.knot_tol_c + 0.5 * SAMPLE_MIN * float(
+                        win.band.bounds(knot)[1])
                     if win.knot_tol_c is not None:
                         tol = win.knot_tol_c[si][pieces_done]
                     pieces_done += 1
@@ -720,6 +724,9 @@ class _Planner:
         self.n_lp = 0
         self.lp_s = 0.0
         self.knot_tol_c = KNOT_TOL_C
+        #: the device limits are tightened by this in the LPs (raised when rounding the
+        #: step table for the operator pushes the device a hair past a limit)
+        self.device_margin_c = 0.0
         ref = responses.scenarios[0].params
         self.offsets_c = [sc.params.dt0_c - ref.dt0_c for sc in responses.scenarios]
         self.size = {"variables": 0, "constraints": 0}
@@ -840,7 +847,9 @@ def _place_sweep(planner: _Planner, u_fixed, d, band, max_seg):
         minutes = band.minutes(fraction)
         if d < 0:
             minutes = minutes[::-1]
-        options.append(np.maximum(1, np.round(minutes / SAMPLE_MIN)).astype(int))
+        # round the planned knot times, not each piece (rounded pieces drift)
+        at = np.round(np.cumsum(minutes) / SAMPLE_MIN)
+        options.append(np.maximum(1, np.diff(np.concatenate(([0.0], at)))).astype(int))
     d_fast = int(options[0].sum())
 
     robust = len(r.resp) > 1
@@ -1538,6 +1547,22 @@ def plan_experiment(
     programme = raw.merged(rate_tol_c_per_min=1e-6).rounded(limits)
     cov, cov01, problems, t_lo, t_hi = check_programme(programme, spec, limits, params_list,
                                                        model)
+    # rounding to whole minutes and 0.1 degC can push the device a hair past a limit the
+    # LP met at its samples: polish again with the limits tightened by that much
+    for _ in range(2):
+        excess = max(limits.device_min_c - t_lo, t_hi - limits.device_max_c)
+        if excess <= 1e-6 or search.best is None:
+            break
+        planner.device_margin_c += excess + 0.05
+        u2, mg2, mt2 = _polish(planner, search.best[0])
+        prog2 = Programme(np.full(u2.size, float(spec.segment_min)), u2, limits.start_c
+                          ).merged(rate_tol_c_per_min=1e-6).rounded(limits)
+        check2 = check_programme(prog2, spec, limits, params_list, model)
+        excess2 = max(limits.device_min_c - check2[3], check2[4] - limits.device_max_c)
+        if check2[0].coverage < cov.coverage or excess2 >= excess:
+            break
+        programme, (cov, cov01, problems, t_lo, t_hi) = prog2, check2
+        u, margin_g, margin_t = u2, mg2, mt2
     if programme.n_segments > spec.max_steps:
         problems.append(f"the step table has {programme.n_segments} steps, more than "
                         f"max_steps = {spec.max_steps}")
@@ -1588,7 +1613,9 @@ def _subregions(spec, params_list, limits, models, progress, stop=None):
     """
     n = spec.grid.n_bins
     for side in ("low", "high", "both"):
-        for cut in ((2, 4, 7) if side != "both" else (4, 7)):
+        wide = (round(0.3 * n), round(0.45 * n))  # regions far too wide for the time
+        cuts = (2, 4, 7) if side != "both" else (4, 7)
+        for cut in sorted(set(cuts) | {c for c in wide if c > 7}):
             if cut >= n - 1:
                 break
             a = {"low": cut, "high": 0, "both": cut // 2}[side]
