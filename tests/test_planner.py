@@ -297,3 +297,15 @@ def test_check_tables_script_agrees_with_the_plan(small_plan, tmp_path):
                     plan.spec.working_lo_c, plan.spec.working_hi_c,
                     plan.spec.levels_required, plan.spec.delta_c_per_min)
     assert cut["coverage"] < res["coverage"]
+
+
+def test_narrow_mid_range_region_with_six_levels_plans_completely(tmp_path):
+    """Fast sweeps across short band pieces: planned knot times must not drift (this
+    region could not be planned at all when each piece was rounded on its own)."""
+    spec = ExperimentSpec("mid", -5.0, 5.0, -15.0, 15.0)
+    plan = plan_experiment(spec)
+    assert plan.complete, plan.notes
+    prog = read_steps(plan.programme.to_csv(tmp_path / "mid.csv"), Limits())
+    _, temp, grad = _ode_trajectory(prog, plan.params)
+    rep = coverage_report(temp, grad, BinGrid(-5.0, 5.0), 6)
+    assert rep.complete and prog.total_min <= 540.0
