@@ -88,7 +88,7 @@ def main() -> int:
         print(f"{row['experiment']}: coverage {res['coverage']:.1%} (summary "
               f"{row['coverage']:.1%}{'' if same else ', DIFFERENT'}), min levels "
               f"{res['min_levels']}, {res['duration_min']:g} min, {res['steps']} steps, "
-              f"device {res['device_min_c']:.2f}..{res['device_max_c']:.2f} degC, chamber "
+              f"device {res['device_min_c']:.3f}..{res['device_max_c']:.3f} degC, chamber "
               f"{res['chamber_min_c']:g}..{res['chamber_max_c']:g} degC, rates "
               f"{res['rate_min']:.3f}..{res['rate_max']:.3f} degC/min, chamber "
               f"{res['chamber_start_c']:g} -> {res['chamber_end_c']:g} degC")
