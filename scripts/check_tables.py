@@ -77,6 +77,10 @@ def main() -> int:
     bad = 0
     for _, row in summary.iterrows():
         folder = args.out / str(row["experiment"])
+        if not (folder / "steps.csv").exists():
+            print(f"{row['experiment']}: no step table (status {row.get('status', '?')}), "
+                  "nothing to check")
+            continue
         plan = json.loads((folder / "plan.json").read_text())
         spec = plan["spec"]
         res = check(folder / "steps.csv", args.tau_s or plan["tau_s"],

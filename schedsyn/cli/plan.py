@@ -233,11 +233,16 @@ def run(args: argparse.Namespace) -> int:
         from ..planner import robustness_price
 
         if progress:
-            progress(f"{spec.name}: planning the nominal point for the price of robustness")
-        nominal = plan_experiment(spec, params, plan.limits, progress=progress)
-        price = robustness_price(nominal, plan, robust_tau, robust_dt0)
-        write_frame_atomic(out / "price.csv", price, inputs)
-        print("price of robustness (both plans checked on the same grid over the box):")
-        print(price.to_string(index=False))
-        print(f"wrote {out}/price.csv")
+            progress("planning the nominal point for the price of robustness")
+        try:
+            nominal = plan_experiment(spec, params, plan.limits, progress=progress)
+        except InfeasiblePlanError as exc:  # the robust plan's files are written already
+            print(f"price of robustness not computed: the nominal point cannot be planned "
+                  f"({exc})")
+        else:
+            price = robustness_price(nominal, plan, robust_tau, robust_dt0)
+            write_frame_atomic(out / "price.csv", price, inputs)
+            print("price of robustness (both plans checked on the same grid over the box):")
+            print(price.to_string(index=False))
+            print(f"wrote {out}/price.csv")
     return 0 if plan.complete else 1
