@@ -1464,9 +1464,10 @@ def plan_experiment(
     search = _synthesise(spec, params_list, limits, models, progress)
     notes: list[str] = []
     if robust and search.best is None:
-        # no one programme fits the whole box: plan for the inner half of the box (half
-        # of each range, same centre), else for the nominal point with the widest band
-        # separation that fits; the box check below says which part of the box it covers
+        # no one programme fits the whole box: plan for its inner half (half of each
+        # range, same centre), then its inner quarter, else for the nominal point with the
+        # widest band separation that fits; the box check below says which part of the
+        # whole box the result covers
         def inner(rng, share):
             if rng is None:
                 return None
