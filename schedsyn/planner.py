@@ -70,9 +70,6 @@ KNOT_INSETS_C = (1.5, 4.0)
 #: A sweep crosses an inner knot at a planned sample within +- this plus half the
 #: distance its band's top speed covers in one sample, degC.
 KNOT_TOL_C = 0.25
-#: Robust plans may widen the bands by this factor (1: the per-scenario slack below
-#: absorbs the scenarios' spread better than wider bands, which slow every sweep down).
-ROBUST_WIDTH_FACTOR = 1.0
 #: Robust plans: how far outside its band a scenario other than the reference (box
 #: centre) may pass, degC/min; the bands are spaced by twice this more than delta.
 ROBUST_SLACK_C_PER_MIN = 0.05
@@ -299,6 +296,18 @@ def band_knots(spec: ExperimentSpec, insets_c: Sequence[float] | None = None) ->
     return (lo - m, *(lo + k for k in inner), *(hi - k for k in reversed(inner)), hi + m)
 
 
+def _invert_increasing(fun, target: float, hi: float) -> float:
+    """Largest ``v`` in ``[0, hi]`` with ``fun(v) < target`` for increasing ``fun`` (bisection)."""
+    lo_v, hi_v = 0.0, hi
+    for _ in range(60):
+        mid = 0.5 * (lo_v + hi_v)
+        if fun(mid) < target:
+            lo_v = mid
+        else:
+            hi_v = mid
+    return lo_v
+
+
 def _dynamic_tops(tops, knots, direction, tau_min, limits,
                   turn_fraction: float = TURN_ACCEL_FRACTION):
     """Lower the band tops so that a sweep can follow them.
@@ -321,16 +330,7 @@ def _dynamic_tops(tops, knots, direction, tau_min, limits,
     def g(v):  # distance to slow down from v to 0: tau (v - b ln(1 + v/b))
         return tau_min * (v - b * math.log(1.0 + v / b))
 
-    def inverse(fun, target, hi):
-        lo_v, hi_v = 0.0, hi
-        for _ in range(60):
-            mid = 0.5 * (lo_v + hi_v)
-            if fun(mid) < target:
-                lo_v = mid
-            else:
-                hi_v = mid
-        return lo_v
-
+    inverse = _invert_increasing
     order = list(range(len(knots))) if direction > 0 else list(range(len(knots)))[::-1]
     v = list(tops)
     for i, j in zip(order[:-1], order[1:], strict=True):      # speeding up, forwards
@@ -357,14 +357,7 @@ def turning_speed(room_c: float, reverse_rate_c_per_min: float, tau_min: float,
     def dist(v):
         return tau_min * (v - b * math.log1p(v / b))
 
-    lo_v, hi_v = 0.0, 20.0
-    for _ in range(60):
-        mid = 0.5 * (lo_v + hi_v)
-        if dist(mid) < room_c:
-            lo_v = mid
-        else:
-            hi_v = mid
-    return lo_v
+    return _invert_increasing(dist, room_c, 20.0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -610,7 +603,7 @@ class _SubLP:
                 if knot is not None:  # cross the knot at the planned sample
                     k = b_ - self.s_from
                     # a fast sweep moves far in one sample: half a sample's travel more
-                    tol = self.planner.knot_tol_c + 0.5 * SAMPLE_MIN * float(
+                    tol = KNOT_TOL_C + 0.5 * SAMPLE_MIN * float(
                         win.band.bounds(knot)[1])
                     if win.knot_tol_c is not None:
                         tol = win.knot_tol_c[si][pieces_done]
@@ -723,7 +716,6 @@ class _Planner:
         self.spec, self.limits, self.responses = spec, limits, responses
         self.n_lp = 0
         self.lp_s = 0.0
-        self.knot_tol_c = KNOT_TOL_C
         #: the device limits are tightened by this in the LPs (raised when rounding the
         #: step table for the operator pushes the device a hair past a limit)
         self.device_margin_c = 0.0
@@ -980,7 +972,7 @@ def _scenario_windows(planner: _Planner, u_fixed: np.ndarray, u_new: np.ndarray,
     if j_need > max_seg:
         return None
     ref = per[0]
-    tol_all[0] = (planner.knot_tol_c,) * len(knots)  # the reference keeps its plan
+    tol_all[0] = (KNOT_TOL_C,) * len(knots)  # the reference keeps its plan
     return replace(win, start_s=ref[0], end_s=ref[1], cuts=ref[2],
                    per_scenario=tuple(per), knot_tol_c=tuple(tol_all)), j_need
 
@@ -1212,8 +1204,14 @@ def robustness_price(nominal: Plan, robust: Plan, tau_s_range: tuple[float, floa
     """
     rows = []
     for name, plan in (("nominal", nominal), ("robust", robust)):
-        box = _verify_robust(plan.programme, plan.spec, nominal.params, tau_s_range,
-                             dt0_c_range, plan.limits)
+        box = plan.box_check  # a robust plan was checked on this box's grid already
+        taus = [p.tau_s for p in plan.scenarios]
+        dt0s = [p.dt0_c for p in plan.scenarios]
+        same_box = (tau_s_range in (None, (min(taus), max(taus)))
+                    and dt0_c_range in (None, (min(dt0s), max(dt0s))))
+        if box is None or not same_box:
+            box = _verify_robust(plan.programme, plan.spec, nominal.params, tau_s_range,
+                                 dt0_c_range, plan.limits)
         rows.append({
             "plan": name,
             "duration_min": plan.duration_min,
@@ -1340,15 +1338,10 @@ def _synthesise(spec, params_list, limits, models, progress, max_candidates=None
                 cap_by_dir = {
                     -1: (caps[0] * spec.max_cool_c_per_min, caps[1] * spec.max_cool_c_per_min),
                     +1: (caps[2] * spec.max_heat_c_per_min, caps[3] * spec.max_heat_c_per_min)}
-                # several scenarios cannot all cross inner knots at the same planned
-                # samples: robust plans use bands that are affine across the region
-                # and wider bands, since the scenarios' gradients differ at any moment
-                robust = len(params_list) > 1
-                insets = None
-                width = BAND_WIDTH_C_PER_MIN * (ROBUST_WIDTH_FACTOR if robust else 1.0)
+                # robust plans use the same bands: each scenario gets its own windows
+                # and a slack (see _scenario_windows and _SubLP.window)
                 bands = {d: make_bands(spec, n_by_dir[d], d, sep, params_list, limits,
-                                       width_c_per_min=width, caps=cap_by_dir[d],
-                                       dynamic=dynamic, knot_insets_c=insets,
+                                       caps=cap_by_dir[d], dynamic=dynamic,
                                        design=DESIGNS[design])
                          if n_by_dir[d] else [] for d in (+1, -1)}
                 narrow = [d for d in (+1, -1) if bands[d] and _band_feasibility(bands[d]) <= 0]

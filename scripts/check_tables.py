@@ -73,6 +73,10 @@ def main() -> int:
     ap.add_argument("--tau-s", type=float, default=None)
     ap.add_argument("--dt0-c", type=float, default=None)
     args = ap.parse_args()
+    if not (args.out / "summary.csv").is_file():
+        print(f"check_tables: error: {args.out / 'summary.csv'} not found; give the folder "
+              "`schedsyn campaign --out DIR` wrote", file=sys.stderr)
+        return 2
     summary = pd.read_csv(args.out / "summary.csv")
     bad = 0
     for _, row in summary.iterrows():
