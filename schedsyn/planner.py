@@ -972,7 +972,6 @@ def _scenario_windows(planner: _Planner, u_fixed: np.ndarray, u_new: np.ndarray,
     if j_need > max_seg:
         return None
     ref = per[0]
-    tol_all[0] = (KNOT_TOL_C,) * len(knots)  # the reference keeps its plan
     return replace(win, start_s=ref[0], end_s=ref[1], cuts=ref[2],
                    per_scenario=tuple(per), knot_tol_c=tuple(tol_all)), j_need
 
