@@ -100,8 +100,9 @@ class CampaignConfig:
             raise ParameterError(f"experiment names must be distinct, repeated: {dup}")
         for n in names:
             if any(c in n for c in "/\\") or n in (".", ".."):
-                raise ParameterError(f"experiment name {n!r} cannot name a folder; use "
-                                     "letters, digits, '-' or '_'")
+                raise ParameterError(
+                    f"experiment name {n!r} cannot name a folder; use letters, digits, '-' or '_'"
+                )
         object.__setattr__(self, "experiments", exps)
         for key in ("robust_tau_s", "robust_dt0_c"):
             v = getattr(self, key)
@@ -112,8 +113,9 @@ class CampaignConfig:
                 object.__setattr__(self, key, v)
         base = tuple(None if b is None else Path(b) for b in self.baseline_steps)
         if base and len(base) != len(exps):
-            raise ParameterError(f"baseline_steps needs one entry per experiment "
-                                 f"({len(exps)}), got {len(base)}")
+            raise ParameterError(
+                f"baseline_steps needs one entry per experiment ({len(exps)}), got {len(base)}"
+            )
         object.__setattr__(self, "baseline_steps", base)
 
     def baseline_for(self, i: int) -> Path | None:
@@ -126,8 +128,7 @@ def default_campaign() -> CampaignConfig:
     Experiment W1 is compared with the paper-like baseline ``data/baseline_exp1_steps.csv``.
     """
     exps = tuple(ExperimentSpec(n, wl, wh, al, ah) for n, wl, wh, al, ah in PAPER_REGIONS_C)
-    return CampaignConfig(
-        experiments=exps, baseline_steps=(PAPER_BASELINE_EXP1, None, None, None))
+    return CampaignConfig(experiments=exps, baseline_steps=(PAPER_BASELINE_EXP1, None, None, None))
 
 
 # ---------------------------------------------------------------------------------------
@@ -166,8 +167,11 @@ def _table(doc: dict, name: str, path: Path) -> dict:
 
 
 def _pair(value: Any, where: str) -> tuple[float, float]:
-    if (not isinstance(value, list) or len(value) != 2
-            or any(isinstance(x, bool) or not isinstance(x, int | float) for x in value)):
+    if (
+        not isinstance(value, list)
+        or len(value) != 2
+        or any(isinstance(x, bool) or not isinstance(x, int | float) for x in value)
+    ):
         raise ParameterError(f"{where} must be [LO, HI] (two numbers), got {value!r}")
     return float(value[0]), float(value[1])
 
@@ -185,13 +189,17 @@ def campaign_from_dict(doc: dict, path: Path | str = "<config>") -> CampaignConf
     _check_keys(doc, ("model", "limits", "settings", "robust", "experiment"), str(path))
     model = _table(doc, "model", path)
     _check_keys(model, ("tau_s", "dt0_c"), _where(path, "model"))
-    params = _wrap(_where(path, "model"), lambda: ThermalParams(
-        **{k: _value(v, k, _where(path, "model")) for k, v in model.items()}))
+    params = _wrap(
+        _where(path, "model"),
+        lambda: ThermalParams(**{k: _value(v, k, _where(path, "model")) for k, v in model.items()}),
+    )
     lim = _table(doc, "limits", path)
     lim_keys = [f.name for f in dataclasses.fields(Limits)]
     _check_keys(lim, lim_keys, _where(path, "limits"))
-    limits = _wrap(_where(path, "limits"), lambda: Limits(
-        **{k: _value(v, k, _where(path, "limits")) for k, v in lim.items()}))
+    limits = _wrap(
+        _where(path, "limits"),
+        lambda: Limits(**{k: _value(v, k, _where(path, "limits")) for k, v in lim.items()}),
+    )
     settings = _table(doc, "settings", path)
     _check_keys(settings, _SETTING_KEYS, _where(path, "settings"))
     settings = {k: _value(v, k, _where(path, "settings")) for k, v in settings.items()}
@@ -201,14 +209,18 @@ def campaign_from_dict(doc: dict, path: Path | str = "<config>") -> CampaignConf
 
     raw = doc.get("experiment")
     if raw is None:
-        raise ParameterError(f"{path}: no experiment; add at least one [[experiment]] table "
-                             "with name, working_lo_c, working_hi_c, approx_lo_c, approx_hi_c")
+        raise ParameterError(
+            f"{path}: no experiment; add at least one [[experiment]] table "
+            "with name, working_lo_c, working_hi_c, approx_lo_c, approx_hi_c"
+        )
     if not isinstance(raw, list) or not all(isinstance(e, dict) for e in raw) or not raw:
         raise ParameterError(f"{path}: experiment must be an array of tables [[experiment]]")
-    specs, baselines = [], []
+    specs: list[ExperimentSpec] = []
+    baselines: list[Path | None] = []
     for i, exp in enumerate(raw, start=1):
         where = f"{path}: [[experiment]] #{i}" + (
-            f" ({exp['name']})" if isinstance(exp.get("name"), str) else "")
+            f" ({exp['name']})" if isinstance(exp.get("name"), str) else ""
+        )
         _check_keys(exp, (*_REGION_KEYS, *_SETTING_KEYS, "baseline_steps"), where)
         missing = [k for k in _REGION_KEYS if k not in exp]
         if missing:
@@ -225,13 +237,22 @@ def campaign_from_dict(doc: dict, path: Path | str = "<config>") -> CampaignConf
             baselines.append(base_path)
         else:
             baselines.append(None)
-        kw = {**settings, **{k: _value(v, k, where) for k, v in exp.items()
-                             if k != "baseline_steps"}}
-        specs.append(_wrap(where, lambda kw=kw: ExperimentSpec(**kw)))
-    return _wrap(str(path), lambda: CampaignConfig(
-        experiments=tuple(specs), params=params, limits=limits,
-        robust_tau_s=box.get("tau_s"), robust_dt0_c=box.get("dt0_c"),
-        baseline_steps=tuple(baselines) if any(b is not None for b in baselines) else ()))
+        kw = {
+            **settings,
+            **{k: _value(v, k, where) for k, v in exp.items() if k != "baseline_steps"},
+        }
+        specs.append(_wrap(where, partial(ExperimentSpec, **kw)))
+    return _wrap(
+        str(path),
+        lambda: CampaignConfig(
+            experiments=tuple(specs),
+            params=params,
+            limits=limits,
+            robust_tau_s=box.get("tau_s"),
+            robust_dt0_c=box.get("dt0_c"),
+            baseline_steps=tuple(baselines) if any(b is not None for b in baselines) else (),
+        ),
+    )
 
 
 def load_campaign(path: Path | str) -> CampaignConfig:
@@ -289,40 +310,69 @@ def _plan_job(job: _PlanJob, progress: Callable[[str], None] | None) -> Plan | I
 
     say("planning")
     try:
-        plan = plan_experiment(job.spec, job.params, job.limits,
-                               robust_tau_s=job.robust_tau_s, robust_dt0_c=job.robust_dt0_c,
-                               progress=say)
+        plan = plan_experiment(
+            job.spec,
+            job.params,
+            job.limits,
+            robust_tau_s=job.robust_tau_s,
+            robust_dt0_c=job.robust_dt0_c,
+            progress=say,
+        )
     except InfeasiblePlanError as exc:
         say(f"infeasible: {exc}")
         best = exc.best_coverage if exc.best_coverage is not None else 0.0
         return Infeasible(str(exc), float(best))
-    say(f"done: {plan.status}, coverage {plan.coverage.coverage:.0%}, "
-        f"{plan.duration_min:g} min")
+    say(f"done: {plan.status}, coverage {plan.coverage.coverage:.0%}, {plan.duration_min:g} min")
     return plan
 
 
-def _baseline_row(path: Path | None, spec: ExperimentSpec, params: ThermalParams,
-                  limits: Limits) -> dict:
+def _baseline_row(
+    path: Path | None, spec: ExperimentSpec, params: ThermalParams, limits: Limits
+) -> dict:
     """Coverage of a paper-like step table by dense simulation (NaN/'none' without one)."""
     if path is None:
-        return {"baseline": "none", "baseline_duration_min": np.nan, "baseline_steps": np.nan,
-                "baseline_coverage": np.nan, "baseline_min_levels": np.nan,
-                "baseline_coverage_delta_0p1": np.nan}
+        return {
+            "baseline": "none",
+            "baseline_duration_min": np.nan,
+            "baseline_steps": np.nan,
+            "baseline_coverage": np.nan,
+            "baseline_min_levels": np.nan,
+            "baseline_coverage_delta_0p1": np.nan,
+        }
     prog = read_steps(path)
     traj = simulate(prog, params, t0_c=limits.t_init_c)
-    rep = coverage_report(traj.t_c, traj.g_c_per_min, spec.grid, spec.levels_required,
-                          spec.delta_c_per_min)
+    rep = coverage_report(
+        traj.t_c, traj.g_c_per_min, spec.grid, spec.levels_required, spec.delta_c_per_min
+    )
     rep01 = coverage_report(traj.t_c, traj.g_c_per_min, spec.grid, spec.levels_required, 0.1)
-    return {"baseline": Path(path).name, "baseline_duration_min": prog.total_min,
-            "baseline_steps": prog.n_segments, "baseline_coverage": rep.coverage,
-            "baseline_min_levels": rep.min_levels, "baseline_coverage_delta_0p1": rep01.coverage}
+    return {
+        "baseline": Path(path).name,
+        "baseline_duration_min": prog.total_min,
+        "baseline_steps": prog.n_segments,
+        "baseline_coverage": rep.coverage,
+        "baseline_min_levels": rep.min_levels,
+        "baseline_coverage_delta_0p1": rep01.coverage,
+    }
 
 
 SUMMARY_COLUMNS = (
-    "experiment", "working_min_c", "working_max_c", "duration_min", "steps", "coverage",
-    "min_levels", "solve_s", "coverage_delta_0p1", "complete", "status",
-    "baseline", "baseline_duration_min", "baseline_steps", "baseline_coverage",
-    "baseline_min_levels", "baseline_coverage_delta_0p1",
+    "experiment",
+    "working_min_c",
+    "working_max_c",
+    "duration_min",
+    "steps",
+    "coverage",
+    "min_levels",
+    "solve_s",
+    "coverage_delta_0p1",
+    "complete",
+    "status",
+    "baseline",
+    "baseline_duration_min",
+    "baseline_steps",
+    "baseline_coverage",
+    "baseline_min_levels",
+    "baseline_coverage_delta_0p1",
 )
 
 
@@ -347,20 +397,41 @@ class CampaignResult:
     def summary_frame(self) -> pd.DataFrame:
         """One row per experiment: the plan's figures next to the baseline's."""
         rows = []
-        for spec, plan, base in zip(self.config.experiments, self.plans, self.baselines,
-                                    strict=True):
+        for spec, plan, base in zip(
+            self.config.experiments, self.plans, self.baselines, strict=True
+        ):
             if plan is not None:
                 s = plan.to_summary_dict()
-                row = {k: s[k] for k in ("experiment", "working_min_c", "working_max_c",
-                                         "duration_min", "steps", "coverage", "min_levels",
-                                         "solve_s", "coverage_delta_0p1", "complete")}
+                row = {
+                    k: s[k]
+                    for k in (
+                        "experiment",
+                        "working_min_c",
+                        "working_max_c",
+                        "duration_min",
+                        "steps",
+                        "coverage",
+                        "min_levels",
+                        "solve_s",
+                        "coverage_delta_0p1",
+                        "complete",
+                    )
+                }
                 row["status"] = plan.status
             else:
-                row = {"experiment": spec.name, "working_min_c": spec.working_lo_c,
-                       "working_max_c": spec.working_hi_c, "duration_min": np.nan,
-                       "steps": np.nan, "coverage": 0.0, "min_levels": 0, "solve_s": np.nan,
-                       "coverage_delta_0p1": 0.0, "complete": False,
-                       "status": "infeasible"}
+                row = {
+                    "experiment": spec.name,
+                    "working_min_c": spec.working_lo_c,
+                    "working_max_c": spec.working_hi_c,
+                    "duration_min": np.nan,
+                    "steps": np.nan,
+                    "coverage": 0.0,
+                    "min_levels": 0,
+                    "solve_s": np.nan,
+                    "coverage_delta_0p1": 0.0,
+                    "complete": False,
+                    "status": "infeasible",
+                }
             row.update(base)
             rows.append(row)
         return pd.DataFrame(rows, columns=list(SUMMARY_COLUMNS))
@@ -397,12 +468,20 @@ def plan_campaign(
         message is in ``errors``.
     """
     tic = time.perf_counter()
-    jobs = [_PlanJob(s, config.params, config.limits, config.robust_tau_s, config.robust_dt0_c)
-            for s in config.experiments]
+    jobs = [
+        _PlanJob(s, config.params, config.limits, config.robust_tau_s, config.robust_dt0_c)
+        for s in config.experiments
+    ]
     # longest first, so that the pool is not left waiting on one long experiment at the end
     order = sorted(range(len(jobs)), key=lambda i: -planning_effort(jobs[i].spec, jobs[i].limits))
-    done = run_map(partial(_plan_job, progress=progress), [jobs[i] for i in order], backend,
-                   workers=workers, progress=progress is not None, desc="experiments")
+    done = run_map(
+        partial(_plan_job, progress=progress),
+        [jobs[i] for i in order],
+        backend,
+        workers=workers,
+        progress=progress is not None,
+        desc="experiments",
+    )
     out = [None] * len(jobs)
     for k, i in enumerate(order):
         out[i] = done[k]
@@ -410,7 +489,8 @@ def plan_campaign(
     errors = tuple("" if isinstance(p, Plan) else str(p) for p in out)
     baselines = tuple(
         _baseline_row(config.baseline_for(i), s, config.params, config.limits)
-        for i, s in enumerate(config.experiments))
+        for i, s in enumerate(config.experiments)
+    )
     return CampaignResult(config, plans, errors, baselines, time.perf_counter() - tic)
 
 
@@ -418,8 +498,16 @@ def plan_campaign(
 # what chamber do I need?
 # ---------------------------------------------------------------------------------------
 CHAMBER_COLUMNS = (
-    "chamber_min_c", "chamber_max_c", "coverage", "coverage_delta_0p1", "min_levels",
-    "duration_min", "steps", "complete", "status", "notes",
+    "chamber_min_c",
+    "chamber_max_c",
+    "coverage",
+    "coverage_delta_0p1",
+    "min_levels",
+    "duration_min",
+    "steps",
+    "complete",
+    "status",
+    "notes",
 )
 
 
@@ -434,9 +522,10 @@ class _ChamberJob:
 
 def _chamber_job(job: _ChamberJob, progress) -> Plan | Infeasible:
     tag = f"{job.spec.name} floor {job.limits.chamber_min_c:g} ceiling {job.limits.chamber_max_c:g}"
-    return _plan_job(_PlanJob(job.spec, job.params, job.limits, job.robust_tau_s,
-                              job.robust_dt0_c),
-                     None if progress is None else partial(_tagged, progress, tag))
+    return _plan_job(
+        _PlanJob(job.spec, job.params, job.limits, job.robust_tau_s, job.robust_dt0_c),
+        None if progress is None else partial(_tagged, progress, tag),
+    )
 
 
 def _tagged(progress, tag: str, msg: str) -> None:
@@ -469,8 +558,14 @@ def chamber_plans(
         except ParameterError as exc:
             raise ParameterError(f"chamber floor {f:g} / ceiling {c:g} degC: {exc}") from None
         jobs.append(_ChamberJob(spec, params, lim, robust_tau_s, robust_dt0_c))
-    out = run_map(partial(_chamber_job, progress=progress), jobs, backend, workers=workers,
-                  progress=progress is not None, desc="chambers")
+    out = run_map(
+        partial(_chamber_job, progress=progress),
+        jobs,
+        backend,
+        workers=workers,
+        progress=progress is not None,
+        desc="chambers",
+    )
     return pairs, out
 
 
@@ -479,17 +574,35 @@ def chamber_frame(pairs, results) -> pd.DataFrame:
     rows = []
     for (f, c), r in zip(pairs, results, strict=True):
         if isinstance(r, Plan):
-            rows.append({"chamber_min_c": f, "chamber_max_c": c,
-                         "coverage": r.coverage.coverage,
-                         "coverage_delta_0p1": r.coverage_0p1.coverage,
-                         "min_levels": r.coverage.min_levels, "duration_min": r.duration_min,
-                         "steps": r.steps, "complete": r.complete, "status": r.status,
-                         "notes": " | ".join(r.notes)})
+            rows.append(
+                {
+                    "chamber_min_c": f,
+                    "chamber_max_c": c,
+                    "coverage": r.coverage.coverage,
+                    "coverage_delta_0p1": r.coverage_0p1.coverage,
+                    "min_levels": r.coverage.min_levels,
+                    "duration_min": r.duration_min,
+                    "steps": r.steps,
+                    "complete": r.complete,
+                    "status": r.status,
+                    "notes": " | ".join(r.notes),
+                }
+            )
         else:
-            rows.append({"chamber_min_c": f, "chamber_max_c": c, "coverage": r.best_coverage,
-                         "coverage_delta_0p1": np.nan, "min_levels": 0,
-                         "duration_min": np.nan, "steps": np.nan, "complete": False,
-                         "status": "infeasible", "notes": str(r)})
+            rows.append(
+                {
+                    "chamber_min_c": f,
+                    "chamber_max_c": c,
+                    "coverage": r.best_coverage,
+                    "coverage_delta_0p1": np.nan,
+                    "min_levels": 0,
+                    "duration_min": np.nan,
+                    "steps": np.nan,
+                    "complete": False,
+                    "status": "infeasible",
+                    "notes": str(r),
+                }
+            )
     return pd.DataFrame(rows, columns=list(CHAMBER_COLUMNS))
 
 
@@ -518,6 +631,15 @@ def chamber_requirement(
     so coverage of a region near -50 degC grows as the floor is lowered.
     """
     pairs, results = chamber_plans(
-        spec, floors_c, ceilings_c, params, limits, robust_tau_s=robust_tau_s,
-        robust_dt0_c=robust_dt0_c, progress=progress, backend=backend, workers=workers)
+        spec,
+        floors_c,
+        ceilings_c,
+        params,
+        limits,
+        robust_tau_s=robust_tau_s,
+        robust_dt0_c=robust_dt0_c,
+        progress=progress,
+        backend=backend,
+        workers=workers,
+    )
     return chamber_frame(pairs, results)

@@ -141,9 +141,7 @@ class RunComparison:
         )
 
 
-def resample_run(
-    log: MeasuredLog, estimate: GradientEstimate, dt_min: float = 0.1
-) -> Trajectory:
+def resample_run(log: MeasuredLog, estimate: GradientEstimate, dt_min: float = 0.1) -> Trajectory:
     """The smoothed run on a regular grid ``0, dt, ...`` over the log's span.
 
     Linear interpolation between log rows; grid points inside a sampling gap
@@ -158,8 +156,11 @@ def resample_run(
         inside = (grid > start_s / 60.0) & (grid < end_s / 60.0)
         temp[inside] = np.nan
         grad[inside] = np.nan
-    tk = (np.interp(grid, t_log, log.tk_set_c) if log.tk_set_c is not None
-          else np.full(grid.shape, np.nan))
+    tk = (
+        np.interp(grid, t_log, log.tk_set_c)
+        if log.tk_set_c is not None
+        else np.full(grid.shape, np.nan)
+    )
     return Trajectory(time_min=grid, tk_c=tk, t_c=temp, g_c_per_min=grad)
 
 
@@ -215,9 +216,11 @@ def compare_run(
         raise ParameterError(f"t0_c must be finite, got {t0_c!r}")
     simulated = simulate(programme, params, times_min=log.time_min, t0_c=t0_c)
     planned = simulate(programme, params, dt_min=dt_min, t0_c=t0_c)
-    planned_cov = coverage_report(planned.t_c, planned.g_c_per_min, grid, levels_required,
-                                  delta_c_per_min)
+    planned_cov = coverage_report(
+        planned.t_c, planned.g_c_per_min, grid, levels_required, delta_c_per_min
+    )
     run_dense = resample_run(log, est, dt_min)
-    run_cov = coverage_report(run_dense.t_c, run_dense.g_c_per_min, grid, levels_required,
-                              delta_c_per_min)
+    run_cov = coverage_report(
+        run_dense.t_c, run_dense.g_c_per_min, grid, levels_required, delta_c_per_min
+    )
     return RunComparison(log, est, simulated, planned, run_dense, planned_cov, run_cov, params)

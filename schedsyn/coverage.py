@@ -28,8 +28,9 @@ def passes(temps_c: np.ndarray, grads_c_per_min: np.ndarray, grid: BinGrid):
     t = np.asarray(temps_c, dtype=float)
     g = np.asarray(grads_c_per_min, dtype=float)
     if t.shape != g.shape or t.ndim != 1:
-        raise ParameterError(f"temperatures and gradients must be 1-D of equal length, got "
-                             f"{t.shape} and {g.shape}")
+        raise ParameterError(
+            f"temperatures and gradients must be 1-D of equal length, got {t.shape} and {g.shape}"
+        )
     k = grid.index(t)
     if t.size == 0:
         empty = np.zeros(0, dtype=np.int64)
@@ -159,6 +160,9 @@ def trajectory_coverage(
 ) -> CoverageReport:
     """Coverage of ``[lo_c, hi_c]`` by a :class:`~schedsyn.simulate.Trajectory`."""
     return coverage_report(
-        trajectory.t_c, trajectory.g_c_per_min, BinGrid(lo_c, hi_c, bin_c),
-        levels_required, delta_c_per_min,
+        trajectory.t_c,
+        trajectory.g_c_per_min,
+        BinGrid(lo_c, hi_c, bin_c),
+        levels_required,
+        delta_c_per_min,
     )

@@ -150,11 +150,28 @@ class _Data:
     def subset(self, until_min: float) -> _Data:
         m = self.time_min <= until_min
         if self.air_time_min is None:
-            return _Data(self.programme, self.time_min[m], self.t_c[m], self.t_var[m],
-                         None, None, None, self.step_min)
+            return _Data(
+                self.programme,
+                self.time_min[m],
+                self.t_c[m],
+                self.t_var[m],
+                None,
+                None,
+                None,
+                self.step_min,
+            )
+        assert self.air_c is not None and self.air_var is not None  # set with the times
         am = self.air_time_min <= until_min
-        return _Data(self.programme, self.time_min[m], self.t_c[m], self.t_var[m],
-                     self.air_time_min[am], self.air_c[am], self.air_var[am], self.step_min)
+        return _Data(
+            self.programme,
+            self.time_min[m],
+            self.t_c[m],
+            self.t_var[m],
+            self.air_time_min[am],
+            self.air_c[am],
+            self.air_var[am],
+            self.step_min,
+        )
 
 
 def _block_means(
@@ -224,8 +241,12 @@ def _prepare(log, settings: DiagnoseSettings) -> tuple[_Data, dict]:
         stride = max(1, int(round(step_min * 60.0 / dt_s)))
         pick = ok_a[::stride]
         at, av, avar = t_min[pick], air[pick], np.zeros(pick.size)
-    info = {"sample_s": dt_s, "duration_s": duration_s, "fit_step_s": step_min * 60.0,
-            "t_first_s": t0_s}
+    info = {
+        "sample_s": dt_s,
+        "duration_s": duration_s,
+        "fit_step_s": step_min * 60.0,
+        "t_first_s": t0_s,
+    }
     return _Data(programme, bt, bv, bvar, at, av, avar, step_min), info
 
 
@@ -270,20 +291,29 @@ def _spec(effect: str, theta: np.ndarray, names: Sequence[str]) -> ModelSpec:
 
 def _residuals(spec: ModelSpec, t0: float, data: _Data) -> tuple[np.ndarray, np.ndarray | None]:
     temp, air = spec.predict_channels(
-        data.programme, data.time_min, data.air_time_min, t0_c=t0,
+        data.programme,
+        data.time_min,
+        data.air_time_min,
+        t0_c=t0,
         grid_min=min(data.step_min, 1 / 3),
     )
     # block mean = f(t_mean) + var/2 f''
     temp = temp + 0.5 * data.t_var * _second_derivative(data.time_min, temp)
-    if air is None:
+    if air is None or data.air_time_min is None or data.air_var is None:
         return temp - data.t_c, None
     air = air + 0.5 * data.air_var * _second_derivative(data.air_time_min, air)
     return temp - data.t_c, air - data.air_c
 
 
-def _fit(effect: str, starts: Sequence[np.ndarray], lo: np.ndarray, hi: np.ndarray,
-         data: _Data, fixed: Mapping[str, float] | None = None,
-         n_refine: int = 1) -> CandidateFit:
+def _fit(
+    effect: str,
+    starts: Sequence[np.ndarray],
+    lo: np.ndarray,
+    hi: np.ndarray,
+    data: _Data,
+    fixed: Mapping[str, float] | None = None,
+    n_refine: int = 1,
+) -> CandidateFit:
     names = () if effect == "none" else EFFECTS[effect].param_names
     fixed = dict(fixed or {})
     free_idx = [i for i, n in enumerate(_BASE_NAMES + names) if n not in fixed]
@@ -302,22 +332,31 @@ def _fit(effect: str, starts: Sequence[np.ndarray], lo: np.ndarray, hi: np.ndarr
         return r_t if r_a is None else np.concatenate((r_t, r_a))
 
     # multi-start: score every start with one evaluation, refine the best n_refine
-    x0s = [np.clip(np.asarray(s, dtype=float)[free_idx], lo[free_idx], hi[free_idx])
-           for s in starts]
+    x0s = [
+        np.clip(np.asarray(s, dtype=float)[free_idx], lo[free_idx], hi[free_idx]) for s in starts
+    ]
     if len(x0s) > n_refine:
         costs = [float(np.sum(fun(x) ** 2)) for x in x0s]
         x0s = [x0s[i] for i in np.argsort(costs)[:n_refine]]
-    best = None
+    best: optimize.OptimizeResult | None = None
     for x0 in x0s:
         try:
             res = optimize.least_squares(
-                fun, x0, bounds=(lo[free_idx], hi[free_idx]), x_scale="jac",
-                method="trf", diff_step=1e-4, max_nfev=60, xtol=1e-6, ftol=1e-6,
+                fun,
+                x0,
+                bounds=(lo[free_idx], hi[free_idx]),
+                x_scale="jac",
+                method="trf",
+                diff_step=1e-4,
+                max_nfev=60,
+                xtol=1e-6,
+                ftol=1e-6,
             )
         except (ValueError, np.linalg.LinAlgError) as exc:  # pragma: no cover - defensive
             raise SolverFailedError(f"fitting {effect} failed: {exc}") from exc
         if best is None or res.cost < best.cost:
             best = res
+    assert best is not None  # x0s is never empty
     theta = full(best.x)
     r = best.fun
     n = r.size
@@ -363,7 +402,7 @@ def _base_start(data: _Data) -> np.ndarray:
     ``T = e T0 + (1 - e)(Tk0 + dt0) + R_u``: affine in (T0, dt0) for a fixed tau.
     """
     prog, t = data.programme, data.time_min
-    best = None
+    best: tuple[float, float, np.ndarray] | None = None
     span_s = max(t[-1] * 60.0, 60.0)
     for tau_s in np.geomspace(max(span_s / 2000.0, 1.0), span_s * 2.0, 40):
         lin = LinearEffectModel(float(tau_s), 0.0)
@@ -377,6 +416,7 @@ def _base_start(data: _Data) -> np.ndarray:
         sse = float(np.sum((a @ coef - y) ** 2))
         if best is None or sse < best[0]:
             best = (sse, tau_s, coef)
+    assert best is not None  # the tau grid is not empty
     _, tau_s, (t0, dt0) = best
     return np.array([tau_s, float(np.clip(dt0, -49, 49)), t0])
 
@@ -387,8 +427,9 @@ def fit_base(data: _Data, start: CandidateFit | None = None) -> CandidateFit:
     return _fit("none", [x0], lo, hi, data)
 
 
-def _peak_periods(t_min: np.ndarray, r: np.ndarray, p_lo_s: float, p_hi_s: float,
-                  n_peaks: int = 3) -> list[float]:
+def _peak_periods(
+    t_min: np.ndarray, r: np.ndarray, p_lo_s: float, p_hi_s: float, n_peaks: int = 3
+) -> list[float]:
     """Periods (s) of the highest distinct peaks of the Lomb-Scargle periodogram of ``r``.
 
     The frequency grid is 4x finer than the natural resolution 1/span, so a sinusoid of
@@ -421,8 +462,9 @@ def _periodic_start(base: CandidateFit, data: _Data) -> list[tuple[float, float,
     p_lo = max(4.0 * data.step_min * 60.0, 60.0)
     p_hi = max(span_s / 4.0, 2 * p_lo)
     periods = _peak_periods(data.time_min, r_t, p_lo, p_hi)
-    if r_a is not None:
-        periods = _peak_periods(data.air_time_min, r_a, p_lo, p_hi) + periods
+    air_t = data.air_time_min
+    if r_a is not None and air_t is not None:
+        periods = _peak_periods(air_t, r_a, p_lo, p_hi) + periods
     starts = []
     for p_s in periods:
         w = 2.0 * np.pi * 60.0 / p_s
@@ -434,8 +476,8 @@ def _periodic_start(base: CandidateFit, data: _Data) -> list[tuple[float, float,
             c = (1.0 - a_) * v[:-1] + beta * np.diff(v)
             y = np.concatenate(([0.0], lfilter([1.0], [1.0, -a_], c)))
             cols_t.append(np.interp(data.time_min, grid, y))
-            if r_a is not None:
-                cols_a.append(fn(w * data.air_time_min))
+            if r_a is not None and air_t is not None:
+                cols_a.append(fn(w * air_t))
         a_mat = np.column_stack(cols_t)
         y_vec = -r_t
         if r_a is not None:
@@ -451,13 +493,12 @@ def _effect_starts(eff: Effect, base: CandidateFit, data: _Data) -> list[np.ndar
     b = np.array([base.values[n] for n in _BASE_NAMES])
     tau = b[0]
     scale = tau / 2400.0
-    extra: list[tuple[float, ...]]
+    extra: Sequence[tuple[float, ...]]
     if eff.name == "chamber_rate_limit":
         rates = data.programme.rates_c_per_min
         cool = max(-float(rates.min()), 0.05)
         heat = max(float(rates.max()), 0.05)
-        extra = [(0.5 * cool, 1.05 * heat), (0.8 * cool, 1.05 * heat),
-                 (1.05 * cool, 0.6 * heat)]
+        extra = [(0.5 * cool, 1.05 * heat), (0.8 * cool, 1.05 * heat), (1.05 * cool, 0.6 * heat)]
     elif eff.name == "chamber_cycling":
         extra = _periodic_start(base, data)
     elif eff.name == "asymmetric_tau":
@@ -480,8 +521,9 @@ def _effect_bounds(eff: Effect, data: _Data) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate((lo, elo)), np.concatenate((hi, ehi))
 
 
-def fit_candidate(name: str, base: CandidateFit, data: _Data,
-                  start: CandidateFit | None = None) -> CandidateFit:
+def fit_candidate(
+    name: str, base: CandidateFit, data: _Data, start: CandidateFit | None = None
+) -> CandidateFit:
     """Fit one effect, from multi-starts around the base fit (or from ``start`` alone)."""
     eff = EFFECTS[name]
     lo, hi = _effect_bounds(eff, data)
@@ -519,8 +561,19 @@ def _unbind_rate_limits(fit: CandidateFit, data: _Data) -> CandidateFit:
         return fit
     spec = ModelSpec(fit.model.tau_s, fit.model.dt0_c, fit.effect, params)
     values = dict(fit.values) | params
-    return CandidateFit(fit.effect, spec, fit.t0_c, values, se, fit.n_params, fit.n_residuals,
-                        fit.sse, fit.score, fit.rms_c, fit.rms_air_c)
+    return CandidateFit(
+        fit.effect,
+        spec,
+        fit.t0_c,
+        values,
+        se,
+        fit.n_params,
+        fit.n_residuals,
+        fit.sse,
+        fit.score,
+        fit.rms_c,
+        fit.rms_air_c,
+    )
 
 
 # --------------------------------------------------------------------------------------
@@ -559,8 +612,10 @@ class ResidualReport:
         seg = ""
         if len(worst):
             w = worst.iloc[0]
-            seg = (f"; worst segment {int(w['step'])} ({w['kind']}, {w['start_min']:.0f}-"
-                   f"{w['end_min']:.0f} min) rms {w['rms_c']:.3f} degC")
+            seg = (
+                f"; worst segment {int(w['step'])} ({w['kind']}, {w['start_min']:.0f}-"
+                f"{w['end_min']:.0f} min) rms {w['rms_c']:.3f} degC"
+            )
         return (
             f"residual rms {self.rms_c:.3f} degC (heating {self.rms_heating_c:.3f}, cooling "
             f"{self.rms_cooling_c:.3f}, hold {self.rms_hold_c:.3f}), max {self.max_abs_c:.3f} "
@@ -587,15 +642,31 @@ def analyse_residuals(
     rows = []
     for i in np.unique(seg):
         m = seg == i
-        rows.append({"step": i + 1, "start_min": edges[i], "end_min": edges[i + 1],
-                     "rate_c_per_min": rates[i], "kind": kind_of[i], "n": int(m.sum()),
-                     "rms_c": _rms(r[m]), "mean_c": float(r[m].mean())})
+        rows.append(
+            {
+                "step": i + 1,
+                "start_min": edges[i],
+                "end_min": edges[i + 1],
+                "rate_c_per_min": rates[i],
+                "kind": kind_of[i],
+                "n": int(m.sum()),
+                "rms_c": _rms(r[m]),
+                "mean_c": float(r[m].mean()),
+            }
+        )
     segments = pd.DataFrame(rows)
     kinds = kind_of[seg]
     band = 10.0 * np.floor(np.asarray(measured_c) / 10.0)
-    temp_rows = [{"t_lo_c": b, "t_hi_c": b + 10.0, "n": int((band == b).sum()),
-                  "rms_c": _rms(r[band == b]), "mean_c": float(r[band == b].mean())}
-                 for b in np.unique(band)]
+    temp_rows = [
+        {
+            "t_lo_c": b,
+            "t_hi_c": b + 10.0,
+            "n": int((band == b).sum()),
+            "rms_c": _rms(r[band == b]),
+            "mean_c": float(r[band == b].mean()),
+        }
+        for b in np.unique(band)
+    ]
     # whiteness: Ljung-Box Q = n (n+2) sum_k rho_k^2 / (n - k)
     x = r - r.mean()
     n = x.size
@@ -615,13 +686,22 @@ def analyse_residuals(
     g_p = min(1.0, m * (1.0 - share) ** (m - 1)) if m > 1 else 1.0
     i_max = int(np.argmax(np.abs(r)))
     return ResidualReport(
-        rms_c=_rms(r), max_abs_c=float(np.abs(r).max()), time_of_max_min=float(t[i_max]),
-        rms_heating_c=_rms(r[kinds == "heating"]), rms_cooling_c=_rms(r[kinds == "cooling"]),
-        rms_hold_c=_rms(r[kinds == "hold"]), lag1_autocorr=float(rho[0]), ljung_box_q=q,
-        ljung_box_p=p, lags=lags, white=p > 0.01,
+        rms_c=_rms(r),
+        max_abs_c=float(np.abs(r).max()),
+        time_of_max_min=float(t[i_max]),
+        rms_heating_c=_rms(r[kinds == "heating"]),
+        rms_cooling_c=_rms(r[kinds == "cooling"]),
+        rms_hold_c=_rms(r[kinds == "hold"]),
+        lag1_autocorr=float(rho[0]),
+        ljung_box_q=q,
+        ljung_box_p=p,
+        lags=lags,
+        white=p > 0.01,
         period_s=float(1.0 / freqs[k]) if spec.size else float("nan"),
-        period_share=share, periodic=bool(g_p < 0.01 and share > 0.05),
-        segments=segments, by_temperature=pd.DataFrame(temp_rows),
+        period_share=share,
+        periodic=bool(g_p < 0.01 and share > 0.05),
+        segments=segments,
+        by_temperature=pd.DataFrame(temp_rows),
     )
 
 
@@ -682,18 +762,20 @@ class Diagnosis:
         """The ranking: one row per candidate (base first), best score first after it."""
         rows = []
         for c in (self.base_fit, *self.candidates):
-            rows.append({
-                "effect": c.effect,
-                "chosen": c.effect == self.effect,
-                "score_bic": c.score,
-                "delta_bic_vs_none": c.score - self.base_fit.score,
-                "rms_c": c.rms_c,
-                "rms_air_c": c.rms_air_c,
-                "n_params": c.n_params,
-                "tau_s": c.values["tau_s"],
-                "dt0_c": c.values["dt0_c"],
-                "parameters": "; ".join(f"{k}={v:.4g}" for k, v in c.parameters.items()),
-            })
+            rows.append(
+                {
+                    "effect": c.effect,
+                    "chosen": c.effect == self.effect,
+                    "score_bic": c.score,
+                    "delta_bic_vs_none": c.score - self.base_fit.score,
+                    "rms_c": c.rms_c,
+                    "rms_air_c": c.rms_air_c,
+                    "n_params": c.n_params,
+                    "tau_s": c.values["tau_s"],
+                    "dt0_c": c.values["dt0_c"],
+                    "parameters": "; ".join(f"{k}={v:.4g}" for k, v in c.parameters.items()),
+                }
+            )
         return pd.DataFrame(rows)
 
     def to_json_dict(self) -> dict:
@@ -722,8 +804,12 @@ class Diagnosis:
                 "periodic": self.residuals_before.periodic,
             },
             "candidates": [
-                {"effect": c.effect, "score": c.score, "rms_c": c.rms_c,
-                 "parameters": {k: float(v) for k, v in c.parameters.items()}}
+                {
+                    "effect": c.effect,
+                    "score": c.score,
+                    "rms_c": c.rms_c,
+                    "parameters": {k: float(v) for k, v in c.parameters.items()},
+                }
                 for c in self.candidates
             ],
         }
@@ -732,10 +818,14 @@ class Diagnosis:
         lines = [f"effect: {self.effect}"]
         for k, v in self.parameters.items():
             lines.append(f"  {k} = {v:.4g} +- {self.stderr.get(k, float('nan')):.2g}")
-        lines.append(f"RMS gap (internal temperature from the setpoint): {self.rms_before_c:.4f}"
-                     f" -> {self.rms_after_c:.4f} degC")
-        lines.append(f"held-out (after {self.holdout_start_min:.0f} min, fitted without it): "
-                     f"{self.holdout_rms_before_c:.4f} -> {self.holdout_rms_after_c:.4f} degC")
+        lines.append(
+            f"RMS gap (internal temperature from the setpoint): {self.rms_before_c:.4f}"
+            f" -> {self.rms_after_c:.4f} degC"
+        )
+        lines.append(
+            f"held-out (after {self.holdout_start_min:.0f} min, fitted without it): "
+            f"{self.holdout_rms_before_c:.4f} -> {self.holdout_rms_after_c:.4f} degC"
+        )
         lines.append("before: " + self.residuals_before.summary())
         if self.effect != "none":
             lines.append("after:  " + self.residuals_after.summary())
@@ -804,7 +894,8 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
         if rel < settings.min_rel_improvement:
             warnings.append(
                 f"{cand.effect} lowers BIC by {gain:.0f} but the RMS gap only by {rel:.1%} "
-                f"(< {settings.min_rel_improvement:.0%}): not taken")
+                f"(< {settings.min_rel_improvement:.0%}): not taken"
+            )
             continue
         if tried >= settings.max_tries:
             break
@@ -817,7 +908,8 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
         warnings.append(
             f"{cand.effect} fits the log but does not predict its held-out last "
             f"{settings.holdout_fraction:.0%} better ({hb:.4f} -> {h_rms:.4f} degC): "
-            "not taken")
+            "not taken"
+        )
     ambiguous: list[str] = []
     if chosen != "none":
         if not has_air:
@@ -831,7 +923,8 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
                     warnings.append(
                         "chamber_lag and second_time_constant give the same internal "
                         "temperature; without tk_air_c they cannot be told apart "
-                        "(log the chamber air to decide)")
+                        "(log the chamber air to decide)"
+                    )
         for c in ranked:
             if c.effect in (chosen, *ambiguous):
                 continue
@@ -840,7 +933,8 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
                 warnings.append(
                     f"{c.effect} fits almost as well as {chosen} "
                     f"(BIC {c.score - fits[chosen].score:+.1f});"
-                    " the log does not tell them apart reliably")
+                    " the log does not tell them apart reliably"
+                )
     chosen_fit = fits[chosen] if chosen != "none" else base
     if chosen == "chamber_cycling":
         share = _setpoint_share(data.programme, chosen_fit.model.parameters["period_s"])
@@ -849,31 +943,52 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
                 f"the cycling period {chosen_fit.model.parameters['period_s']:.0f} s is the "
                 f"setpoint's own period ({share:.0%} of its variance): more likely the model "
                 "has the wrong gain or phase at that frequency (e.g. a missing time "
-                "constant) than a chamber controller cycling")
+                "constant) than a chamber controller cycling"
+            )
     # full-resolution predictions and residual reports
     p_before = _full_prediction(base.model, base.t0_c, data.programme, t_ok)
     p_after = _full_prediction(chosen_fit.model, chosen_fit.t0_c, data.programme, t_ok)
-    res_before = analyse_residuals(data.time_min, _residuals(base.model, base.t0_c, data)[0],
-                                   data.t_c, data.programme)
-    res_after = analyse_residuals(data.time_min,
-                                  _residuals(chosen_fit.model, chosen_fit.t0_c, data)[0],
-                                  data.t_c, data.programme)
+    res_before = analyse_residuals(
+        data.time_min, _residuals(base.model, base.t0_c, data)[0], data.t_c, data.programme
+    )
+    res_after = analyse_residuals(
+        data.time_min,
+        _residuals(chosen_fit.model, chosen_fit.t0_c, data)[0],
+        data.t_c,
+        data.programme,
+    )
     if chosen == "none" and not res_before.white:
         warnings.append(
             "the base-model residuals are not white but no candidate explains them well "
-            "enough: an effect outside the library, or a sensor problem")
+            "enough: an effect outside the library, or a sensor problem"
+        )
     params = dict(chosen_fit.model.parameters)
     stderr = {k: chosen_fit.stderr[k] for k in params}
     stderr.update({k: chosen_fit.stderr[k] for k in ("tau_s", "dt0_c")})
     return Diagnosis(
-        effect=chosen, model=chosen_fit.model, base=base.model, parameters=params,
-        stderr=stderr, rms_before_c=_rms(p_before.t_c - meas),
-        rms_after_c=_rms(p_after.t_c - meas), holdout_rms_before_c=hb,
-        holdout_rms_after_c=ha, holdout_start_min=float(cut), candidates=ranked,
-        base_fit=base, residuals_before=res_before, residuals_after=res_after,
-        ambiguous_with=tuple(ambiguous), warnings=tuple(warnings), has_air=has_air,
-        info=info, time_min=t_ok, measured_c=meas, before_c=p_before.t_c,
-        after_c=p_after.t_c, before_g_c_per_min=p_before.g_c_per_min,
+        effect=chosen,
+        model=chosen_fit.model,
+        base=base.model,
+        parameters=params,
+        stderr=stderr,
+        rms_before_c=_rms(p_before.t_c - meas),
+        rms_after_c=_rms(p_after.t_c - meas),
+        holdout_rms_before_c=hb,
+        holdout_rms_after_c=ha,
+        holdout_start_min=float(cut),
+        candidates=ranked,
+        base_fit=base,
+        residuals_before=res_before,
+        residuals_after=res_after,
+        ambiguous_with=tuple(ambiguous),
+        warnings=tuple(warnings),
+        has_air=has_air,
+        info=info,
+        time_min=t_ok,
+        measured_c=meas,
+        before_c=p_before.t_c,
+        after_c=p_after.t_c,
+        before_g_c_per_min=p_before.g_c_per_min,
         after_g_c_per_min=p_after.g_c_per_min,
     )
 
@@ -900,12 +1015,24 @@ def _rename(fit: CandidateFit, name: str) -> CandidateFit:
     se.update(zip(eff.param_names, [fit.stderr[k] for k in old], strict=True))
     vals = {k: values[k] for k in _BASE_NAMES} | mapped
     model = ModelSpec(fit.model.tau_s, fit.model.dt0_c, name, mapped)
-    return CandidateFit(name, model, fit.t0_c, vals, se, fit.n_params, fit.n_residuals,
-                        fit.sse, fit.score, fit.rms_c, fit.rms_air_c)
+    return CandidateFit(
+        name,
+        model,
+        fit.t0_c,
+        vals,
+        se,
+        fit.n_params,
+        fit.n_residuals,
+        fit.sse,
+        fit.score,
+        fit.rms_c,
+        fit.rms_air_c,
+    )
 
 
-def diagnose_frame(frame: pd.DataFrame, settings: DiagnoseSettings | None = None,
-                   source: str = "log") -> Diagnosis:
+def diagnose_frame(
+    frame: pd.DataFrame, settings: DiagnoseSettings | None = None, source: str = "log"
+) -> Diagnosis:
     """:func:`diagnose` on a DataFrame in the log format (validated by the log reader)."""
     from .logs import log_from_frame
 

@@ -139,7 +139,7 @@ class LinearEffectModel:
         return x + (a * a * np.expm1(-x / a) - b * b * np.expm1(-x / b)) / (a - b)
 
     def free(
-        self, t_min: np.ndarray, tk0_c: float, t0_c: float
+        self, t_min: np.ndarray, tk0_c: float | np.ndarray, t0_c: float
     ) -> tuple[np.ndarray, np.ndarray]:
         # constant chamber Tk0 (second state starts and stays at Tk0):
         # target = K (Tk0 + dt0 - 20 s); T = e T0 + (1 - e) target; g = e (target - T0)/tau_eff
@@ -375,11 +375,14 @@ class ModelSpec:
             )
             temp, grad, tk = resp.evaluate(programme.rates_c_per_min)
             if self.effect == "chamber_lag":
-                air = affine_response(
+                air_resp = affine_response(
                     LinearEffectModel(self.parameters["tau_chamber_s"], 0.0),
-                    programme.durations_min, t, programme.start_c, programme.start_c,
+                    programme.durations_min,
+                    t,
+                    programme.start_c,
+                    programme.start_c,
                 )
-                tk = air.evaluate(programme.rates_c_per_min)[0]
+                tk = air_resp.evaluate(programme.rates_c_per_min)[0]
             return Prediction(t, temp, grad, tk)
         end = max(float(t.max()), programme.total_min)
         h = grid_min if grid_min is not None else min(1.0 / 6.0, end / 2000.0)
@@ -429,7 +432,10 @@ class ModelSpec:
         if self.effect == "chamber_lag":
             air = affine_response(
                 LinearEffectModel(self.parameters["tau_chamber_s"], 0.0),
-                programme.durations_min, air_times_min, programme.start_c, programme.start_c,
+                programme.durations_min,
+                air_times_min,
+                programme.start_c,
+                programme.start_c,
             )
             return temp, air.a_t @ programme.rates_c_per_min + air.b_t
         return temp, programme.chamber_at(air_times_min)
@@ -458,9 +464,7 @@ class ModelSpec:
             air = setpoint
         v = air + self.dt0_c
         if self.effect == "asymmetric_tau":
-            temp = lag_foh_asymmetric(
-                v, t0_c, p["tau_heat_s"] / 60.0, p["tau_cool_s"] / 60.0, h
-            )
+            temp = lag_foh_asymmetric(v, t0_c, p["tau_heat_s"] / 60.0, p["tau_cool_s"] / 60.0, h)
         else:
             temp = lag_foh(v, t0_c, self.tau_s / 60.0, h)
         return air, temp
@@ -544,46 +548,69 @@ def _library() -> dict[str, Effect]:
         Effect(
             "chamber_lag",
             "the chamber air follows the setpoint through a first-order lag",
-            ("tau_chamber_s",), ((1e-3, 2e4),), ((60.0,), (150.0,), (400.0,), (1000.0,), (2500.0,)),
-            "tau_chamber_s", linear=True, uses_air=True,
+            ("tau_chamber_s",),
+            ((1e-3, 2e4),),
+            ((60.0,), (150.0,), (400.0,), (1000.0,), (2500.0,)),
+            "tau_chamber_s",
+            linear=True,
+            uses_air=True,
         ),
         Effect(
             "chamber_rate_limit",
             "the chamber cannot cool (or heat) as fast as programmed",
             ("max_cool_rate_c_per_min", "max_heat_rate_c_per_min"),
-            ((1e-3, 1e6), (1e-3, 1e6)), (),  # guesses come from the programme
-            "max_cool_rate_c_per_min", linear=False, uses_air=True,
+            ((1e-3, 1e6), (1e-3, 1e6)),
+            (),  # guesses come from the programme
+            "max_cool_rate_c_per_min",
+            linear=False,
+            uses_air=True,
         ),
         Effect(
             "chamber_cycling",
             "the chamber controller alternates heating and cooling around the setpoint",
             ("amplitude_c", "period_s", "phase_rad"),
-            ((0.0, 20.0), (1.0, 1e5), (-4 * math.pi, 4 * math.pi)), (),  # from periodogram
-            "amplitude_c", linear=False, uses_air=True, nuisance=("phase_rad",),
+            ((0.0, 20.0), (1.0, 1e5), (-4 * math.pi, 4 * math.pi)),
+            (),  # from periodogram
+            "amplitude_c",
+            linear=False,
+            uses_air=True,
+            nuisance=("phase_rad",),
         ),
         Effect(
             "dead_time",
             "a transport delay between the chamber and the sensor",
-            ("delay_s",), ((0.0, 1e4),), ((30.0,), (100.0,), (300.0,), (900.0,)),
-            "delay_s", linear=True,
+            ("delay_s",),
+            ((0.0, 1e4),),
+            ((30.0,), (100.0,), (300.0,), (900.0,)),
+            "delay_s",
+            linear=True,
         ),
         Effect(
             "second_time_constant",
             "a second thermal mass between the chamber air and the sensor",
-            ("tau2_s",), ((1e-3, 2e4),), ((60.0,), (150.0,), (400.0,), (1000.0,), (2500.0,)),
-            "tau2_s", linear=True,
+            ("tau2_s",),
+            ((1e-3, 2e4),),
+            ((60.0,), (150.0,), (400.0,), (1000.0,), (2500.0,)),
+            "tau2_s",
+            linear=True,
         ),
         Effect(
             "selfheat_slope",
             "the self-heating offset changes with temperature: dT0 = dt0 + s (T - 20)",
-            ("dt0_slope_c_per_c",), ((-0.3, 0.3),), ((0.0,),),
-            "dt0_slope_c_per_c", linear=True,
+            ("dt0_slope_c_per_c",),
+            ((-0.3, 0.3),),
+            ((0.0,),),
+            "dt0_slope_c_per_c",
+            linear=True,
         ),
         Effect(
             "asymmetric_tau",
             "heating and cooling time constants differ",
-            ("tau_heat_s", "tau_cool_s"), ((1.0, 1e5), (1.0, 1e5)), (),  # from the base tau
-            "tau_cool_s", linear=False,
+            ("tau_heat_s", "tau_cool_s"),
+            ((1.0, 1e5), (1.0, 1e5)),
+            (),  # from the base tau
+            "tau_cool_s",
+            linear=False,
         ),
     )
     return {e.name: e for e in effects}

@@ -308,25 +308,25 @@ def filter_smooth(y, a, b, u, q11, q12, q22, r, x0, p0, *, smooth=True):
             s = pp11 + r
             g1, g2 = pp11 / s, pp12 / s
             m = ((1.0 - g1) * ak, (1.0 - g1) * bk), (-g2 * ak, 1.0 - g2 * bk)
-            ys, us = y[k:k1 + 1], u[k:k1 + 1]
+            ys, us = y[k : k1 + 1], u[k : k1 + 1]
             # filtered means of the stretch: x_j = M x_j-1 + (I - K H)[u_j, 0] + K y_j
             xf1, xf2 = _lti(m, (1.0 - g1) * us + g1 * ys, g2 * (ys - us), (x1, x2))
             prev1 = np.concatenate(([x1], xf1[:-1]))
             prev2 = np.concatenate(([x2], xf2[:-1]))
             xp1 = ak * prev1 + bk * prev2 + us
             e = ys - xp1
-            innov[k:k1 + 1] = e
-            svar[k:k1 + 1] = s
+            innov[k : k1 + 1] = e
+            svar[k : k1 + 1] = s
             m2ll += float(np.sum(e * e)) / s + e.size * (log2pi + math.log(s))
             seen += e.size
             p11, p12, p22 = pp11 - g1 * pp11, pp12 - g1 * pp12, pp22 - g2 * pp12
             if smooth:
-                pred[k:k1 + 1, 0] = xp1
-                pred[k:k1 + 1, 1] = prev2
-                pred[k:k1 + 1, 2:] = (pp11, pp12, pp22)
-                filt[k:k1 + 1, 0] = xf1
-                filt[k:k1 + 1, 1] = xf2
-                filt[k:k1 + 1, 2:] = (p11, p12, p22)
+                pred[k : k1 + 1, 0] = xp1
+                pred[k : k1 + 1, 1] = prev2
+                pred[k : k1 + 1, 2:] = (pp11, pp12, pp22)
+                filt[k : k1 + 1, 0] = xf1
+                filt[k : k1 + 1, 1] = xf2
+                filt[k : k1 + 1, 2:] = (p11, p12, p22)
             x1, x2 = float(xf1[-1]), float(xf2[-1])
             o11, o12, o22 = p11, p12, p22
             stretches.append((k, k1))
@@ -360,8 +360,9 @@ def filter_smooth(y, a, b, u, q11, q12, q22, r, x0, p0, *, smooth=True):
                 steady = False
             elif not k & 15:  # test convergence every 16th row (cheap, <= 16 rows late)
                 scale = STEADY_RTOL * (abs(p11) + abs(p22))
-                steady = (abs(p11 - o11) <= scale and abs(p12 - o12) <= scale
-                          and abs(p22 - o22) <= scale)
+                steady = (
+                    abs(p11 - o11) <= scale and abs(p12 - o12) <= scale and abs(p22 - o22) <= scale
+                )
             o11, o12, o22 = p11, p12, p22
         else:
             steady = False
@@ -406,13 +407,13 @@ def filter_smooth(y, a, b, u, q11, q12, q22, r, x0, p0, *, smooth=True):
         k0 = starts.get(k + 1)
         lo = k if k0 is None or k0 > k else k0  # rows lo..k use this C
         if lo < k:
-            fa = filt[lo:k + 1][::-1]  # rows k, k-1, ..., lo
-            pa = pred[lo + 1:k + 2][::-1]  # rows k+1, ..., lo+1
+            fa = filt[lo : k + 1][::-1]  # rows k, k-1, ..., lo
+            pa = pred[lo + 1 : k + 2][::-1]  # rows k+1, ..., lo+1
             r1 = fa[:, 0] - c11 * pa[:, 0] - c12 * pa[:, 1]
             r2 = fa[:, 1] - c21 * pa[:, 0] - c22 * pa[:, 1]
             s1, s2 = _lti(((c11, c12), (c21, c22)), r1, r2, (x1, x2))
-            out[lo:k + 1, 0] = s1[::-1]
-            out[lo:k + 1, 1] = s2[::-1]
+            out[lo : k + 1, 0] = s1[::-1]
+            out[lo : k + 1, 1] = s2[::-1]
             x1, x2 = float(s1[-1]), float(s2[-1])
         if lo == k:  # a plain row
             e11, e12, e22 = p11 - q11_, p12 - q12_, p22 - q22_
@@ -443,19 +444,26 @@ def filter_smooth(y, a, b, u, q11, q12, q22, r, x0, p0, *, smooth=True):
             n12 = f12 + t11 * c21 + t12 * c22
             n22 = f22 + t21 * c21 + t22 * c22
             scale = 1e-14 * (abs(n11) + abs(n22))
-            fixed = (abs(n11 - p11) <= scale and abs(n12 - p12) <= scale
-                     and abs(n22 - p22) <= scale)
+            fixed = abs(n11 - p11) <= scale and abs(n12 - p12) <= scale and abs(n22 - p22) <= scale
             p11, p12, p22 = n11, n12, n22
             if fixed:
-                out[lo:j + 1, 2:] = (p11, p12, p22)
+                out[lo : j + 1, 2:] = (p11, p12, p22)
                 break
             out[j, 2:] = (p11, p12, p22)
             j -= 1
         k = lo - 1
     if done_rows:
         out[done_rows] = done_vals
-    return (out[:, 0].copy(), out[:, 1].copy(), out[:, 2].copy(), out[:, 3].copy(),
-            out[:, 4].copy(), innov, svar, m2ll)
+    return (
+        out[:, 0].copy(),
+        out[:, 1].copy(),
+        out[:, 2].copy(),
+        out[:, 3].copy(),
+        out[:, 4].copy(),
+        innov,
+        svar,
+        m2ll,
+    )
 
 
 # -- quantisation and noise levels ---------------------------------------------------------
@@ -562,7 +570,7 @@ def _fit_noise(setup: _Setup, q: float | None, r: float | None, quant_c: float) 
     """Maximum likelihood of the innovations over the free levels (log-parametrised)."""
     floor = quant_c**2 / 12.0
     fitted = tuple(n for n, v in (("q", q), ("r", r)) if v is None)
-    if not fitted:
+    if q is not None and r is not None:
         return NoiseLevels(q, r, quant_c, ())
     n_fin = int(np.isfinite(setup.y).sum())
     n = setup.y.size
@@ -596,12 +604,13 @@ def _fit_noise(setup: _Setup, q: float | None, r: float | None, quant_c: float) 
     if q is None:
         # coarse scan of q (the likelihood is often flat far from the optimum)
         grid = np.arange(-12.0, 3.0, 2.0) * math.log(10.0)
-        best = None
+        best: tuple[float, float] | None = None
         for lq in grid:
             theta = [lq] + ([] if r is not None else [math.log(r_extra_start)])
             c = cost(theta)
             if best is None or c < best[0]:
                 best = (c, lq)
+        assert best is not None  # the grid is not empty
         start = [best[1]]
     else:
         start = []
@@ -611,9 +620,12 @@ def _fit_noise(setup: _Setup, q: float | None, r: float | None, quant_c: float) 
     # the coordinate) is degenerate at log q = 0
     x0 = np.array(start)
     simplex = np.vstack([x0, x0 + np.eye(x0.size)])
-    res = minimize(cost, x0, method="Nelder-Mead",
-                   options={"xatol": 0.05, "fatol": 0.05, "maxiter": 400,
-                            "initial_simplex": simplex})
+    res = minimize(
+        cost,
+        x0,
+        method="Nelder-Mead",
+        options={"xatol": 0.05, "fatol": 0.05, "maxiter": 400, "initial_simplex": simplex},
+    )
     qq, rr = levels(res.x)
     return NoiseLevels(qq, rr, quant_c, fitted)
 
@@ -712,8 +724,9 @@ def _first_finite(y: np.ndarray) -> float:
     return float(y[np.flatnonzero(np.isfinite(y))[0]])
 
 
-def _finish(setup: _Setup, noise: NoiseLevels, method: str, grad, params,
-            time_s: np.ndarray) -> GradientEstimate:
+def _finish(
+    setup: _Setup, noise: NoiseLevels, method: str, grad, params, time_s: np.ndarray
+) -> GradientEstimate:
     x1, x2, p11, p12, p22, innov, svar, m2ll = _run(setup, noise.q, noise.r, smooth=True)
     g, g_var = grad(x1, x2, p11, p12, p22)
     return GradientEstimate(

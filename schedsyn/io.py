@@ -27,7 +27,7 @@ def _check_not_input(path: Path, inputs: Iterable[Path | str]) -> None:
 
 def write_atomic(
     path: Path | str,
-    writer: Callable[[Path], None],
+    writer: Callable[[Path], object],
     inputs: Iterable[Path | str] = (),
 ) -> Path:
     """Call ``writer(tmp_path)`` and move the result to ``path`` atomically."""

@@ -48,7 +48,7 @@ class LinearThermalModel(Protocol):
     def step(self, x_min: np.ndarray) -> np.ndarray: ...
 
     def free(
-        self, t_min: np.ndarray, tk0_c: float, t0_c: float
+        self, t_min: np.ndarray, tk0_c: float | np.ndarray, t0_c: float
     ) -> tuple[np.ndarray, np.ndarray]: ...
 
 
@@ -77,7 +77,7 @@ class FirstOrderLag:
         return x + self.tau_min * np.expm1(-x / self.tau_min)
 
     def free(
-        self, t_min: np.ndarray, tk0_c: float, t0_c: float
+        self, t_min: np.ndarray, tk0_c: float | np.ndarray, t0_c: float
     ) -> tuple[np.ndarray, np.ndarray]:
         # T_free = e T0 + (1 - e)(Tk0 + dT0); g_free = e (Tk0 + dT0 - T0)/tau
         e = np.exp(-np.asarray(t_min, dtype=float) / self.tau_min)

@@ -62,5 +62,4 @@ def simulate_effect(
     """
     t = dense_times(programme.total_min, dt_min) if times_min is None else np.asarray(times_min)
     pred = model.predict(programme, t, t0_c=t0_c)
-    return Trajectory(time_min=t, tk_c=pred.tk_air_c, t_c=pred.t_c,
-                      g_c_per_min=pred.g_c_per_min)
+    return Trajectory(time_min=t, tk_c=pred.tk_air_c, t_c=pred.t_c, g_c_per_min=pred.g_c_per_min)

@@ -131,9 +131,17 @@ class ExperimentSpec:
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
             raise ParameterError("an experiment needs a non-empty name")
-        for f in ("working_lo_c", "working_hi_c", "approx_lo_c", "approx_hi_c",
-                  "delta_c_per_min", "segment_min", "edge_margin_c", "max_cool_c_per_min",
-                  "max_heat_c_per_min"):
+        for f in (
+            "working_lo_c",
+            "working_hi_c",
+            "approx_lo_c",
+            "approx_hi_c",
+            "delta_c_per_min",
+            "segment_min",
+            "edge_margin_c",
+            "max_cool_c_per_min",
+            "max_heat_c_per_min",
+        ):
             v = getattr(self, f)
             if not isinstance(v, int | float) or not math.isfinite(v):
                 raise ParameterError(f"{self.name}: {f} must be a finite number, got {v!r}")
@@ -150,16 +158,19 @@ class ExperimentSpec:
                 f"{self.levels_required!r}"
             )
         if not 0 < self.delta_c_per_min <= 1:
-            raise ParameterError(f"{self.name}: delta_c_per_min must be in (0, 1] degC/min, got "
-                                 f"{self.delta_c_per_min!r}")
+            raise ParameterError(
+                f"{self.name}: delta_c_per_min must be in (0, 1] degC/min, got "
+                f"{self.delta_c_per_min!r}"
+            )
         if self.segment_min != int(self.segment_min) or not 2 <= self.segment_min <= 30:
             raise ParameterError(
                 f"{self.name}: segment_min must be a whole number of minutes in 2..30, got "
                 f"{self.segment_min!r}"
             )
         if self.objective not in OBJECTIVES:
-            raise ParameterError(f"{self.name}: objective must be one of {OBJECTIVES}, got "
-                                 f"{self.objective!r}")
+            raise ParameterError(
+                f"{self.name}: objective must be one of {OBJECTIVES}, got {self.objective!r}"
+            )
         if int(self.max_steps) != self.max_steps or self.max_steps < 2:
             raise ParameterError(f"{self.name}: max_steps must be a whole number >= 2")
         if not 0 < self.edge_margin_c <= 10:
@@ -201,8 +212,11 @@ def robust_scenarios(
     over the range (both ends included) are used and the plan is verified afterwards on
     a dense grid.
     """
-    taus = [params.tau_s] if tau_s_range is None else list(
-        np.linspace(tau_s_range[0], tau_s_range[1], n_tau))
+    taus = (
+        [params.tau_s]
+        if tau_s_range is None
+        else list(np.linspace(tau_s_range[0], tau_s_range[1], n_tau))
+    )
     dt0s = [params.dt0_c] if dt0_c_range is None else [dt0_c_range[0], dt0_c_range[1]]
     for name, rng in (("tau_s", tau_s_range), ("dt0_c", dt0_c_range)):
         if rng is not None and not rng[0] <= rng[1]:
@@ -213,8 +227,7 @@ def robust_scenarios(
 class _Responses:
     """Affine responses of all scenarios at the planner samples of a full-length grid."""
 
-    def __init__(self, scenarios: Sequence[Scenario], n_seg: int, seg_min: float,
-                 limits: Limits):
+    def __init__(self, scenarios: Sequence[Scenario], n_seg: int, seg_min: float, limits: Limits):
         self.seg_min = seg_min
         self.scenarios = list(scenarios)
         self.durations = np.full(n_seg, float(seg_min))
@@ -251,8 +264,10 @@ class Band:
 
     def bounds(self, temp_c):
         t = np.asarray(temp_c, dtype=float)
-        return (np.interp(t, self.knots_c, self.lo_c_per_min),
-                np.interp(t, self.knots_c, self.hi_c_per_min))
+        return (
+            np.interp(t, self.knots_c, self.lo_c_per_min),
+            np.interp(t, self.knots_c, self.hi_c_per_min),
+        )
 
     def piece(self, i: int) -> tuple[float, float, float, float, float]:
         """``(t_ref, lo0, lo1, hi0, hi1)`` of the affine piece between knots i and i+1."""
@@ -272,8 +287,9 @@ class Band:
         return np.array(out)
 
 
-def _available_rate(direction: int, temp_c: float, params: ThermalParams, limits: Limits,
-                    cap: float) -> float:
+def _available_rate(
+    direction: int, temp_c: float, params: ThermalParams, limits: Limits, cap: float
+) -> float:
     """Largest |g| the chamber limits allow at T in this direction, capped (degC/min)."""
     tau = params.tau_min
     if direction < 0:
@@ -308,8 +324,9 @@ def _invert_increasing(fun, target: float, hi: float) -> float:
     return lo_v
 
 
-def _dynamic_tops(tops, knots, direction, tau_min, limits,
-                  turn_fraction: float = TURN_ACCEL_FRACTION):
+def _dynamic_tops(
+    tops, knots, direction, tau_min, limits, turn_fraction: float = TURN_ACCEL_FRACTION
+):
     """Lower the band tops so that a sweep can follow them.
 
     Along a sweep the speed ``v = |g|`` obeys ``dv/dt = (|U| - v)/tau`` at most when
@@ -333,7 +350,7 @@ def _dynamic_tops(tops, knots, direction, tau_min, limits,
     inverse = _invert_increasing
     order = list(range(len(knots))) if direction > 0 else list(range(len(knots)))[::-1]
     v = list(tops)
-    for i, j in zip(order[:-1], order[1:], strict=True):      # speeding up, forwards
+    for i, j in zip(order[:-1], order[1:], strict=True):  # speeding up, forwards
         dist = abs(knots[j] - knots[i])
         v[j] = min(v[j], inverse(f, f(min(v[i], 0.999 * a)) + dist, 0.999 * a))
     for i, j in zip(order[::-1][:-1], order[::-1][1:], strict=True):  # slowing, backwards
@@ -342,8 +359,12 @@ def _dynamic_tops(tops, knots, direction, tau_min, limits,
     return v
 
 
-def turning_speed(room_c: float, reverse_rate_c_per_min: float, tau_min: float,
-                  turn_fraction: float = TURN_ACCEL_FRACTION) -> float:
+def turning_speed(
+    room_c: float,
+    reverse_rate_c_per_min: float,
+    tau_min: float,
+    turn_fraction: float = TURN_ACCEL_FRACTION,
+) -> float:
     """Fastest speed |g| from which the device stops within ``room_c`` (degC/min).
 
     Reversing at a constant rate ``b`` (a share ``turn_fraction`` of the full reverse
@@ -384,12 +405,19 @@ DESIGNS = {
 }
 
 
-def make_bands(spec: ExperimentSpec, n_dir: int, direction: int, sep_c_per_min: float,
-               params_list: Sequence[ThermalParams], limits: Limits,
-               width_c_per_min: float = BAND_WIDTH_C_PER_MIN,
-               caps: tuple[float, float] | None = None, dynamic: bool = True,
-               knot_insets_c: Sequence[float] | None = None,
-               design: BandDesign | None = None) -> list[Band]:
+def make_bands(
+    spec: ExperimentSpec,
+    n_dir: int,
+    direction: int,
+    sep_c_per_min: float,
+    params_list: Sequence[ThermalParams],
+    limits: Limits,
+    width_c_per_min: float = BAND_WIDTH_C_PER_MIN,
+    caps: tuple[float, float] | None = None,
+    dynamic: bool = True,
+    knot_insets_c: Sequence[float] | None = None,
+    design: BandDesign | None = None,
+) -> list[Band]:
     """``n_dir`` bands ``sep`` apart, stacked down from the fastest gradient available.
 
     Slow sweeps cost time (a sweep lasts span / gradient), so the bands sit as high as
@@ -421,18 +449,18 @@ def make_bands(spec: ExperimentSpec, n_dir: int, direction: int, sep_c_per_min: 
         room_lo, room_hi = t - d_lo, d_hi - t
         k = design.turn_fraction
         if design.room == "exact":
-            v_room = min(turning_speed(room_lo, limits.rate_max_c_per_min, tau_max, k),
-                         turning_speed(room_hi, -limits.rate_min_c_per_min, tau_max, k))
+            v_room = min(
+                turning_speed(room_lo, limits.rate_max_c_per_min, tau_max, k),
+                turning_speed(room_hi, -limits.rate_min_c_per_min, tau_max, k),
+            )
         else:
             a_lo = k * limits.rate_max_c_per_min / tau_max
             a_hi = k * -limits.rate_min_c_per_min / tau_max
-            v_room = min(math.sqrt(max(a_lo * room_lo, 0.0)),
-                         math.sqrt(max(a_hi * room_hi, 0.0)))
+            v_room = min(math.sqrt(max(a_lo * room_lo, 0.0)), math.sqrt(max(a_hi * room_hi, 0.0)))
         tops.append(min(v_lim, v_room))
     if dynamic:
         tops = _dynamic_tops(tops, knots, direction, tau_max, limits, design.turn_fraction)
-    widths = [min(width_c_per_min, (v - v_min - (n_dir - 1) * sep_c_per_min) / n_dir)
-              for v in tops]
+    widths = [min(width_c_per_min, (v - v_min - (n_dir - 1) * sep_c_per_min) / n_dir) for v in tops]
     bands = []
     for r in range(1, n_dir + 1):  # rank 1 = slowest
         hi = tuple(v - (n_dir - r) * (w + sep_c_per_min) for v, w in zip(tops, widths, strict=True))
@@ -496,8 +524,14 @@ class _SubLP:
     epigraph variable). Rows are accumulated as ``G @ x <= h`` and ``E @ x == f``.
     """
 
-    def __init__(self, planner: _Planner, u_fixed: np.ndarray, j1: int, extra: int = 0,
-                 scenarios: Sequence[int] | None = None):
+    def __init__(
+        self,
+        planner: _Planner,
+        u_fixed: np.ndarray,
+        j1: int,
+        extra: int = 0,
+        scenarios: Sequence[int] | None = None,
+    ):
         r = planner.responses
         self.planner = planner
         self.j0 = int(u_fixed.size)
@@ -509,8 +543,8 @@ class _SubLP:
         self.scen = []
         self.scen_idx = list(range(len(r.resp))) if scenarios is None else list(scenarios)
         for resp in (r.resp[i] for i in self.scen_idx):
-            at = resp.a_t[rows, self.j0:j1]
-            ag = resp.a_g[rows, self.j0:j1]
+            at = resp.a_t[rows, self.j0 : j1]
+            ag = resp.a_g[rows, self.j0 : j1]
             bt = resp.b_t[rows] + resp.a_t[rows, : self.j0] @ u_fixed
             bg = resp.b_g[rows] + resp.a_g[rows, : self.j0] @ u_fixed
             self.scen.append((at, bt, ag, bg))
@@ -567,8 +601,9 @@ class _SubLP:
             self.le(at, lim.device_max_c - pad - bt)
             self.ge(at, lim.device_min_c + pad - bt)
 
-    def window(self, win: _Window, margin_g: int | None = None,
-               margin_t: int | None = None) -> None:
+    def window(
+        self, win: _Window, margin_g: int | None = None, margin_t: int | None = None
+    ) -> None:
         """Band constraints inside the window and the edge conditions at its ends.
 
         ``margin_g`` / ``margin_t``: indices of extra columns that tighten the band and
@@ -598,20 +633,18 @@ class _SubLP:
                 # q <= hi0 + hi1 (T - t_ref) - margin (robust: not for the fastest band,
                 # whose top bounds no other band; the scenarios spread most when fast)
                 if not (win.band.top and len(self.planner.responses.resp) > 1):
-                    self.le(d * ag[w] - hi1 * at[w], hi0 + hi1 * (bt[w] - t_ref) - d * bg[w],
-                            mg)
+                    self.le(d * ag[w] - hi1 * at[w], hi0 + hi1 * (bt[w] - t_ref) - d * bg[w], mg)
                 if knot is not None:  # cross the knot at the planned sample
                     k = b_ - self.s_from
                     # a fast sweep moves far in one sample: half a sample's travel more
-                    tol = KNOT_TOL_C + 0.5 * SAMPLE_MIN * float(
-                        win.band.bounds(knot)[1])
+                    tol = KNOT_TOL_C + 0.5 * SAMPLE_MIN * float(win.band.bounds(knot)[1])
                     if win.knot_tol_c is not None:
                         tol = win.knot_tol_c[si][pieces_done]
                     pieces_done += 1
                     self.le(at[k], knot + off + tol - bt[k])
                     self.ge(at[k], knot + off - tol - bt[k])
             lo_edge, hi_edge = spec.working_lo_c - m, spec.working_hi_c + m
-            if d < 0:   # starts above the region, ends below it
+            if d < 0:  # starts above the region, ends below it
                 self.ge(at[s0], hi_edge - bt[s0], mt)
                 self.le(at[s1], lo_edge - bt[s1], mt)
             else:
@@ -648,16 +681,20 @@ class _SubLP:
         n_rows = n_eq + n_g + 2 * n + 2 * n_t
         a = np.zeros((n_rows, m + n_t))
         a[:n_eq, :m] = eq
-        a[n_eq:n_eq + n_g, :m] = g
+        a[n_eq : n_eq + n_g, :m] = g
         r0 = n_eq + n_g
         idx = np.arange(n)
-        a[r0 + idx, idx] = 1.0            # rate <= max
-        a[r0 + n + idx, idx] = -1.0       # -rate <= -min
-        b = np.concatenate((
-            np.concatenate(self.f_rows) if self.f_rows else np.zeros(0),
-            np.concatenate(self.h_rows),
-            np.full(n, lim.rate_max_c_per_min), np.full(n, -lim.rate_min_c_per_min),
-            np.zeros(2 * n_t)))
+        a[r0 + idx, idx] = 1.0  # rate <= max
+        a[r0 + n + idx, idx] = -1.0  # -rate <= -min
+        b = np.concatenate(
+            (
+                np.concatenate(self.f_rows) if self.f_rows else np.zeros(0),
+                np.concatenate(self.h_rows),
+                np.full(n, lim.rate_max_c_per_min),
+                np.full(n, -lim.rate_min_c_per_min),
+                np.zeros(2 * n_t),
+            )
+        )
         if n_t:  # |rate| <= t
             r1 = r0 + 2 * n
             a[r1 + idx, idx] = 1.0
@@ -667,13 +704,15 @@ class _SubLP:
         a = sparse.csc_matrix(a)
         q = np.concatenate((np.asarray(cost, dtype=float), np.full(n_t, float(l1_weight))))
         cones = ([clarabel.ZeroConeT(n_eq)] if n_eq else []) + [
-            clarabel.NonnegativeConeT(a.shape[0] - n_eq)]
+            clarabel.NonnegativeConeT(a.shape[0] - n_eq)
+        ]
         settings = clarabel.DefaultSettings()
         settings.verbose = False
         tic = time.perf_counter()
         try:
-            sol = clarabel.DefaultSolver(sparse.csc_matrix((m + n_t, m + n_t)), q, a, b,
-                                         cones, settings).solve()
+            sol = clarabel.DefaultSolver(
+                sparse.csc_matrix((m + n_t, m + n_t)), q, a, b, cones, settings
+            ).solve()
         finally:
             self.planner.lp_s += time.perf_counter() - tic
             self.planner.n_lp += 1
@@ -683,15 +722,21 @@ class _SubLP:
             return None
         return np.asarray(sol.x[:m], dtype=float)
 
-    def solve(self, objective: Callable[[cp.Variable], cp.Expression],
-              extra_bounds: Sequence[tuple[float | None, float | None]] = (),
-              extra_constraints: Callable[[cp.Variable], list] | None = None):
+    def solve(
+        self,
+        objective: Callable[[cp.Variable], cp.Expression],
+        extra_bounds: Sequence[tuple[float | None, float | None]] = (),
+        extra_constraints: Callable[[cp.Variable], list] | None = None,
+    ):
         lim = self.planner.limits
         x = cp.Variable(self.n + self.extra)
         g = np.vstack(self.g_rows)
         h = np.concatenate(self.h_rows)
-        cons = [g @ x <= h, x[: self.n] >= lim.rate_min_c_per_min,
-                x[: self.n] <= lim.rate_max_c_per_min]
+        cons = [
+            g @ x <= h,
+            x[: self.n] >= lim.rate_min_c_per_min,
+            x[: self.n] <= lim.rate_max_c_per_min,
+        ]
         if self.e_rows:
             cons.append(np.vstack(self.e_rows) @ x == np.concatenate(self.f_rows))
         for k, (lo, hi) in enumerate(extra_bounds):
@@ -768,8 +813,9 @@ def planning_effort(spec: ExperimentSpec, limits: Limits) -> float:
     return len(_first_directions(spec, limits)) * (spec.working_hi_c - spec.working_lo_c)
 
 
-def _turnaround_minutes(v_from: float, d_to: int, v_to: float, params: ThermalParams,
-                        limits: Limits) -> float:
+def _turnaround_minutes(
+    v_from: float, d_to: int, v_to: float, params: ThermalParams, limits: Limits
+) -> float:
     """Time for g to go from ``-d_to * v_from`` to ``d_to * v_to`` at the full chamber rate.
 
     ``g(t) = U + (g0 - U) exp(-t/tau)`` under a constant rate U.
@@ -790,26 +836,25 @@ def _order_bands(directions, bands_by_dir, spec, params, limits):
     from itertools import permutations
 
     idx = {d: [k for k, dd in enumerate(directions) if dd == d] for d in (+1, -1)}
-    best = None
+    best: tuple[float, list[Band]] | None = None
     perms_h = list(permutations(bands_by_dir[+1])) or [()]
     perms_c = list(permutations(bands_by_dir[-1])) or [()]
     for ph in perms_h:
         for pc in perms_c:
-            seq = [None] * len(directions)
-            for k, b in zip(idx[+1], ph, strict=True):
-                seq[k] = b
-            for k, b in zip(idx[-1], pc, strict=True):
-                seq[k] = b
+            placed = dict(zip(idx[+1], ph, strict=True)) | dict(zip(idx[-1], pc, strict=True))
+            seq = [placed[k] for k in range(len(directions))]
             total = 0.0
             prev = 0.0
             for d, b in zip(directions, seq, strict=True):
                 lo, _ = b.bounds(np.array(b.knots_c))
                 v_in, v_out = (lo[-1], lo[0]) if d < 0 else (lo[0], lo[-1])
-                total += float(b.minutes().sum()) + _turnaround_minutes(prev, d, v_in, params,
-                                                                         limits)
+                total += float(b.minutes().sum()) + _turnaround_minutes(
+                    prev, d, v_in, params, limits
+                )
                 prev = v_out
             if best is None or total < best[0]:
                 best = (total, seq)
+    assert best is not None  # at least one assignment is tried
     return best[1]
 
 
@@ -918,8 +963,9 @@ def _place_sweep(planner: _Planner, u_fixed, d, band, max_seg):
 SCENARIO_LOOKAHEAD_SEG = 6
 
 
-def _scenario_windows(planner: _Planner, u_fixed: np.ndarray, u_new: np.ndarray,
-                      win: _Window, max_seg: int) -> tuple[_Window, int] | None:
+def _scenario_windows(
+    planner: _Planner, u_fixed: np.ndarray, u_new: np.ndarray, win: _Window, max_seg: int
+) -> tuple[_Window, int] | None:
     """Per-scenario windows of a sweep placed for the reference scenario.
 
     Every scenario is simulated (affine responses) under the reference solution; its
@@ -942,7 +988,7 @@ def _scenario_windows(planner: _Planner, u_fixed: np.ndarray, u_new: np.ndarray,
     knots = [k for _, _, _, k in win.pieces() if k is not None]
     per, tol_all = [], []
     for resp, off in zip(r.resp, planner.offsets_c, strict=True):
-        t = resp.a_t[s_from:s_to + 1, :j_end] @ u + resp.b_t[s_from:s_to + 1]
+        t = resp.a_t[s_from : s_to + 1, :j_end] @ u + resp.b_t[s_from : s_to + 1]
         q = d * t  # increases along the sweep
 
         def first_past(level, after, q=q):
@@ -972,12 +1018,19 @@ def _scenario_windows(planner: _Planner, u_fixed: np.ndarray, u_new: np.ndarray,
     if j_need > max_seg:
         return None
     ref = per[0]
-    return replace(win, start_s=ref[0], end_s=ref[1], cuts=ref[2],
-                   per_scenario=tuple(per), knot_tol_c=tuple(tol_all)), j_need
+    return replace(
+        win,
+        start_s=ref[0],
+        end_s=ref[1],
+        cuts=ref[2],
+        per_scenario=tuple(per),
+        knot_tol_c=tuple(tol_all),
+    ), j_need
 
 
-def _greedy(planner: _Planner, directions, sweep_bands, max_seg,
-            progress: Callable[[str], None] | None) -> tuple[_Structure | None, str]:
+def _greedy(
+    planner: _Planner, directions, sweep_bands, max_seg, progress: Callable[[str], None] | None
+) -> tuple[_Structure | None, str]:
     """Place the sweeps one after another, each as early and as short as feasible."""
     spec, limits = planner.spec, planner.limits
     seg = spec.segment_min
@@ -992,12 +1045,12 @@ def _greedy(planner: _Planner, directions, sweep_bands, max_seg,
                 f"does not fit within {max_seg * seg:g} min"
             )
         u_new, win = res
-        u_fixed = np.concatenate((u_fixed, np.clip(u_new, limits.rate_min_c_per_min,
-                                                   limits.rate_max_c_per_min)))
+        u_fixed = np.concatenate(
+            (u_fixed, np.clip(u_new, limits.rate_min_c_per_min, limits.rate_max_c_per_min))
+        )
         windows.append(win)
         if progress:
-            progress(f"sweep {k + 1}/{len(directions)} placed, ends at "
-                     f"{u_fixed.size * seg:g} min")
+            progress(f"sweep {k + 1}/{len(directions)} placed, ends at {u_fixed.size * seg:g} min")
     # return the chamber to its end temperature as soon as possible
     j0 = u_fixed.size
     for n_r in range(1, max_seg - j0 + 1):
@@ -1009,8 +1062,10 @@ def _greedy(planner: _Planner, directions, sweep_bands, max_seg,
         if x is not None:
             u_fixed = np.concatenate((u_fixed, x))
             return _Structure(windows, u_fixed.size, u_fixed), ""
-    return None, (f"no time is left within {max_seg * seg:g} min to bring the chamber back "
-                  f"to {limits.end_c:g} degC after the last sweep")
+    return None, (
+        f"no time is left within {max_seg * seg:g} min to bring the chamber back "
+        f"to {limits.end_c:g} degC after the last sweep"
+    )
 
 
 def _whole_lp(planner: _Planner, windows: Sequence[_Window], n_seg: int, extra: int = 0):
@@ -1116,7 +1171,8 @@ class Plan:
             "spec": self.spec.to_dict(),
             "limits": self.limits.to_dict(),
             "robust_scenarios": [p.to_dict() for p in self.scenarios]
-            if len(self.scenarios) > 1 else [],
+            if len(self.scenarios) > 1
+            else [],
             "status": self.status,
             "complete": self.complete,
             "coverage": self.coverage.coverage,
@@ -1156,23 +1212,38 @@ def check_programme(
     problems = list(programme.violations(limits))
     t_lo, t_hi = np.inf, -np.inf
     for p in scenarios:
-        traj = simulate(programme, p, model=model if len(scenarios) == 1 else None,
-                        dt_min=0.1, t0_c=limits.t_init_c)
-        rep = coverage_report(traj.t_c, traj.g_c_per_min, grid, spec.levels_required,
-                              spec.delta_c_per_min)
+        traj = simulate(
+            programme,
+            p,
+            model=model if len(scenarios) == 1 else None,
+            dt_min=0.1,
+            t0_c=limits.t_init_c,
+        )
+        rep = coverage_report(
+            traj.t_c, traj.g_c_per_min, grid, spec.levels_required, spec.delta_c_per_min
+        )
         rep01 = coverage_report(traj.t_c, traj.g_c_per_min, grid, spec.levels_required, 0.1)
-        if worst is None or rep.coverage < worst.coverage or (
-                rep.coverage == worst.coverage and rep.min_levels < worst.min_levels):
+        if (
+            worst is None
+            or rep.coverage < worst.coverage
+            or (rep.coverage == worst.coverage and rep.min_levels < worst.min_levels)
+        ):
             worst = rep
         if worst01 is None or rep01.coverage < worst01.coverage:
             worst01 = rep01
         t_lo, t_hi = min(t_lo, traj.t_c.min()), max(t_hi, traj.t_c.max())
     if t_lo < limits.device_min_c - 1e-6 or t_hi > limits.device_max_c + 1e-6:
-        where = "" if len(scenarios) == 1 else (
-            f" (over the {len(scenarios)} design scenarios of the robust box)")
+        where = (
+            ""
+            if len(scenarios) == 1
+            else (f" (over the {len(scenarios)} design scenarios of the robust box)")
+        )
         problems.append(
             f"the device reaches {t_lo:.2f} .. {t_hi:.2f} degC{where}, outside its limits "
-            f"{limits.device_min_c:g} .. {limits.device_max_c:g} degC")
+            f"{limits.device_min_c:g} .. {limits.device_max_c:g} degC"
+        )
+    if worst is None or worst01 is None:
+        raise ParameterError("check_programme needs at least one scenario")
     return worst, worst01, problems, float(t_lo), float(t_hi)
 
 
@@ -1181,18 +1252,30 @@ def _verify_robust(programme, spec, params, tau_range, dt0_range, limits) -> dic
     from .sweep import verify_box
 
     res = verify_box(
-        programme, (spec.working_lo_c, spec.working_hi_c),
+        programme,
+        (spec.working_lo_c, spec.working_hi_c),
         tau_range if tau_range is not None else (params.tau_s, params.tau_s),
         dt0_range if dt0_range is not None else (params.dt0_c, params.dt0_c),
         levels_required=spec.levels_required,
-        deltas_c_per_min=(spec.delta_c_per_min, 0.1), t0_c=limits.t_init_c)
-    return {"holds": res.holds(), "full_share": res.full_share, "worst": res.worst(),
-            "min_levels": int(res.min_levels_grid.min()),
-            "covered_box": res.covered_box(), "grid_points": int(np.prod(res.shape))}
+        deltas_c_per_min=(spec.delta_c_per_min, 0.1),
+        t0_c=limits.t_init_c,
+    )
+    return {
+        "holds": res.holds(),
+        "full_share": res.full_share,
+        "worst": res.worst(),
+        "min_levels": int(res.min_levels_grid.min()),
+        "covered_box": res.covered_box(),
+        "grid_points": int(np.prod(res.shape)),
+    }
 
 
-def robustness_price(nominal: Plan, robust: Plan, tau_s_range: tuple[float, float] | None,
-                     dt0_c_range: tuple[float, float] | None) -> pd.DataFrame:
+def robustness_price(
+    nominal: Plan,
+    robust: Plan,
+    tau_s_range: tuple[float, float] | None,
+    dt0_c_range: tuple[float, float] | None,
+) -> pd.DataFrame:
     """The price of robustness: a nominal and a robust plan side by side.
 
     Both plans are checked on the same dense grid over the box (:func:`_verify_robust`,
@@ -1206,23 +1289,28 @@ def robustness_price(nominal: Plan, robust: Plan, tau_s_range: tuple[float, floa
         box = plan.box_check  # a robust plan was checked on this box's grid already
         taus = [p.tau_s for p in plan.scenarios]
         dt0s = [p.dt0_c for p in plan.scenarios]
-        same_box = (tau_s_range in (None, (min(taus), max(taus)))
-                    and dt0_c_range in (None, (min(dt0s), max(dt0s))))
+        same_box = tau_s_range in (None, (min(taus), max(taus))) and dt0_c_range in (
+            None,
+            (min(dt0s), max(dt0s)),
+        )
         if box is None or not same_box:
-            box = _verify_robust(plan.programme, plan.spec, nominal.params, tau_s_range,
-                                 dt0_c_range, plan.limits)
-        rows.append({
-            "plan": name,
-            "duration_min": plan.duration_min,
-            "extra_min": plan.duration_min - nominal.duration_min,
-            "steps": plan.steps,
-            "coverage": plan.coverage.coverage,
-            "coverage_delta_0p1": plan.coverage_0p1.coverage,
-            "box_worst_coverage": box["worst"]["coverage"],
-            "box_min_levels": box["min_levels"],
-            "box_full_share": box["full_share"],
-            "complete_over_box": bool(box["holds"]),
-        })
+            box = _verify_robust(
+                plan.programme, plan.spec, nominal.params, tau_s_range, dt0_c_range, plan.limits
+            )
+        rows.append(
+            {
+                "plan": name,
+                "duration_min": plan.duration_min,
+                "extra_min": plan.duration_min - nominal.duration_min,
+                "steps": plan.steps,
+                "coverage": plan.coverage.coverage,
+                "coverage_delta_0p1": plan.coverage_0p1.coverage,
+                "box_worst_coverage": box["worst"]["coverage"],
+                "box_min_levels": box["min_levels"],
+                "box_full_share": box["full_share"],
+                "complete_over_box": bool(box["holds"]),
+            }
+        )
     return pd.DataFrame(rows)
 
 
@@ -1240,30 +1328,43 @@ def explain_shortfall(spec: ExperimentSpec, params: ThermalParams, limits: Limit
             f"the chamber floor {limits.chamber_min_c:g} degC cannot bring the device below "
             f"{floor_t:g} degC (floor + dT0), so the bins below it are unreachable; a floor "
             f"of at most {spec.working_lo_c - spec.edge_margin_c - params.dt0_c - 1:g} degC "
-            "is needed")
+            "is needed"
+        )
     elif g_cool < need(n_cool) + 0.1:
         notes.append(
             f"at {spec.working_lo_c:g} degC the chamber floor {limits.chamber_min_c:g} degC "
             f"allows cooling gradients of at most {g_cool:.3f} degC/min "
             f"(g = (Tk_min + dT0 - T)/tau); {n_cool} cooling levels {spec.delta_c_per_min:g} "
-            "degC/min apart need clearly more: lower the floor or the level count")
+            "degC/min apart need clearly more: lower the floor or the level count"
+        )
     g_heat = (limits.chamber_max_c + params.dt0_c - spec.working_hi_c) / tau
     if g_heat <= 0:
         notes.append(
             f"the chamber ceiling {limits.chamber_max_c:g} degC cannot bring the device above "
-            f"{limits.chamber_max_c + params.dt0_c:g} degC")
+            f"{limits.chamber_max_c + params.dt0_c:g} degC"
+        )
     elif g_heat < need(n_heat) + 0.1:
         notes.append(
             f"at {spec.working_hi_c:g} degC the chamber ceiling {limits.chamber_max_c:g} degC "
             f"allows heating gradients of at most {g_heat:.3f} degC/min; {n_heat} heating "
-            "levels need clearly more: raise the ceiling or lower the level count")
+            "levels need clearly more: raise the ceiling or lower the level count"
+        )
     # turning room between the working edges and the device limits
     tau_s_min = params.tau_min
     for edge, room, rate, word in (
-            (spec.working_lo_c, spec.working_lo_c - limits.device_min_c,
-             limits.rate_max_c_per_min, "heating"),
-            (spec.working_hi_c, limits.device_max_c - spec.working_hi_c,
-             -limits.rate_min_c_per_min, "cooling")):
+        (
+            spec.working_lo_c,
+            spec.working_lo_c - limits.device_min_c,
+            limits.rate_max_c_per_min,
+            "heating",
+        ),
+        (
+            spec.working_hi_c,
+            limits.device_max_c - spec.working_hi_c,
+            -limits.rate_min_c_per_min,
+            "cooling",
+        ),
+    ):
         v_room = math.sqrt(max(2 * TURN_ACCEL_FRACTION * rate / tau_s_min * room, 0.0))
         n_dir = max(n_cool, n_heat)
         if v_room < 2 * n_dir * (spec.delta_c_per_min + BAND_SAFETY_C_PER_MIN):
@@ -1272,11 +1373,13 @@ def explain_shortfall(spec: ExperimentSpec, params: ThermalParams, limits: Limit
                 f"the chamber {word} at {rate:g} degC/min the passes there cannot be faster "
                 f"than about {v_room:.2f} degC/min, so {n_dir} levels per direction there "
                 "need slow, long passes: widen the device limits, lower the level count or "
-                "lengthen the experiment")
+                "lengthen the experiment"
+            )
     if spec.approx_lo_c < limits.device_min_c or spec.approx_hi_c > limits.device_max_c:
         notes.append(
             f"the approximation region [{spec.approx_lo_c:g}, {spec.approx_hi_c:g}] degC "
-            f"exceeds the device limits {limits.device_min_c:g} .. {limits.device_max_c:g} degC")
+            f"exceeds the device limits {limits.device_min_c:g} .. {limits.device_max_c:g} degC"
+        )
     return notes
 
 
@@ -1305,7 +1408,7 @@ OVERRUN_FACTOR = 1.3
 
 @dataclass(slots=True)
 class _Search:
-    best: tuple | None          # (structure, sep) that fits the duration limit
+    best: tuple | None  # (structure, sep) that fits the duration limit
     overrun: _Structure | None  # shortest structure that does not fit
     planner: _Planner
     reasons: list[str]
@@ -1327,8 +1430,7 @@ def _synthesise(spec, params_list, limits, models, progress, max_candidates=None
     base_sep = spec.delta_c_per_min + BAND_SAFETY_C_PER_MIN
     if len(params_list) > 1:
         base_sep += 2 * ROBUST_SLACK_C_PER_MIN
-    seps = [base_sep] if spec.objective == "shortest" else [
-        base_sep + x for x in (0.04, 0.02, 0.0)]
+    seps = [base_sep] if spec.objective == "shortest" else [base_sep + x for x in (0.04, 0.02, 0.0)]
     for sep in seps:
         for first in _first_directions(spec, limits):
             directions = _sweep_directions(spec, first)
@@ -1336,19 +1438,33 @@ def _synthesise(spec, params_list, limits, models, progress, max_candidates=None
             for caps, dynamic, design in CANDIDATES[:max_candidates]:
                 cap_by_dir = {
                     -1: (caps[0] * spec.max_cool_c_per_min, caps[1] * spec.max_cool_c_per_min),
-                    +1: (caps[2] * spec.max_heat_c_per_min, caps[3] * spec.max_heat_c_per_min)}
+                    +1: (caps[2] * spec.max_heat_c_per_min, caps[3] * spec.max_heat_c_per_min),
+                }
                 # robust plans use the same bands: each scenario gets its own windows
                 # and a slack (see _scenario_windows and _SubLP.window)
-                bands = {d: make_bands(spec, n_by_dir[d], d, sep, params_list, limits,
-                                       caps=cap_by_dir[d], dynamic=dynamic,
-                                       design=DESIGNS[design])
-                         if n_by_dir[d] else [] for d in (+1, -1)}
+                bands = {
+                    d: make_bands(
+                        spec,
+                        n_by_dir[d],
+                        d,
+                        sep,
+                        params_list,
+                        limits,
+                        caps=cap_by_dir[d],
+                        dynamic=dynamic,
+                        design=DESIGNS[design],
+                    )
+                    if n_by_dir[d]
+                    else []
+                    for d in (+1, -1)
+                }
                 narrow = [d for d in (+1, -1) if bands[d] and _band_feasibility(bands[d]) <= 0]
                 if narrow:
                     search.reasons.append(
                         f"the {'heating' if narrow[0] > 0 else 'cooling'} gradients the chamber "
                         f"allows near the region's edges cannot hold {n_by_dir[narrow[0]]} "
-                        f"levels {sep:.3f} degC/min apart")
+                        f"levels {sep:.3f} degC/min apart"
+                    )
                     continue
                 order = _order_bands(directions, bands, spec, params_list[0], limits)
                 # only a shorter structure can improve on what was found: prune
@@ -1365,7 +1481,8 @@ def _synthesise(spec, params_list, limits, models, progress, max_candidates=None
                 if structure.n_seg > max_seg:
                     search.reasons.append(
                         f"the sweeps need {minutes:g} min, more than the limit "
-                        f"{limits.duration_max_min:g} min")
+                        f"{limits.duration_max_min:g} min"
+                    )
                     if search.overrun is None or structure.n_seg < search.overrun.n_seg:
                         search.overrun = structure
                     continue
@@ -1439,17 +1556,22 @@ def plan_experiment(
     tic = time.perf_counter()
     robust = robust_tau_s is not None or robust_dt0_c is not None
     if robust and model is not None:
-        raise ParameterError("robust planning uses the first-order model of each scenario; "
-                             "give either a model or a robust box, not both")
+        raise ParameterError(
+            "robust planning uses the first-order model of each scenario; "
+            "give either a model or a robust box, not both"
+        )
     params_list = robust_scenarios(params, robust_tau_s, robust_dt0_c)
     if robust:
         # the reference scenario (first) is the centre of the box: sweeps are placed for
         # it and every scenario's windows are read off its simulation
-        params_list = [replace(
-            params,
-            tau_s=float(np.mean(robust_tau_s)) if robust_tau_s else params.tau_s,
-            dt0_c=float(np.mean(robust_dt0_c)) if robust_dt0_c else params.dt0_c),
-            *params_list]
+        params_list = [
+            replace(
+                params,
+                tau_s=float(np.mean(robust_tau_s)) if robust_tau_s else params.tau_s,
+                dt0_c=float(np.mean(robust_dt0_c)) if robust_dt0_c else params.dt0_c,
+            ),
+            *params_list,
+        ]
     models = [model if model is not None else FirstOrderLag(p) for p in params_list]
 
     lp_count0 = _LP_COUNT[0]
@@ -1471,23 +1593,29 @@ def plan_experiment(
             if progress:
                 progress(f"no programme fits the robust box; trying its inner {word}")
             inner_list = [params_list[0], *robust_scenarios(params, in_tau, in_dt0)]
-            search = _synthesise(spec, inner_list, limits,
-                                 [FirstOrderLag(p) for p in inner_list], progress)
+            search = _synthesise(
+                spec, inner_list, limits, [FirstOrderLag(p) for p in inner_list], progress
+            )
             if search.best is not None:
                 box = " x ".join(
-                    f"{name} {r[0]:g}..{r[1]:g} {unit}" for name, r, unit in (
-                        ("tau", in_tau, "s"), ("dT0", in_dt0, "degC")) if r is not None)
-                notes.append("no single programme meeting the target for every scenario of "
-                             f"the robust box was found; planned robustly for its inner {word} "
-                             f"({box})")
+                    f"{name} {r[0]:g}..{r[1]:g} {unit}"
+                    for name, r, unit in (("tau", in_tau, "s"), ("dT0", in_dt0, "degC"))
+                    if r is not None
+                )
+                notes.append(
+                    "no single programme meeting the target for every scenario of "
+                    f"the robust box was found; planned robustly for its inner {word} "
+                    f"({box})"
+                )
                 break
         else:
-            notes.append("no single programme meeting the target for every scenario of the "
-                         "robust box (or its inner half or quarter) was found; planned at the "
-                         "nominal point with the widest margins that fit")
+            notes.append(
+                "no single programme meeting the target for every scenario of the "
+                "robust box (or its inner half or quarter) was found; planned at the "
+                "nominal point with the widest margins that fit"
+            )
             spec_margin = replace(spec, objective="margin")
-            search = _synthesise(spec_margin, [params], limits, [FirstOrderLag(params)],
-                                 progress)
+            search = _synthesise(spec_margin, [params], limits, [FirstOrderLag(params)], progress)
     max_seg = int(limits.duration_max_min // spec.segment_min)
     if search.best is not None:
         structure, _ = search.best
@@ -1499,38 +1627,61 @@ def plan_experiment(
         options = []
         if search.overrun is not None:
             structure = _truncate(search.planner, search.overrun, max_seg)
-            options.append((f"all {spec.levels_required} sweeps need "
-                            f"{search.overrun.n_seg * spec.segment_min:g} min, more than the "
-                            f"limit {limits.duration_max_min:g} min; the programme is cut at "
-                            "the limit", structure.u, 0.0, 0.0, search))
+            options.append(
+                (
+                    f"all {spec.levels_required} sweeps need "
+                    f"{search.overrun.n_seg * spec.segment_min:g} min, more than the "
+                    f"limit {limits.duration_max_min:g} min; the programme is cut at "
+                    "the limit",
+                    structure.u,
+                    0.0,
+                    0.0,
+                    search,
+                )
+            )
 
         checked: dict[int, float] = {}
 
         def verified(option):
             key = id(option[1])
             if key not in checked:
-                prog = Programme(np.full(option[1].size, float(spec.segment_min)), option[1],
-                                 limits.start_c).merged(1e-6).rounded(limits)
+                prog = (
+                    Programme(
+                        np.full(option[1].size, float(spec.segment_min)), option[1], limits.start_c
+                    )
+                    .merged(1e-6)
+                    .rounded(limits)
+                )
                 checked[key] = check_programme(prog, spec, limits, params_list, model)[0].coverage
             return checked[key]
 
         def full_coverage_found():
             return any(verified(o) >= 1.0 for o in options[-1:])
 
-        for sub_spec, sub_search in _subregions(spec, params_list, limits, models, progress,
-                                                stop=full_coverage_found):
+        for sub_spec, sub_search in _subregions(
+            spec, params_list, limits, models, progress, stop=full_coverage_found
+        ):
             u_sub, mg, mt = _polish(sub_search.planner, sub_search.best[0])
-            options.append((f"sweeps designed for the sub-region [{sub_spec.working_lo_c:g}, "
-                            f"{sub_spec.working_hi_c:g}] degC (the full region did not fit "
-                            "in time)",
-                            u_sub, mg, mt, sub_search))
+            options.append(
+                (
+                    f"sweeps designed for the sub-region [{sub_spec.working_lo_c:g}, "
+                    f"{sub_spec.working_hi_c:g}] degC (the full region did not fit "
+                    "in time)",
+                    u_sub,
+                    mg,
+                    mt,
+                    sub_search,
+                )
+            )
         if not options:
-            msg = (f"{spec.name}: no programme covers any part of [{spec.working_lo_c:g}, "
-                   f"{spec.working_hi_c:g}] degC with {spec.levels_required} gradient levels "
-                   f"{spec.delta_c_per_min:g} degC/min apart within "
-                   f"{limits.duration_max_min:g} min ({'; '.join(search.reasons[:2])}); "
-                   "best reachable coverage is 0%. "
-                   "Lengthen the duration, narrow the region or lower the level count.")
+            msg = (
+                f"{spec.name}: no programme covers any part of [{spec.working_lo_c:g}, "
+                f"{spec.working_hi_c:g}] degC with {spec.levels_required} gradient levels "
+                f"{spec.delta_c_per_min:g} degC/min apart within "
+                f"{limits.duration_max_min:g} min ({'; '.join(search.reasons[:2])}); "
+                "best reachable coverage is 0%. "
+                "Lengthen the duration, narrow the region or lower the level count."
+            )
             raise InfeasiblePlanError(msg, best_coverage=0.0)
 
         note, u, margin_g, margin_t, search = max(options, key=verified)
@@ -1538,8 +1689,7 @@ def plan_experiment(
     planner = search.planner
     raw = Programme(np.full(u.size, float(spec.segment_min)), u, limits.start_c)
     programme = raw.merged(rate_tol_c_per_min=1e-6).rounded(limits)
-    cov, cov01, problems, t_lo, t_hi = check_programme(programme, spec, limits, params_list,
-                                                       model)
+    cov, cov01, problems, t_lo, t_hi = check_programme(programme, spec, limits, params_list, model)
     # rounding to whole minutes and 0.1 degC can push the device a hair past a limit the
     # LP met at its samples: polish again with the limits tightened by that much
     for _ in range(2):
@@ -1548,8 +1698,11 @@ def plan_experiment(
             break
         planner.device_margin_c += excess + 0.05
         u2, mg2, mt2 = _polish(planner, search.best[0])
-        prog2 = Programme(np.full(u2.size, float(spec.segment_min)), u2, limits.start_c
-                          ).merged(rate_tol_c_per_min=1e-6).rounded(limits)
+        prog2 = (
+            Programme(np.full(u2.size, float(spec.segment_min)), u2, limits.start_c)
+            .merged(rate_tol_c_per_min=1e-6)
+            .rounded(limits)
+        )
         check2 = check_programme(prog2, spec, limits, params_list, model)
         excess2 = max(limits.device_min_c - check2[3], check2[4] - limits.device_max_c)
         if check2[0].coverage < cov.coverage or excess2 >= excess:
@@ -1557,19 +1710,21 @@ def plan_experiment(
         programme, (cov, cov01, problems, t_lo, t_hi) = prog2, check2
         u, margin_g, margin_t = u2, mg2, mt2
     if programme.n_segments > spec.max_steps:
-        problems.append(f"the step table has {programme.n_segments} steps, more than "
-                        f"max_steps = {spec.max_steps}")
+        problems.append(
+            f"the step table has {programme.n_segments} steps, more than "
+            f"max_steps = {spec.max_steps}"
+        )
     complete = cov.complete and not problems
     if not cov.complete:
         short = cov.short_bins()
         notes.append(
             f"{len(short)} of {spec.grid.n_bins} bins have fewer than {spec.levels_required} "
-            f"distinct levels: " + ", ".join(f"[{a:g},{b:g}) {n}" for a, b, n in short[:10]))
+            f"distinct levels: " + ", ".join(f"[{a:g},{b:g}) {n}" for a, b, n in short[:10])
+        )
         notes += [n for n in explain_shortfall(spec, params, limits) if n not in notes]
     box_check = None
     if robust:
-        box_check = _verify_robust(programme, spec, params, robust_tau_s, robust_dt0_c,
-                                   limits)
+        box_check = _verify_robust(programme, spec, params, robust_tau_s, robust_dt0_c, limits)
         if not box_check["holds"]:
             complete = False
             part = box_check["covered_box"]
@@ -1577,22 +1732,41 @@ def plan_experiment(
                 "coverage does not hold everywhere in the robust box (worst point tau "
                 f"{box_check['worst']['tau_s']:g} s, dT0 {box_check['worst']['dt0_c']:g} degC: "
                 f"{box_check['worst']['coverage']:.0%}); "
-                + (f"it holds for tau {part['tau_s_range'][0]:g}..{part['tau_s_range'][1]:g} s "
-                   f"x dT0 {part['dt0_c_range'][0]:g}..{part['dt0_c_range'][1]:g} degC"
-                   if part else "no grid point is fully covered"))
+                + (
+                    f"it holds for tau {part['tau_s_range'][0]:g}..{part['tau_s_range'][1]:g} s "
+                    f"x dT0 {part['dt0_c_range'][0]:g}..{part['dt0_c_range'][1]:g} degC"
+                    if part
+                    else "no grid point is fully covered"
+                )
+            )
     status = "complete" if complete else ("incomplete" if not problems else "limits violated")
     plan = Plan(
-        spec=spec, params=params, limits=limits, programme=programme, coverage=cov,
-        coverage_0p1=cov01, complete=complete, status=status,
-        solve_s=time.perf_counter() - tic, margin_g_c_per_min=margin_g, margin_t_c=margin_t,
-        n_lp=_LP_COUNT[0] - lp_count0, problem_size=planner.size, scenarios=tuple(params_list),
-        violations=tuple(problems), notes=tuple(notes), t_min_c=t_lo, t_max_c=t_hi,
+        spec=spec,
+        params=params,
+        limits=limits,
+        programme=programme,
+        coverage=cov,
+        coverage_0p1=cov01,
+        complete=complete,
+        status=status,
+        solve_s=time.perf_counter() - tic,
+        margin_g_c_per_min=margin_g,
+        margin_t_c=margin_t,
+        n_lp=_LP_COUNT[0] - lp_count0,
+        problem_size=planner.size,
+        scenarios=tuple(params_list),
+        violations=tuple(problems),
+        notes=tuple(notes),
+        t_min_c=t_lo,
+        t_max_c=t_hi,
         box_check=box_check,
     )
     if require_complete and not complete:
         raise InfeasiblePlanError(
             f"{spec.name}: the target cannot be met: {'; '.join(notes + problems)}; best "
-            f"reachable coverage is {cov.coverage:.0%}", best_coverage=cov.coverage)
+            f"reachable coverage is {cov.coverage:.0%}",
+            best_coverage=cov.coverage,
+        )
     return plan
 
 
@@ -1613,8 +1787,9 @@ def _subregions(spec, params_list, limits, models, progress, stop=None):
                 break
             a = {"low": cut, "high": 0, "both": cut // 2}[side]
             b = cut - a
-            sub = replace(spec, working_lo_c=spec.working_lo_c + a,
-                          working_hi_c=spec.working_hi_c - b)
+            sub = replace(
+                spec, working_lo_c=spec.working_lo_c + a, working_hi_c=spec.working_hi_c - b
+            )
             search = _synthesise(sub, params_list, limits, models, None, max_candidates=1)
             if search.best is not None:
                 if progress:

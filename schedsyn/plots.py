@@ -81,10 +81,22 @@ def coverage_plot(report, ax=None, title: str | None = None):
     ax = _axes(ax, figsize=(8, 3.5))
     lo = report.grid.lower_c
     colors = np.where(report.covered, "tab:green", "tab:red")
-    ax.bar(lo, report.levels, width=report.grid.bin_c, align="edge", color=colors,
-           edgecolor="k", lw=0.4)
-    ax.axhline(report.levels_required, color="k", ls="--", lw=1,
-               label=f"required: {report.levels_required}")
+    ax.bar(
+        lo,
+        report.levels,
+        width=report.grid.bin_c,
+        align="edge",
+        color=colors,
+        edgecolor="k",
+        lw=0.4,
+    )
+    ax.axhline(
+        report.levels_required,
+        color="k",
+        ls="--",
+        lw=1,
+        label=f"required: {report.levels_required}",
+    )
     ax.set_xlabel("internal temperature bin, °C")
     ax.set_ylabel(f"distinct levels (Δ ≥ {report.delta_c_per_min:g} °C/min)")
     ax.set_title(title or f"coverage {report.coverage:.0%}")
@@ -131,8 +143,15 @@ def sweep_heatmap(
         z = 100.0 * z
         vmin = 0.0 if vmin is None else 100.0 * vmin
         vmax = 100.0 if vmax is None else 100.0 * vmax
-    mesh = ax.pcolormesh(_cell_edges(taus), _cell_edges(dt0s), np.ma.masked_invalid(z),
-                         cmap="viridis", vmin=vmin, vmax=vmax, shading="flat")
+    mesh = ax.pcolormesh(
+        _cell_edges(taus),
+        _cell_edges(dt0s),
+        np.ma.masked_invalid(z),
+        cmap="viridis",
+        vmin=vmin,
+        vmax=vmax,
+        shading="flat",
+    )
     label = f"{column}, %" if is_cov else column
     cbar = ax.figure.colorbar(mesh, ax=ax, label=label)
     integer = bool(np.all(np.isnan(z) | (z == np.round(z))))
@@ -144,8 +163,15 @@ def sweep_heatmap(
     if is_cov and taus.size > 1 and dt0s.size > 1:
         full = z >= 100.0 - 1e-9
         if full.any() and not full.all():
-            ax.contour(taus, dt0s, full.astype(float), levels=[0.5], colors="white",
-                       linewidths=1.2, linestyles="--")
+            ax.contour(
+                taus,
+                dt0s,
+                full.astype(float),
+                levels=[0.5],
+                colors="white",
+                linewidths=1.2,
+                linestyles="--",
+            )
     if annotate is None:
         annotate = z.size <= 400
     if annotate:
@@ -154,22 +180,39 @@ def sweep_heatmap(
                 if np.isfinite(z[i, j]):
                     text = f"{z[i, j]:.0f}" if integer or is_cov else f"{z[i, j]:.3g}"
                     light = mesh.norm(z[i, j]) > 0.6  # dark text on the yellow end
-                    ax.text(t, d, text, ha="center", va="center", fontsize=6,
-                            color="k" if light else "w")
+                    ax.text(
+                        t,
+                        d,
+                        text,
+                        ha="center",
+                        va="center",
+                        fontsize=6,
+                        color="k" if light else "w",
+                    )
     if nominal is not None:
-        ax.plot([nominal[0]], [nominal[1]], marker="*", ms=15, color="tab:red", mec="white",
-                ls="none", label=f"nominal (tau {nominal[0]:g} s, dT0 {nominal[1]:g} °C)")
-        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), fontsize=8,
-                  frameon=False)
+        ax.plot(
+            [nominal[0]],
+            [nominal[1]],
+            marker="*",
+            ms=15,
+            color="tab:red",
+            mec="white",
+            ls="none",
+            label=f"nominal (tau {nominal[0]:g} s, dT0 {nominal[1]:g} °C)",
+        )
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), fontsize=8, frameon=False)
     ax.set_xlabel("time constant tau, s")
     ax.set_ylabel("self-heating offset dT0, °C")
     ax.set_title(title or column)
     return ax
 
 
-def sweep_panels(panels, nominal: tuple[float, float] | None = (2400.0, 3.0),
-                 suptitle: str | None = None,
-                 box: tuple[tuple[float, float], tuple[float, float]] | None = None):
+def sweep_panels(
+    panels,
+    nominal: tuple[float, float] | None = (2400.0, 3.0),
+    suptitle: str | None = None,
+    box: tuple[tuple[float, float], tuple[float, float]] | None = None,
+):
     """Side-by-side :func:`sweep_heatmap` panels in one figure; returns the list of axes.
 
     ``panels`` is a sequence of ``(frame, column, title)``, e.g. the coverage and the
@@ -183,18 +226,30 @@ def sweep_panels(panels, nominal: tuple[float, float] | None = (2400.0, 3.0),
     import matplotlib.pyplot as plt
 
     panels = list(panels)
-    fig, axes = plt.subplots(1, len(panels), figsize=(6.5 * len(panels), 5),
-                             constrained_layout=True, squeeze=False)
+    fig, axes = plt.subplots(
+        1, len(panels), figsize=(6.5 * len(panels), 5), constrained_layout=True, squeeze=False
+    )
     for ax, (frame, column, title) in zip(axes[0], panels, strict=True):
         sweep_heatmap(frame, column, ax=ax, nominal=nominal, title=title)
         if box is not None:
             from matplotlib.patches import Rectangle
 
             (t0, t1), (d0, d1) = box
-            ax.add_patch(Rectangle((t0, d0), t1 - t0, d1 - d0, fill=False, ec="red",
-                                   lw=1.8, ls="-", label="robust box"))
-            ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2,
-                      fontsize=8, frameon=False)
+            ax.add_patch(
+                Rectangle(
+                    (t0, d0),
+                    t1 - t0,
+                    d1 - d0,
+                    fill=False,
+                    ec="red",
+                    lw=1.8,
+                    ls="-",
+                    label="robust box",
+                )
+            )
+            ax.legend(
+                loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2, fontsize=8, frameon=False
+            )
     if suptitle:
         fig.suptitle(suptitle)
     return list(axes[0])
@@ -206,8 +261,7 @@ def gradient_plot(estimate, ax=None, truth_c_per_min=None, title: str | None = N
     ax = _axes(ax)
     t = estimate.time_min
     g, s = estimate.g_est_c_per_min, estimate.g_std_c_per_min
-    ax.fill_between(t, g - 2 * s, g + 2 * s, color="tab:red", alpha=0.25, lw=0,
-                    label="±2σ")
+    ax.fill_between(t, g - 2 * s, g + 2 * s, color="tab:red", alpha=0.25, lw=0, label="±2σ")
     ax.plot(t, g, color="tab:red", lw=1.0, label=f"estimated ({estimate.method})")
     if truth_c_per_min is not None:
         ax.plot(t, truth_c_per_min, color="k", lw=0.6, ls="--", label="truth")
@@ -220,17 +274,31 @@ def gradient_plot(estimate, ax=None, truth_c_per_min=None, title: str | None = N
     return ax
 
 
-def phase_overlay_plot(sim_t_c, sim_g_c_per_min, run_t_c, run_g_c_per_min, ax=None,
-                       region=None, title: str | None = None):
+def phase_overlay_plot(
+    sim_t_c,
+    sim_g_c_per_min,
+    run_t_c,
+    run_g_c_per_min,
+    ax=None,
+    region=None,
+    title: str | None = None,
+):
     """Measured phase trajectory over the simulated one (thin line), as in paper figs 5-6."""
-    ax = phase_plot(sim_t_c, sim_g_c_per_min, ax=ax, region=region, label="simulated plan",
-                    lw=0.7, color="k")
-    return phase_plot(run_t_c, run_g_c_per_min, ax=ax, label="measured (smoothed)", lw=1.4,
-                      color="tab:red", title=title)
+    ax = phase_plot(
+        sim_t_c, sim_g_c_per_min, ax=ax, region=region, label="simulated plan", lw=0.7, color="k"
+    )
+    return phase_plot(
+        run_t_c,
+        run_g_c_per_min,
+        ax=ax,
+        label="measured (smoothed)",
+        lw=1.4,
+        color="tab:red",
+        title=title,
+    )
 
 
-def temperature_compare_plot(time_min, measured_c, simulated_c, ax=None,
-                             title: str | None = None):
+def temperature_compare_plot(time_min, measured_c, simulated_c, ax=None, title: str | None = None):
     """Measured and simulated internal temperature against time; residual on the right axis."""
     ax = _axes(ax)
     ax.plot(time_min, simulated_c, color="k", lw=0.8, label="simulated T")
@@ -257,13 +325,35 @@ def coverage_compare_plot(planned, run, ax=None, title: str | None = None):
     ax = _axes(ax, figsize=(8, 3.5))
     lo = planned.grid.lower_c
     w = planned.grid.bin_c
-    ax.bar(lo, planned.levels, width=0.45 * w, align="edge", color="0.85", edgecolor="k",
-           lw=0.4, hatch="//", label=f"planned ({planned.coverage:.0%})")
+    ax.bar(
+        lo,
+        planned.levels,
+        width=0.45 * w,
+        align="edge",
+        color="0.85",
+        edgecolor="k",
+        lw=0.4,
+        hatch="//",
+        label=f"planned ({planned.coverage:.0%})",
+    )
     colors = np.where(run.covered, "tab:green", "tab:red")
-    ax.bar(lo + 0.5 * w, run.levels, width=0.45 * w, align="edge", color=colors,
-           edgecolor="k", lw=0.4, label=f"run ({run.coverage:.0%})")
-    ax.axhline(planned.levels_required, color="k", ls="--", lw=1,
-               label=f"required: {planned.levels_required}")
+    ax.bar(
+        lo + 0.5 * w,
+        run.levels,
+        width=0.45 * w,
+        align="edge",
+        color=colors,
+        edgecolor="k",
+        lw=0.4,
+        label=f"run ({run.coverage:.0%})",
+    )
+    ax.axhline(
+        planned.levels_required,
+        color="k",
+        ls="--",
+        lw=1,
+        label=f"required: {planned.levels_required}",
+    )
     ax.set_xlabel("internal temperature bin, °C")
     ax.set_ylabel(f"distinct levels (Δ ≥ {planned.delta_c_per_min:g} °C/min)")
     ax.set_title(title or f"coverage: planned {planned.coverage:.0%}, run {run.coverage:.0%}")
@@ -283,15 +373,24 @@ def compare_panels(comparison, region=None, suptitle: str | None = None):
 
     fig, axes = plt.subplots(2, 2, figsize=(14, 9), constrained_layout=True)
     c = comparison
-    phase_overlay_plot(c.planned.t_c, c.planned.g_c_per_min, c.run_dense.t_c,
-                       c.run_dense.g_c_per_min, ax=axes[0, 0], region=region,
-                       title="phase portrait: measured over simulated")
-    temperature_compare_plot(c.log.time_min, c.log.t_int_c, c.simulated.t_c, ax=axes[0, 1],
-                             title=f"internal temperature (RMS residual "
-                                   f"{c.rms_residual_c:.2f} °C)")
+    phase_overlay_plot(
+        c.planned.t_c,
+        c.planned.g_c_per_min,
+        c.run_dense.t_c,
+        c.run_dense.g_c_per_min,
+        ax=axes[0, 0],
+        region=region,
+        title="phase portrait: measured over simulated",
+    )
+    temperature_compare_plot(
+        c.log.time_min,
+        c.log.t_int_c,
+        c.simulated.t_c,
+        ax=axes[0, 1],
+        title=f"internal temperature (RMS residual {c.rms_residual_c:.2f} °C)",
+    )
     ax = gradient_plot(c.estimate, ax=axes[1, 0], title="gradient: estimated vs simulated")
-    ax.plot(c.simulated.time_min, c.simulated.g_c_per_min, color="k", lw=0.6,
-            label="simulated")
+    ax.plot(c.simulated.time_min, c.simulated.g_c_per_min, color="k", lw=0.6, label="simulated")
     ax.legend(loc="best")
     coverage_compare_plot(c.planned_coverage, c.run_coverage, ax=axes[1, 1])
     if suptitle:
@@ -299,8 +398,14 @@ def compare_panels(comparison, region=None, suptitle: str | None = None):
     return list(axes.ravel())
 
 
-def residual_plot(time_min, before_c, after_c=None, ax=None, title: str | None = None,
-                  labels=("base model", "augmented model")):
+def residual_plot(
+    time_min,
+    before_c,
+    after_c=None,
+    ax=None,
+    title: str | None = None,
+    labels=("base model", "augmented model"),
+):
     """Residuals (model - measured, °C) against time, before and after augmentation."""
     ax = _axes(ax)
     ax.plot(time_min, before_c, color="tab:red", lw=0.8, alpha=0.8, label=labels[0])

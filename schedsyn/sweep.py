@@ -351,7 +351,10 @@ def _sweep_tau(chunk: _TauChunk) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
     # A(tau) does not depend on dT0: one affine response for the whole row
     resp = affine_response(
         FirstOrderLag(ThermalParams(tau_s=chunk.tau_s, dt0_c=0.0)),
-        prog.durations_min, times, prog.start_c, chunk.t0_c,
+        prog.durations_min,
+        times,
+        prog.start_c,
+        chunk.t0_c,
     )
     t_forced = resp.a_t @ prog.rates_c_per_min  # A_T u
     g_forced = resp.a_g @ prog.rates_c_per_min  # A_g u
@@ -420,8 +423,14 @@ class SweepResult:
     bin_c: float = 1.0
 
     def __post_init__(self) -> None:
-        for name in ("tau_s_values", "dt0_c_values", "coverage", "min_levels", "t_min_c",
-                     "t_max_c"):
+        for name in (
+            "tau_s_values",
+            "dt0_c_values",
+            "coverage",
+            "min_levels",
+            "t_min_c",
+            "t_max_c",
+        ):
             object.__setattr__(self, name, _frozen(getattr(self, name)))
 
     # -- views at the first (primary) delta ----------------------------------------------
@@ -536,8 +545,8 @@ class SweepResult:
 def sweep_fixed(
     programme: Programme,
     region: tuple[float, float],
-    tau_s_values: Sequence[float],
-    dt0_c_values: Sequence[float],
+    tau_s_values: Sequence[float] | np.ndarray,
+    dt0_c_values: Sequence[float] | np.ndarray,
     *,
     levels_required: int = 6,
     deltas_c_per_min: Sequence[float] = (0.05, 0.1),
@@ -586,12 +595,21 @@ def sweep_fixed(
         raise ParameterError(f"levels_required must be a whole number >= 1, got {levels_required}")
     dense_times(programme.total_min, dt_min)  # validates dt_min
     chunks = [
-        _TauChunk(programme, grid, float(tau), tuple(float(x) for x in dt0s),
-                  int(levels_required), deltas, float(dt_min), float(t0_c))
+        _TauChunk(
+            programme,
+            grid,
+            float(tau),
+            tuple(float(x) for x in dt0s),
+            int(levels_required),
+            deltas,
+            float(dt_min),
+            float(t0_c),
+        )
         for tau in taus
     ]
-    rows = run_map(_sweep_tau, chunks, backend, workers=workers, progress=progress,
-                   desc="sweep (tau rows)")
+    rows = run_map(
+        _sweep_tau, chunks, backend, workers=workers, progress=progress, desc="sweep (tau rows)"
+    )
     return SweepResult(
         region_c=(lo, hi),
         tau_s_values=taus,
@@ -648,9 +666,18 @@ def verify_box(
             )
         axes.append(np.array([lo]) if lo == hi else np.linspace(lo, hi, int(n)))
     return sweep_fixed(
-        programme, region, axes[0], axes[1], levels_required=levels_required,
-        deltas_c_per_min=deltas_c_per_min, dt_min=dt_min, bin_c=bin_c, t0_c=t0_c,
-        backend=backend, workers=workers, progress=progress,
+        programme,
+        region,
+        axes[0],
+        axes[1],
+        levels_required=levels_required,
+        deltas_c_per_min=deltas_c_per_min,
+        dt_min=dt_min,
+        bin_c=bin_c,
+        t0_c=t0_c,
+        backend=backend,
+        workers=workers,
+        progress=progress,
     )
 
 
@@ -722,8 +749,8 @@ class ReplanResult:
 
 def sweep_replan(
     plan_fn: Callable[[ThermalParams], Any],
-    tau_s_values: Sequence[float],
-    dt0_c_values: Sequence[float],
+    tau_s_values: Sequence[float] | np.ndarray,
+    dt0_c_values: Sequence[float] | np.ndarray,
     *,
     backend: Any = "serial",
     workers: int | None = None,
@@ -742,6 +769,12 @@ def sweep_replan(
     dt0s = _axis(dt0_c_values, "dt0_c_values")
     _check_params(taus, dt0s)
     points = [ThermalParams(tau_s=float(t), dt0_c=float(d)) for t in taus for d in dt0s]
-    rows = run_map(partial(_replan_point, plan_fn), points, backend, workers=workers,
-                   progress=progress, desc="re-plan")
+    rows = run_map(
+        partial(_replan_point, plan_fn),
+        points,
+        backend,
+        workers=workers,
+        progress=progress,
+        desc="re-plan",
+    )
     return ReplanResult(taus, dt0s, tuple(rows))

@@ -151,8 +151,9 @@ EFFECT_RANGES = {
 }
 
 
-def random_effect_model(effect: str, rng: np.random.Generator, tau_s: float = 2400.0,
-                        dt0_c: float = 3.0):
+def random_effect_model(
+    effect: str, rng: np.random.Generator, tau_s: float = 2400.0, dt0_c: float = 3.0
+):
     """A :class:`~schedsyn.effects.ModelSpec` with ``effect`` drawn from EFFECT_RANGES.
 
     ``chamber_rate_limit`` limits cooling only (heating limit 10 degC/min, not binding);
@@ -174,8 +175,10 @@ def random_effect_model(effect: str, rng: np.random.Generator, tau_s: float = 24
         ratio = draw.pop("ratio")
         slow, fast = tau_s * math.sqrt(ratio), tau_s / math.sqrt(ratio)
         heat_slow = bool(rng.integers(2))
-        draw = {"tau_heat_s": slow if heat_slow else fast,
-                "tau_cool_s": fast if heat_slow else slow}
+        draw = {
+            "tau_heat_s": slow if heat_slow else fast,
+            "tau_cool_s": fast if heat_slow else slow,
+        }
     return ModelSpec(tau_s, dt0_c, effect, draw)
 
 
@@ -185,15 +188,18 @@ def blind_programmes() -> dict[str, Programme]:
     ``cold``: down to -40 at -1 degC/min, up to +40 at +2, down to -10 at -0.8, back;
     ``warm``: up to +60 at +1, down to 0 at -1, up to +50 at +2.5, back at -0.6.
     """
+
     def build(steps: list[tuple[float, float]]) -> Programme:
         d = [s[0] for s in steps]
         return Programme(np.array(d + [540.0 - sum(d)]), np.array([s[1] for s in steps] + [0.0]))
 
     return {
-        "cold": build([(60, -1.0), (60, 0.0), (40, 2.0), (90, 0.0), (62.5, -0.8), (60, 0.0),
-                       (30, 1.0)]),
-        "warm": build([(40, 1.0), (60, 0.0), (60, -1.0), (60, 0.0), (20, 2.5), (60, 0.0),
-                       (50, -0.6)]),
+        "cold": build(
+            [(60, -1.0), (60, 0.0), (40, 2.0), (90, 0.0), (62.5, -0.8), (60, 0.0), (30, 1.0)]
+        ),
+        "warm": build(
+            [(40, 1.0), (60, 0.0), (60, -1.0), (60, 0.0), (20, 2.5), (60, 0.0), (50, -0.6)]
+        ),
     }
 
 
@@ -220,6 +226,13 @@ def blind_case(
     noise = float(rng.uniform(0.01, 0.03)) if noise_c is None else noise_c
     samp = float(rng.choice([1.0, 2.0, 5.0, 10.0])) if sample_s is None else sample_s
     air = bool(rng.integers(2)) if with_air is None else with_air
-    frame = synth_effect_log(programme, truth, sample_s=samp, noise_c=noise, quant_c=quant_c,
-                             seed=int(rng.integers(2**31)), with_air=air)
+    frame = synth_effect_log(
+        programme,
+        truth,
+        sample_s=samp,
+        noise_c=noise,
+        quant_c=quant_c,
+        seed=int(rng.integers(2**31)),
+        with_air=air,
+    )
     return frame, truth, noise

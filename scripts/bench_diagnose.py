@@ -53,8 +53,9 @@ def run_case(args):
     progs = programmes()
     names = sorted(progs)
     prog_name = names[seed % len(names)]
-    frame, truth, noise = blind_case(effect, 1000 * (list(EFFECTS) + ["none"]).index(effect)
-                                     + seed, progs[prog_name])
+    frame, truth, noise = blind_case(
+        effect, 1000 * (list(EFFECTS) + ["none"]).index(effect) + seed, progs[prog_name]
+    )
     t0 = time.perf_counter()
     d = diagnose_frame(frame, DiagnoseSettings(fit_step_s=fit_step_s))
     elapsed = time.perf_counter() - t0
@@ -63,12 +64,21 @@ def run_case(args):
     if correct and effect != "none":
         err = main_error(effect, truth.parameters, d.parameters)
     return {
-        "truth": effect, "seed": seed, "programme": prog_name, "found": d.effect,
-        "ambiguous_with": ",".join(d.ambiguous_with), "correct": correct,
-        "main_rel_error": err, "rms_before_c": d.rms_before_c, "rms_after_c": d.rms_after_c,
-        "holdout_before_c": d.holdout_rms_before_c, "holdout_after_c": d.holdout_rms_after_c,
-        "noise_c": noise, "sample_s": float(np.median(np.diff(frame["time_s"]))),
-        "with_air": "tk_air_c" in frame, "seconds": elapsed,
+        "truth": effect,
+        "seed": seed,
+        "programme": prog_name,
+        "found": d.effect,
+        "ambiguous_with": ",".join(d.ambiguous_with),
+        "correct": correct,
+        "main_rel_error": err,
+        "rms_before_c": d.rms_before_c,
+        "rms_after_c": d.rms_after_c,
+        "holdout_before_c": d.holdout_rms_before_c,
+        "holdout_after_c": d.holdout_rms_after_c,
+        "noise_c": noise,
+        "sample_s": float(np.median(np.diff(frame["time_s"]))),
+        "with_air": "tk_air_c" in frame,
+        "seconds": elapsed,
         "truth_params": "; ".join(f"{k}={v:.4g}" for k, v in truth.parameters.items()),
         "found_params": "; ".join(f"{k}={v:.4g}" for k, v in d.parameters.items()),
     }
@@ -96,26 +106,48 @@ def main() -> None:
     confusion.to_csv(out / "confusion.csv")
     material = cases["rms_before_c"] > 3 * cases["noise_c"]
     cases["halved"] = cases["rms_after_c"] <= 0.5 * cases["rms_before_c"]
-    summary = cases.assign(material=material).groupby("truth").agg(
-        n=("correct", "size"), correct=("correct", "sum"),
-        main_err_median=("main_rel_error", "median"), main_err_max=("main_rel_error", "max"),
-        within_25pct=("main_rel_error", lambda s: int((s <= 0.25).sum())),
-        material=("material", "sum"),
-        halved_of_material=("halved", lambda s: int(s[material[s.index]].sum())),
-        seconds_median=("seconds", "median"), seconds_max=("seconds", "max"),
+    summary = (
+        cases.assign(material=material)
+        .groupby("truth")
+        .agg(
+            n=("correct", "size"),
+            correct=("correct", "sum"),
+            main_err_median=("main_rel_error", "median"),
+            main_err_max=("main_rel_error", "max"),
+            within_25pct=("main_rel_error", lambda s: int((s <= 0.25).sum())),
+            material=("material", "sum"),
+            halved_of_material=("halved", lambda s: int(s[material[s.index]].sum())),
+            seconds_median=("seconds", "median"),
+            seconds_max=("seconds", "max"),
+        )
     )
     summary.to_csv(out / "summary.csv")
     pd.set_option("display.width", 200)
     print(confusion.to_string())
     print()
     print(summary.to_string(float_format=lambda v: f"{v:.3g}"))
-    print(f"\n{len(cases)} logs in {wall:.0f} s wall on {ns.workers} workers; "
-          f"median {cases['seconds'].median():.1f} s per log (one core each)")
+    print(
+        f"\n{len(cases)} logs in {wall:.0f} s wall on {ns.workers} workers; "
+        f"median {cases['seconds'].median():.1f} s per log (one core each)"
+    )
     bad = cases[~cases["correct"]]
     if len(bad):
         print("\nmisses:")
-        print(bad[["truth", "seed", "programme", "found", "with_air", "sample_s", "noise_c",
-                   "truth_params", "found_params"]].to_string())
+        print(
+            bad[
+                [
+                    "truth",
+                    "seed",
+                    "programme",
+                    "found",
+                    "with_air",
+                    "sample_s",
+                    "noise_c",
+                    "truth_params",
+                    "found_params",
+                ]
+            ].to_string()
+        )
 
 
 if __name__ == "__main__":

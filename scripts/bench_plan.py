@@ -31,8 +31,10 @@ from schedsyn.campaign import default_campaign, load_campaign, plan_campaign
 
 
 def _with_segment(config, segment_min: float):
-    exps = tuple(dataclasses.replace(e, segment_min=segment_min, objective="shortest")
-                 for e in config.experiments)
+    exps = tuple(
+        dataclasses.replace(e, segment_min=segment_min, objective="shortest")
+        for e in config.experiments
+    )
     return dataclasses.replace(config, experiments=exps)
 
 
@@ -83,8 +85,9 @@ def probe_lp_timing(repeats: int = 30) -> dict:
     cost[-1] = 1.0
     out = {}
     for name, run in (
-            ("direct", lambda: build().solve_direct(cost, l1_weight=1e-4)),
-            ("cvxpy", lambda: build().solve(lambda v: v[-1] + 1e-4 * cp.norm1(v[:-1])))):
+        ("direct", lambda: build().solve_direct(cost, l1_weight=1e-4)),
+        ("cvxpy", lambda: build().solve(lambda v: v[-1] + 1e-4 * cp.norm1(v[:-1]))),
+    ):
         times = []
         for _ in range(repeats):
             tic = time.perf_counter()
@@ -101,8 +104,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("config", nargs="?", default=None)
     ap.add_argument("--runs", type=int, default=3, help="repetitions for the medians")
-    ap.add_argument("--segments", type=float, nargs="+", default=[5.0, 10.0],
-                    help="segment lengths, min, for the shortest-duration columns")
+    ap.add_argument(
+        "--segments",
+        type=float,
+        nargs="+",
+        default=[5.0, 10.0],
+        help="segment lengths, min, for the shortest-duration columns",
+    )
     ap.add_argument("--out", default="out")
     args = ap.parse_args()
     config = default_campaign() if args.config is None else load_campaign(args.config)
@@ -121,8 +129,9 @@ def main() -> None:
     reached: dict[float, list] = {}
     for seg in args.segments:
         res = plan_campaign(_with_segment(config, seg), backend="local")
-        shortest[seg] = [p.duration_min if p is not None and p.complete else float("nan")
-                         for p in res.plans]
+        shortest[seg] = [
+            p.duration_min if p is not None and p.complete else float("nan") for p in res.plans
+        ]
         reached[seg] = [p.coverage.coverage if p is not None else 0.0 for p in res.plans]
 
     rows = []
@@ -158,27 +167,48 @@ def main() -> None:
     frame.to_csv(out / "bench_plan.csv", index=False)
 
     seg_cols = [f"shortest_full_min_seg{s:g}" for s in args.segments]
-    head = ["experiment", "variables", "constraints", "binaries", "LP solves",
-            "solve s (median)", "coverage", *[f"shortest full, seg {s:g} min" for s in
-                                               args.segments]]
-    print(f"planner benchmark: {platform.processor() or platform.machine()}, "
-          f"{os.cpu_count()} cores, medians of {args.runs} runs\n")
+    head = [
+        "experiment",
+        "variables",
+        "constraints",
+        "binaries",
+        "LP solves",
+        "solve s (median)",
+        "coverage",
+        *[f"shortest full, seg {s:g} min" for s in args.segments],
+    ]
+    print(
+        f"planner benchmark: {platform.processor() or platform.machine()}, "
+        f"{os.cpu_count()} cores, medians of {args.runs} runs\n"
+    )
     print("| " + " | ".join(head) + " |")
     print("|" + "---|" * len(head))
     for r in rows:
-        cells = [r["experiment"], _fmt(r["variables"], ".0f"), _fmt(r["constraints"], ".0f"),
-                 "0", _fmt(r["lp_solves"], ".0f"), _fmt(r["solve_s_median"]),
-                 f"{r['coverage']:.0%}",
-                 *[_fmt(r[c], ".0f") if r[c] == r[c] else
-                   f"not full ({r[f'coverage_seg{s:g}']:.0%})"
-                   for c, s in zip(seg_cols, args.segments, strict=True)]]
+        cells = [
+            r["experiment"],
+            _fmt(r["variables"], ".0f"),
+            _fmt(r["constraints"], ".0f"),
+            "0",
+            _fmt(r["lp_solves"], ".0f"),
+            _fmt(r["solve_s_median"]),
+            f"{r['coverage']:.0%}",
+            *[
+                _fmt(r[c], ".0f") if r[c] == r[c] else f"not full ({r[f'coverage_seg{s:g}']:.0%})"
+                for c, s in zip(seg_cols, args.segments, strict=True)
+            ],
+        ]
         print("| " + " | ".join(cells) + " |")
-    print(f"\nwhole campaign in parallel over {os.cpu_count()} cores: "
-          f"{statistics.median(campaign_s):.1f} s (median of {args.runs}; runs "
-          + ", ".join(f"{x:.1f}" for x in campaign_s) + " s)")
-    print(f"one search probe LP ({probe['variables']} variables, {probe['rows']} rows): "
-          f"{1e3 * probe['direct']:.1f} ms straight to Clarabel vs {1e3 * probe['cvxpy']:.1f} "
-          f"ms through cvxpy (median of 30; ratio {probe['cvxpy'] / probe['direct']:.1f})")
+    print(
+        f"\nwhole campaign in parallel over {os.cpu_count()} cores: "
+        f"{statistics.median(campaign_s):.1f} s (median of {args.runs}; runs "
+        + ", ".join(f"{x:.1f}" for x in campaign_s)
+        + " s)"
+    )
+    print(
+        f"one search probe LP ({probe['variables']} variables, {probe['rows']} rows): "
+        f"{1e3 * probe['direct']:.1f} ms straight to Clarabel vs {1e3 * probe['cvxpy']:.1f} "
+        f"ms through cvxpy (median of 30; ratio {probe['cvxpy'] / probe['direct']:.1f})"
+    )
     print(f"wrote {out / 'bench_plan.csv'}")
 
 

@@ -59,15 +59,19 @@ def main() -> None:
     cores = os.cpu_count() or 1
 
     def fixed(backend, workers=None):
-        return lambda: sweep_fixed(programme, REGION, taus, dt0s, deltas_c_per_min=DELTAS,
-                                   backend=backend, workers=workers)
+        return lambda: sweep_fixed(
+            programme, REGION, taus, dt0s, deltas_c_per_min=DELTAS, backend=backend, workers=workers
+        )
 
     cases = [
-        ("naive loop: simulate + coverage_report per point", "serial", 1,
-         lambda: naive(programme, taus, dt0s)),
+        (
+            "naive loop: simulate + coverage_report per point",
+            "serial",
+            1,
+            lambda: naive(programme, taus, dt0s),
+        ),
         ("sweep_fixed (vectorised), serial", "serial", 1, fixed("serial")),
-        (f"sweep_fixed (vectorised), local pool of {cores}", "local", cores,
-         fixed("local", cores)),
+        (f"sweep_fixed (vectorised), local pool of {cores}", "local", cores, fixed("local", cores)),
     ]
     fixed("serial")()  # warm-up (imports, caches)
     rows = []
@@ -79,12 +83,23 @@ def main() -> None:
     except ImportError:
         distributed = None
     if distributed is not None:
-        with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                      host="127.0.0.1", dashboard_address=None) as cluster:
+        with distributed.LocalCluster(
+            n_workers=2,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=None,
+        ) as cluster:
             fn = fixed(cluster.scheduler_address)
             fn()  # warm-up: workers import schedsyn
-            rows.append(("sweep_fixed (vectorised), Dask LocalCluster 2 processes",
-                         "dask", 2, timed(fn, args.repeats)))
+            rows.append(
+                (
+                    "sweep_fixed (vectorised), Dask LocalCluster 2 processes",
+                    "dask",
+                    2,
+                    timed(fn, args.repeats),
+                )
+            )
 
     table = pd.DataFrame(
         {
@@ -102,14 +117,18 @@ def main() -> None:
     table["cpu"] = platform.processor() or platform.machine()
     table["cores"] = cores
     write_frame_atomic(Path(args.out), table.round(4))
-    print(f"fixed-plan sweep, {n_points} points ({taus.size} tau x {dt0s.size} dT0), "
-          f"{args.steps}, region {REGION}, deltas {DELTAS}; {cores} cores; "
-          f"median of {args.repeats} runs\n")
+    print(
+        f"fixed-plan sweep, {n_points} points ({taus.size} tau x {dt0s.size} dT0), "
+        f"{args.steps}, region {REGION}, deltas {DELTAS}; {cores} cores; "
+        f"median of {args.repeats} runs\n"
+    )
     print("| case | median, s | min .. max, s | per point, ms |")
     print("|---|---:|---:|---:|")
     for _, r in table.iterrows():
-        print(f"| {r['case']} | {r['median_s']:.3f} | {r['min_s']:.3f} .. {r['max_s']:.3f} | "
-              f"{r['per_point_ms']:.2f} |")
+        print(
+            f"| {r['case']} | {r['median_s']:.3f} | {r['min_s']:.3f} .. {r['max_s']:.3f} | "
+            f"{r['per_point_ms']:.2f} |"
+        )
     print(f"\nwrote {args.out}")
 
 

@@ -37,8 +37,9 @@ def levels_per_bin(temp_c, grad, lo_c, hi_c, delta):
     return np.array(out)
 
 
-def check(steps_csv: Path, tau_s: float, dt0_c: float, lo_c: float, hi_c: float,
-          levels: int, delta: float) -> dict:
+def check(
+    steps_csv: Path, tau_s: float, dt0_c: float, lo_c: float, hi_c: float, levels: int, delta: float
+) -> dict:
     df = pd.read_csv(steps_csv)
     start = df["start_min"].to_numpy(float)
     dur = df["duration_min"].to_numpy(float)
@@ -51,18 +52,31 @@ def check(steps_csv: Path, tau_s: float, dt0_c: float, lo_c: float, hi_c: float,
     def tk(x):
         return np.interp(x, knots_t, knots_tk)
 
-    sol = solve_ivp(lambda x, y: [(tk(x) + dt0_c - y[0]) / tau], (0.0, end), [tk0[0]],
-                    t_eval=t, max_step=0.05, rtol=1e-9, atol=1e-9)
+    sol = solve_ivp(
+        lambda x, y: [(tk(x) + dt0_c - y[0]) / tau],
+        (0.0, end),
+        [tk0[0]],
+        t_eval=t,
+        max_step=0.05,
+        rtol=1e-9,
+        atol=1e-9,
+    )
     temp = sol.y[0]
     grad = (tk(t) + dt0_c - temp) / tau
     lev = levels_per_bin(temp, grad, lo_c, hi_c, delta)
     rates = np.diff(knots_tk) / dur
     return {
-        "duration_min": end, "steps": len(df), "coverage": float(np.mean(lev >= levels)),
-        "min_levels": int(lev.min()), "device_min_c": float(temp.min()),
-        "device_max_c": float(temp.max()), "chamber_min_c": float(knots_tk.min()),
-        "chamber_max_c": float(knots_tk.max()), "rate_min": float(rates.min()),
-        "rate_max": float(rates.max()), "chamber_start_c": float(tk0[0]),
+        "duration_min": end,
+        "steps": len(df),
+        "coverage": float(np.mean(lev >= levels)),
+        "min_levels": int(lev.min()),
+        "device_min_c": float(temp.min()),
+        "device_max_c": float(temp.max()),
+        "chamber_min_c": float(knots_tk.min()),
+        "chamber_max_c": float(knots_tk.max()),
+        "rate_min": float(rates.min()),
+        "rate_max": float(rates.max()),
+        "chamber_start_c": float(tk0[0]),
         "chamber_end_c": float(tk1[-1]),
     }
 
@@ -74,32 +88,44 @@ def main() -> int:
     ap.add_argument("--dt0-c", type=float, default=None)
     args = ap.parse_args()
     if not (args.out / "summary.csv").is_file():
-        print(f"check_tables: error: {args.out / 'summary.csv'} not found; give the folder "
-              "`schedsyn campaign --out DIR` wrote", file=sys.stderr)
+        print(
+            f"check_tables: error: {args.out / 'summary.csv'} not found; give the folder "
+            "`schedsyn campaign --out DIR` wrote",
+            file=sys.stderr,
+        )
         return 2
     summary = pd.read_csv(args.out / "summary.csv")
     bad = 0
     for _, row in summary.iterrows():
         folder = args.out / str(row["experiment"])
         if not (folder / "steps.csv").exists():
-            print(f"{row['experiment']}: no step table (status {row.get('status', '?')}), "
-                  "nothing to check")
+            print(
+                f"{row['experiment']}: no step table (status {row.get('status', '?')}), "
+                "nothing to check"
+            )
             continue
         plan = json.loads((folder / "plan.json").read_text())
         spec = plan["spec"]
-        res = check(folder / "steps.csv", args.tau_s or plan["tau_s"],
-                    plan["dt0_c"] if args.dt0_c is None else args.dt0_c,
-                    spec["working_lo_c"], spec["working_hi_c"], spec["levels_required"],
-                    spec["delta_c_per_min"])
+        res = check(
+            folder / "steps.csv",
+            args.tau_s or plan["tau_s"],
+            plan["dt0_c"] if args.dt0_c is None else args.dt0_c,
+            spec["working_lo_c"],
+            spec["working_hi_c"],
+            spec["levels_required"],
+            spec["delta_c_per_min"],
+        )
         same = abs(res["coverage"] - row["coverage"]) < 1e-9
         bad += not same
-        print(f"{row['experiment']}: coverage {res['coverage']:.1%} (summary "
-              f"{row['coverage']:.1%}{'' if same else ', DIFFERENT'}), min levels "
-              f"{res['min_levels']}, {res['duration_min']:g} min, {res['steps']} steps, "
-              f"device {res['device_min_c']:.3f}..{res['device_max_c']:.3f} degC, chamber "
-              f"{res['chamber_min_c']:g}..{res['chamber_max_c']:g} degC, rates "
-              f"{res['rate_min']:.3f}..{res['rate_max']:.3f} degC/min, chamber "
-              f"{res['chamber_start_c']:g} -> {res['chamber_end_c']:g} degC")
+        print(
+            f"{row['experiment']}: coverage {res['coverage']:.1%} (summary "
+            f"{row['coverage']:.1%}{'' if same else ', DIFFERENT'}), min levels "
+            f"{res['min_levels']}, {res['duration_min']:g} min, {res['steps']} steps, "
+            f"device {res['device_min_c']:.3f}..{res['device_max_c']:.3f} degC, chamber "
+            f"{res['chamber_min_c']:g}..{res['chamber_max_c']:g} degC, rates "
+            f"{res['rate_min']:.3f}..{res['rate_max']:.3f} degC/min, chamber "
+            f"{res['chamber_start_c']:g} -> {res['chamber_end_c']:g} degC"
+        )
     return 1 if bad else 0
 
 

@@ -38,9 +38,15 @@ def main() -> None:
     args = ap.parse_args()
     params = {k: float(v) for k, v in (p.split("=", 1) for p in args.params)}
     truth = ModelSpec(args.tau_s, args.dt0_c, args.effect, params)
-    frame = synth_effect_log(read_steps(args.steps), truth, sample_s=args.sample_s,
-                             noise_c=args.noise_c, quant_c=args.quant_c, seed=args.seed,
-                             with_air=not args.no_air)
+    frame = synth_effect_log(
+        read_steps(args.steps),
+        truth,
+        sample_s=args.sample_s,
+        noise_c=args.noise_c,
+        quant_c=args.quant_c,
+        seed=args.seed,
+        with_air=not args.no_air,
+    )
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     frame.drop(columns=["t_true_c", "g_true_c_per_min"]).to_csv(args.out, index=False)
     print(f"wrote {args.out}: {len(frame)} rows, hidden effect {truth.effect} {params}")

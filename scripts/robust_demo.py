@@ -42,35 +42,56 @@ def main() -> None:
     frames, rows = {}, []
     for name, plan in plans.items():
         plan.programme.to_csv(out / f"{name}_steps.csv")
-        sweep = sweep_fixed(plan.programme, (spec.working_lo_c, spec.working_hi_c), taus, dt0s,
-                            levels_required=spec.levels_required)
+        sweep = sweep_fixed(
+            plan.programme,
+            (spec.working_lo_c, spec.working_hi_c),
+            taus,
+            dt0s,
+            levels_required=spec.levels_required,
+        )
         frames[name] = sweep.to_frame()
-        in_box = frames[name][frames[name].tau_s.between(*tau_box)
-                              & frames[name].dt0_c.between(*dt0_box)]
-        rows.append({
-            "plan": name, "duration_min": plan.duration_min, "steps": plan.steps,
-            "coverage_at_scenarios": plan.coverage.coverage,
-            "coverage_delta_0p1": plan.coverage_0p1.coverage,
-            "margin_g_c_per_min": plan.margin_g_c_per_min,
-            "box_min_coverage": float(in_box.coverage.min()),
-            "box_min_levels": int(in_box.min_levels.min()),
-            "box_full_share": float((in_box.coverage >= 1).mean()),
-            "grid_full_share": float((frames[name].coverage >= 1).mean()),
-            "complete": plan.complete, "notes": " | ".join(plan.notes),
-        })
+        in_box = frames[name][
+            frames[name].tau_s.between(*tau_box) & frames[name].dt0_c.between(*dt0_box)
+        ]
+        rows.append(
+            {
+                "plan": name,
+                "duration_min": plan.duration_min,
+                "steps": plan.steps,
+                "coverage_at_scenarios": plan.coverage.coverage,
+                "coverage_delta_0p1": plan.coverage_0p1.coverage,
+                "margin_g_c_per_min": plan.margin_g_c_per_min,
+                "box_min_coverage": float(in_box.coverage.min()),
+                "box_min_levels": int(in_box.min_levels.min()),
+                "box_full_share": float((in_box.coverage >= 1).mean()),
+                "grid_full_share": float((frames[name].coverage >= 1).mean()),
+                "complete": plan.complete,
+                "notes": " | ".join(plan.notes),
+            }
+        )
     price = pd.DataFrame(rows)
     write_frame_atomic(out / "price.csv", price)
     print(price.drop(columns=["notes"]).to_string(index=False))
     from schedsyn import plots
 
     axes = plots.sweep_panels(
-        [(frames["nominal"], "coverage", f"nominal plan ({plans['nominal'].duration_min:g} min)"),
-         (frames["robust"], "coverage",
-          f"robust plan, box tau {tau_box[0]:g}-{tau_box[1]:g} s, dT0 {dt0_box[0]:g}-"
-          f"{dt0_box[1]:g} °C ({plans['robust'].duration_min:g} min"
-          f"{'' if plans['robust'].complete else ', NOT complete'})")],
+        [
+            (
+                frames["nominal"],
+                "coverage",
+                f"nominal plan ({plans['nominal'].duration_min:g} min)",
+            ),
+            (
+                frames["robust"],
+                "coverage",
+                f"robust plan, box tau {tau_box[0]:g}-{tau_box[1]:g} s, dT0 {dt0_box[0]:g}-"
+                f"{dt0_box[1]:g} °C ({plans['robust'].duration_min:g} min"
+                f"{'' if plans['robust'].complete else ', NOT complete'})",
+            ),
+        ],
         suptitle=f"coverage of [{spec.working_lo_c:g}, {spec.working_hi_c:g}] °C",
-        box=(tau_box, dt0_box))
+        box=(tau_box, dt0_box),
+    )
     plots.save_figure(axes[0], args.figure)
     print(f"wrote {out}/price.csv and {args.figure}")
 

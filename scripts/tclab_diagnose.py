@@ -41,8 +41,9 @@ def heater_gain(time_s: np.ndarray, t1_c: np.ndarray, q1_pct: np.ndarray) -> flo
     t = (time_s - time_s[0]) / 60.0
     best = None
     for tau_s in np.geomspace(20.0, 2000.0, 60):
-        resp = affine_response(LinearEffectModel(float(tau_s), 0.0), prog.durations_min, t,
-                               prog.start_c, 0.0)
+        resp = affine_response(
+            LinearEffectModel(float(tau_s), 0.0), prog.durations_min, t, prog.start_c, 0.0
+        )
         forced = resp.a_t @ prog.rates_c_per_min + resp.b_t  # the lag of Q1 from 0
         e = np.exp(-t / (tau_s / 60.0))
         a = np.column_stack((e, 1.0 - e, forced))
@@ -69,19 +70,30 @@ def run(directory: Path, pattern: str = "*.csv") -> pd.DataFrame:
     for path in sorted(directory.glob(pattern)):
         log, k = tclab_log(path)
         d = diagnose(log, SETTINGS)
-        rows.append({
-            "file": path.name, "k_c_per_pct": k, "tau_base_s": d.base.tau_s,
-            "effect": d.effect,
-            "parameters": "; ".join(f"{a}={b:.3g}" for a, b in d.parameters.items()),
-            "rms_before_c": d.rms_before_c, "rms_after_c": d.rms_after_c,
-            "holdout_before_c": d.holdout_rms_before_c,
-            "holdout_after_c": d.holdout_rms_after_c,
-            "runner_up": next((c.effect for c in d.candidates
-                               if c.effect not in (d.effect, *d.ambiguous_with)), ""),
-            "warnings": len(d.warnings),
-            "ambiguous_with": ",".join(d.ambiguous_with),
-            "white_before": d.residuals_before.white,
-        })
+        rows.append(
+            {
+                "file": path.name,
+                "k_c_per_pct": k,
+                "tau_base_s": d.base.tau_s,
+                "effect": d.effect,
+                "parameters": "; ".join(f"{a}={b:.3g}" for a, b in d.parameters.items()),
+                "rms_before_c": d.rms_before_c,
+                "rms_after_c": d.rms_after_c,
+                "holdout_before_c": d.holdout_rms_before_c,
+                "holdout_after_c": d.holdout_rms_after_c,
+                "runner_up": next(
+                    (
+                        c.effect
+                        for c in d.candidates
+                        if c.effect not in (d.effect, *d.ambiguous_with)
+                    ),
+                    "",
+                ),
+                "warnings": len(d.warnings),
+                "ambiguous_with": ",".join(d.ambiguous_with),
+                "white_before": d.residuals_before.white,
+            }
+        )
     return pd.DataFrame(rows)
 
 
@@ -94,8 +106,9 @@ def main() -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     table.to_csv(out / "tclab_diagnose.csv", index=False)
-    with pd.option_context("display.width", 250, "display.max_columns", 20,
-                           "display.max_colwidth", 60):
+    with pd.option_context(
+        "display.width", 250, "display.max_columns", 20, "display.max_colwidth", 60
+    ):
         print(table.to_string(index=False, float_format=lambda v: f"{v:.3g}"))
 
 

@@ -50,18 +50,20 @@ def main() -> None:
         est = estimate_gradient(log)
         fd = finite_difference_gradient(log.time_s, log.t_int_c)
         step = est.noise.quant_c
-        rows.append({
-            "file": path.name,
-            "rows": log.n_rows,
-            "quant_c": round(step, 3),
-            "r_over_quant2_12": est.r / (step**2 / 12) if step else float("nan"),
-            "q": est.q,
-            "median_g_std_c_per_min": float(np.median(est.g_std_c_per_min)),
-            "max_abs_t_resid_c": float(np.max(np.abs(est.t_est_c - log.t_int_c))),
-            "fd_spread_c_per_min": float(np.std(fd - est.g_est_c_per_min)),
-            "g_range_c_per_min": f"{est.g_est_c_per_min.min():.1f} .. "
-                                 f"{est.g_est_c_per_min.max():.1f}",
-        })
+        rows.append(
+            {
+                "file": path.name,
+                "rows": log.n_rows,
+                "quant_c": round(step, 3),
+                "r_over_quant2_12": est.r / (step**2 / 12) if step else float("nan"),
+                "q": est.q,
+                "median_g_std_c_per_min": float(np.median(est.g_std_c_per_min)),
+                "max_abs_t_resid_c": float(np.max(np.abs(est.t_est_c - log.t_int_c))),
+                "fd_spread_c_per_min": float(np.std(fd - est.g_est_c_per_min)),
+                "g_range_c_per_min": f"{est.g_est_c_per_min.min():.1f} .. "
+                f"{est.g_est_c_per_min.max():.1f}",
+            }
+        )
     table = pd.DataFrame(rows)
     with pd.option_context("display.width", 200, "display.max_columns", 20):
         print(table.to_string(index=False, float_format=lambda v: f"{v:.3g}"))
@@ -70,17 +72,20 @@ def main() -> None:
         log = tclab_log(path, with_heater=True)
         kin = estimate_gradient(log)
         mod = estimate_gradient_model(log, HEATER_MODEL)
-        rows.append({
-            "file": path.name,
-            "m2ll_kinematic": kin.minus2_log_likelihood,
-            "m2ll_model": mod.minus2_log_likelihood,
-            "q_kinematic": kin.q,
-            "q_model": mod.q,
-            "g_std_kinematic": float(np.median(kin.g_std_c_per_min)),
-            "g_std_model": float(np.median(mod.g_std_c_per_min)),
-            "rms_g_difference": float(np.sqrt(np.mean(
-                (kin.g_est_c_per_min - mod.g_est_c_per_min) ** 2))),
-        })
+        rows.append(
+            {
+                "file": path.name,
+                "m2ll_kinematic": kin.minus2_log_likelihood,
+                "m2ll_model": mod.minus2_log_likelihood,
+                "q_kinematic": kin.q,
+                "q_model": mod.q,
+                "g_std_kinematic": float(np.median(kin.g_std_c_per_min)),
+                "g_std_model": float(np.median(mod.g_std_c_per_min)),
+                "rms_g_difference": float(
+                    np.sqrt(np.mean((kin.g_est_c_per_min - mod.g_est_c_per_min) ** 2))
+                ),
+            }
+        )
     print("\nmodel-based with Tk = T1[0] + 0.78 Q1, tau 180 s (g in degC/min):")
     with pd.option_context("display.width", 200, "display.max_columns", 20):
         print(pd.DataFrame(rows).to_string(index=False, float_format=lambda v: f"{v:.3g}"))

@@ -1,6 +1,12 @@
 #!/usr/bin/env bash
-# Run the test suite (creates .venv and installs what it needs on first use).
+# Run the checks and the test suite (creates .venv and installs what it needs on first use):
+# ruff (lint and format), mypy (types of the package), then pytest.
 # Extra arguments go to pytest, e.g. scripts/test.sh -k coverage
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/_venv.sh" test
+echo "ruff: lint and format" >&2
+.venv/bin/ruff check --quiet .
+.venv/bin/ruff format --check --quiet .
+echo "mypy: types of the package" >&2
+.venv/bin/mypy --no-error-summary
 exec .venv/bin/python -m pytest "$@"

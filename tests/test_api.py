@@ -11,8 +11,6 @@ def test_every_public_name_resolves():
 
 def test_import_is_light():
     """``import schedsyn`` loads neither matplotlib nor cvxpy (the planner is lazy)."""
-    code = ("import sys, schedsyn; "
-            "print('matplotlib' in sys.modules, 'cvxpy' in sys.modules)")
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True)
+    code = "import sys, schedsyn; print('matplotlib' in sys.modules, 'cvxpy' in sys.modules)"
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert res.stdout.split() == ["False", "False"]

@@ -70,7 +70,11 @@ def test_paper_campaign_file_is_the_default_campaign():
     assert [e.name for e in cfg.experiments] == ["W1", "W2", "W3", "W4"]
     w1 = cfg.experiments[0]
     assert (w1.working_lo_c, w1.working_hi_c, w1.approx_lo_c, w1.approx_hi_c) == (
-        -50, -30, -52, -20)
+        -50,
+        -30,
+        -52,
+        -20,
+    )
     assert cfg.baseline_for(0) == PAPER_BASELINE_EXP1 and cfg.baseline_for(3) is None
 
 
@@ -109,8 +113,9 @@ segment_min = 10
     assert cfg.robust_dt0_c == (2.0, 4.0) and cfg.robust_tau_s is None
     a, b = cfg.experiments
     assert a == ExperimentSpec("a", 0, 10, -5, 15, levels_required=4, objective="margin")
-    assert b == ExperimentSpec("b", 10, 20, 5, 25, levels_required=3, objective="margin",
-                               segment_min=10)
+    assert b == ExperimentSpec(
+        "b", 10, 20, 5, 25, levels_required=3, objective="margin", segment_min=10
+    )
     assert cfg.baseline_steps == ()
 
 
@@ -119,18 +124,29 @@ segment_min = 10
     [
         (lambda t: t.replace("[model]", "[model]\ntau = 3"), ["[model]", "unknown", "tau"]),
         (lambda t: t.replace("tau_s = 2400", 'tau_s = "fast"'), ["[model]", "tau_s", "number"]),
-        (lambda t: t.replace("levels_required = 2", "levels_required = 2.5"),
-         ["[settings]", "levels_required", "whole"]),
+        (
+            lambda t: t.replace("levels_required = 2", "levels_required = 2.5"),
+            ["[settings]", "levels_required", "whole"],
+        ),
         (lambda t: t.replace("working_hi_c = 0\n", ""), ["S", "missing", "working_hi_c"]),
         (lambda t: t.replace('name = "S"', "name = 7"), ["name", "string"]),
-        (lambda t: t.replace("approx_hi_c = 10", "approx_hi_c = -5"),
-         ["S", "approximation region"]),
-        (lambda t: t.replace("chamber_min_c = -70", "chamber_min_c = true"),
-         ["[limits]", "chamber_min_c", "number"]),
+        (
+            lambda t: t.replace("approx_hi_c = 10", "approx_hi_c = -5"),
+            ["S", "approximation region"],
+        ),
+        (
+            lambda t: t.replace("chamber_min_c = -70", "chamber_min_c = true"),
+            ["[limits]", "chamber_min_c", "number"],
+        ),
         (lambda t: t.replace("[settings]", "[setting]"), ["unknown", "setting"]),
         (lambda t: t.replace("baseline_exp1", "no_such"), ["baseline_steps", "does not exist"]),
-        (lambda t: t + "\n[[experiment]]\nname = \"S\"\nworking_lo_c = 0\nworking_hi_c = 1\n"
-                   "approx_lo_c = 0\napprox_hi_c = 1\n", ["distinct", "S"]),
+        (
+            lambda t: (
+                t + '\n[[experiment]]\nname = "S"\nworking_lo_c = 0\nworking_hi_c = 1\n'
+                "approx_lo_c = 0\napprox_hi_c = 1\n"
+            ),
+            ["distinct", "S"],
+        ),
         (lambda t: t.replace("dt0_c = 3.0", "dt0_c = 3.0 ="), ["not valid TOML"]),
         (lambda t: t.split("[[experiment]]")[0], ["no experiment"]),
     ],
@@ -242,8 +258,10 @@ def test_baseline_sits_next_to_the_plan(small_campaign):
 
 def test_campaign_bad_config_is_one_line_exit_2(tmp_path, capsys):
     path = tmp_path / "bad.toml"
-    path.write_text("[model]\ntau_s = -1\n[[experiment]]\nname='x'\nworking_lo_c=0\n"
-                    "working_hi_c=1\napprox_lo_c=0\napprox_hi_c=1\n")
+    path.write_text(
+        "[model]\ntau_s = -1\n[[experiment]]\nname='x'\nworking_lo_c=0\n"
+        "working_hi_c=1\napprox_lo_c=0\napprox_hi_c=1\n"
+    )
     assert main(["campaign", str(path), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "tau_s" in err and str(path) in err

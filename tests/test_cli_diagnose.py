@@ -18,8 +18,12 @@ def _no_nan(name):
 @pytest.fixture(scope="module")
 def rate_limited_log(tmp_path_factory):
     prog = blind_programmes()["cold"]
-    truth = ModelSpec(2400.0, 3.0, "chamber_rate_limit",
-                      {"max_cool_rate_c_per_min": 0.6, "max_heat_rate_c_per_min": 20.0})
+    truth = ModelSpec(
+        2400.0,
+        3.0,
+        "chamber_rate_limit",
+        {"max_cool_rate_c_per_min": 0.6, "max_heat_rate_c_per_min": 20.0},
+    )
     frame = synth_effect_log(prog, truth, sample_s=10.0, noise_c=0.02, seed=4, with_air=False)
     path = tmp_path_factory.mktemp("log") / "run.csv"
     frame.drop(columns=["t_true_c", "g_true_c_per_min"]).to_csv(path, index=False)
@@ -40,30 +44,51 @@ def test_diagnose_json_model_file_and_simulate(rate_limited_log, tmp_path, capsy
     assert js["parameters"]["max_heat_rate_c_per_min"] == 1e6  # never binding: no limit
     assert js["rms_after_c"] < 0.5 * js["rms_before_c"]
     assert {c["effect"] for c in js["candidates"]} >= {"chamber_lag", "asymmetric_tau"}
-    for name in ("model.json", "diagnosis.json", "candidates.csv", "residuals.png",
-                 "phase.png", "residual_segments.csv", "residual_by_temperature.csv"):
+    for name in (
+        "model.json",
+        "diagnosis.json",
+        "candidates.csv",
+        "residuals.png",
+        "phase.png",
+        "residual_segments.csv",
+        "residual_by_temperature.csv",
+    ):
         assert (out / name).is_file(), name
     model = load_model(out / "model.json")
     assert model.effect == "chamber_rate_limit"
     assert model.planner_limits().rate_min_c_per_min == pytest.approx(-0.6, rel=0.05)
     # simulate with the augmented model: the trajectory matches the measured log
     sim = tmp_path / "sim"
-    assert main(["simulate", str(steps), "--model", str(out / "model.json"), "--out", str(sim),
-                 "--dt-min", "1"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                str(steps),
+                "--model",
+                str(out / "model.json"),
+                "--out",
+                str(sim),
+                "--dt-min",
+                "1",
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     assert "effect chamber_rate_limit" in text
     assert "outside the chamber limits" in text  # the plan ramps faster than the chamber can
     traj = pd.read_csv(sim / "trajectory.csv")
     logged = pd.read_csv(log)
     measured = logged.set_index("time_s")["t_int_c"].reindex(traj["time_min"] * 60.0)
-    gap = (traj["t_c"].to_numpy() - measured.to_numpy())
+    gap = traj["t_c"].to_numpy() - measured.to_numpy()
     assert abs(gap).max() < 0.15
 
 
 def test_diagnose_bad_log_is_one_line_exit_2(tmp_path, capsys):
     bad = tmp_path / "bad.csv"
     pd.DataFrame({"time_s": [0.0, 10.0, 20.0], "t_int_c": [20.0, 20.1, 20.2]}).to_csv(
-        bad, index=False)
+        bad, index=False
+    )
     assert main(["diagnose", str(bad), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("schedsyn diagnose: error:") and "Traceback" not in err

@@ -47,8 +47,22 @@ def test_estimate_writes_gradient_csv(tmp_path, capsys):
 
 def test_estimate_user_noise_and_model_method(tmp_path, capsys, clean_log_path):
     out = tmp_path / "o"
-    rc = main(["estimate", str(clean_log_path), "--out", str(out), "--q", "1e-3", "--r", "4e-4",
-               "--method", "model", "--tau-s", "2400"])
+    rc = main(
+        [
+            "estimate",
+            str(clean_log_path),
+            "--out",
+            str(out),
+            "--q",
+            "1e-3",
+            "--r",
+            "4e-4",
+            "--method",
+            "model",
+            "--tau-s",
+            "2400",
+        ]
+    )
     assert rc == 0
     text = capsys.readouterr().out
     assert "model Kalman smoother: q = 0.001 " in text and "fitted by ML: none" in text
@@ -57,19 +71,22 @@ def test_estimate_user_noise_and_model_method(tmp_path, capsys, clean_log_path):
 
 def test_estimate_bad_logs_are_one_line_exit_2(tmp_path, capsys):
     bad = tmp_path / "bad.csv"
-    pd.DataFrame({"time_s": [0, 10, 10, 20, 30, 40], "t_int_c": [20.0] * 6}).to_csv(bad,
-                                                                                  index=False)
+    pd.DataFrame({"time_s": [0, 10, 10, 20, 30, 40], "t_int_c": [20.0] * 6}).to_csv(
+        bad, index=False
+    )
     assert main(["estimate", str(bad), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "bad.csv" in err and "duplicates" in err
     kelvin = tmp_path / "k.csv"
     pd.DataFrame({"time_s": np.arange(10.0), "t_int_c": np.full(10, 293.0)}).to_csv(
-        kelvin, index=False)
+        kelvin, index=False
+    )
     assert main(["estimate", str(kelvin)]) == 2
     assert "kelvin" in capsys.readouterr().err
     no_tk = tmp_path / "n.csv"
     pd.DataFrame({"time_s": np.arange(10.0), "t_int_c": np.full(10, 20.0)}).to_csv(
-        no_tk, index=False)
+        no_tk, index=False
+    )
     assert main(["estimate", str(no_tk), "--method", "model", "--out", str(tmp_path)]) == 2
     assert "tk_set_c" in capsys.readouterr().err
     assert main(["estimate", str(no_tk), "--q", "-1", "--out", str(tmp_path)]) == 2
@@ -81,9 +98,16 @@ def test_compare_writes_outputs_and_reports_coverage(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "planned: coverage of [-50, -30]" in text and "run:     coverage of" in text
     assert "measured - simulated T: RMS" in text
-    for name in ("gradient.csv", "compare.csv", "coverage.csv", "summary.json",
-                 "phase_compare.png", "temperature_compare.png", "coverage_compare.png",
-                 "compare.png"):
+    for name in (
+        "gradient.csv",
+        "compare.csv",
+        "coverage.csv",
+        "summary.json",
+        "phase_compare.png",
+        "temperature_compare.png",
+        "coverage_compare.png",
+        "compare.png",
+    ):
         assert (out / name).stat().st_size > 0
     summary = json.loads((out / "summary.json").read_text())
     cov = pd.read_csv(out / "coverage.csv")
@@ -155,6 +179,17 @@ def test_compare_with_the_model_based_estimator(clean_log_path, tmp_path, capsys
 
     with pytest.raises(ParameterError, match="method"):
         compare_run(log, programme, grid=grid, method="kalman")
-    rc = main(["compare", str(clean_log_path), STEPS, "--method", "model", "--chamber",
-               "tk_air_c", "--out", str(tmp_path / "m")])
+    rc = main(
+        [
+            "compare",
+            str(clean_log_path),
+            STEPS,
+            "--method",
+            "model",
+            "--chamber",
+            "tk_air_c",
+            "--out",
+            str(tmp_path / "m"),
+        ]
+    )
     assert rc == 0 and "model Kalman smoother" in capsys.readouterr().out

@@ -20,15 +20,36 @@ pytestmark = pytest.mark.filterwarnings("ignore:Solution may be inaccurate:UserW
 
 
 def test_plan_with_a_model_file_writes_outputs_and_its_coverage_survives_re_simulation(
-        tmp_path, capsys):
+    tmp_path, capsys
+):
     # a linear augmented model (second thermal mass, 60 s) as `schedsyn diagnose` writes it
-    spec = ModelSpec(tau_s=2000.0, dt0_c=3.0, effect="second_time_constant",
-                     parameters={"tau2_s": 60.0})
+    spec = ModelSpec(
+        tau_s=2000.0, dt0_c=3.0, effect="second_time_constant", parameters={"tau2_s": 60.0}
+    )
     model_path = write_model(tmp_path / "model.json", spec)
     out = tmp_path / "p"
-    rc = main(["plan", "--working", "-10", "0", "--approx", "-20", "10", "--levels", "2",
-               "--name", "small", "--model", str(model_path), "--tau-s", "2400",
-               "--out", str(out), "--quiet"])
+    rc = main(
+        [
+            "plan",
+            "--working",
+            "-10",
+            "0",
+            "--approx",
+            "-20",
+            "10",
+            "--levels",
+            "2",
+            "--name",
+            "small",
+            "--model",
+            str(model_path),
+            "--tau-s",
+            "2400",
+            "--out",
+            str(out),
+            "--quiet",
+        ]
+    )
     text = capsys.readouterr().out
     for name in ("steps.csv", "plan.json", "program.png", "phase.png", "coverage.png"):
         assert (out / name).stat().st_size > 0, name
@@ -39,8 +60,9 @@ def test_plan_with_a_model_file_writes_outputs_and_its_coverage_survives_re_simu
         assert "NOT COMPLETE" in text
     # independent check: re-read the table, simulate through the model file's model
     prog = read_steps(out / "steps.csv", Limits())
-    model = ModelSpec(tau_s=2400.0, dt0_c=3.0, effect="second_time_constant",
-                      parameters={"tau2_s": 60.0}).linear_model()
+    model = ModelSpec(
+        tau_s=2400.0, dt0_c=3.0, effect="second_time_constant", parameters={"tau2_s": 60.0}
+    ).linear_model()
     traj = simulate(prog, model=model, dt_min=0.1)
     rep = trajectory_coverage(traj, -10, 0, levels_required=2, delta_c_per_min=0.05)
     assert rep.coverage == pytest.approx(plan["coverage"])
@@ -53,10 +75,14 @@ def test_plan_with_a_model_file_writes_outputs_and_its_coverage_survives_re_simu
 
 
 def test_a_nonlinear_model_file_is_refused(tmp_path, capsys):
-    path = write_model(tmp_path / "m.json", ModelSpec(
-        effect="asymmetric_tau", parameters={"tau_heat_s": 2000.0, "tau_cool_s": 2600.0}))
-    assert main(["plan", "--working", "-10", "0", "--model", str(path),
-                 "--out", str(tmp_path / "o")]) == 2
+    path = write_model(
+        tmp_path / "m.json",
+        ModelSpec(effect="asymmetric_tau", parameters={"tau_heat_s": 2000.0, "tau_cool_s": 2600.0}),
+    )
+    assert (
+        main(["plan", "--working", "-10", "0", "--model", str(path), "--out", str(tmp_path / "o")])
+        == 2
+    )
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "not linear" in err and str(path) in err
 
@@ -89,8 +115,24 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, words):
 
 def test_infeasible_request_names_the_requirement_and_best_coverage(tmp_path, capsys):
     out = tmp_path / "o"
-    rc = main(["plan", "--working", "-10", "-8", "--approx", "-20", "0", "--levels", "2",
-               "--duration-max-min", "20", "--out", str(out), "--quiet"])
+    rc = main(
+        [
+            "plan",
+            "--working",
+            "-10",
+            "-8",
+            "--approx",
+            "-20",
+            "0",
+            "--levels",
+            "2",
+            "--duration-max-min",
+            "20",
+            "--out",
+            str(out),
+            "--quiet",
+        ]
+    )
     err = capsys.readouterr().err.strip()
     assert rc == 2
     assert len(err.splitlines()) == 1, err
@@ -103,9 +145,16 @@ def test_default_approximation_region_follows_the_paper_rule(tmp_path):
 
     from schedsyn.cli.plan import build_spec
 
-    args = Namespace(working=[-50.0, -30.0], approx=None, name="W1", levels=6,
-                     delta_c_per_min=0.05, segment_min=5.0, objective="shortest",
-                     max_steps=80)
+    args = Namespace(
+        working=[-50.0, -30.0],
+        approx=None,
+        name="W1",
+        levels=6,
+        delta_c_per_min=0.05,
+        segment_min=5.0,
+        objective="shortest",
+        max_steps=80,
+    )
     spec = build_spec(args, Limits())
     assert (spec.approx_lo_c, spec.approx_hi_c) == (-52.0, -20.0)  # clipped at the device
     args.working = [0.0, 30.0]
@@ -123,8 +172,25 @@ def test_help_lists_plan_and_campaign(capsys):
 
 def test_chamber_csv_from_several_floors(tmp_path, capsys):
     out = tmp_path / "c"
-    rc = main(["plan", "--working", "-50", "-47", "--approx", "-52", "-40", "--levels", "2",
-               "--chamber-min-c", "-52", "-70", "--out", str(out), "--quiet"])
+    rc = main(
+        [
+            "plan",
+            "--working",
+            "-50",
+            "-47",
+            "--approx",
+            "-52",
+            "-40",
+            "--levels",
+            "2",
+            "--chamber-min-c",
+            "-52",
+            "-70",
+            "--out",
+            str(out),
+            "--quiet",
+        ]
+    )
     frame = pd.read_csv(out / "chamber.csv")
     assert frame["chamber_min_c"].tolist() == [-52.0, -70.0]
     assert {"coverage", "min_levels", "duration_min", "complete"} <= set(frame.columns)
@@ -140,9 +206,28 @@ def test_chamber_csv_from_several_floors(tmp_path, capsys):
 
 def test_robust_plan_writes_the_price_of_robustness(tmp_path, capsys):
     out = tmp_path / "r"
-    rc = main(["plan", "--working", "-10", "0", "--approx", "-20", "10", "--levels", "3",
-               "--duration-max-min", "300", "--robust-tau-s", "2200:2600",
-               "--robust-dt0-c", "2:4", "--out", str(out), "--quiet"])
+    rc = main(
+        [
+            "plan",
+            "--working",
+            "-10",
+            "0",
+            "--approx",
+            "-20",
+            "10",
+            "--levels",
+            "3",
+            "--duration-max-min",
+            "300",
+            "--robust-tau-s",
+            "2200:2600",
+            "--robust-dt0-c",
+            "2:4",
+            "--out",
+            str(out),
+            "--quiet",
+        ]
+    )
     plan = json.loads((out / "plan.json").read_text())
     assert rc == (0 if plan["complete"] else 1)
     assert plan["robust_box_check"]["grid_points"] >= 63
@@ -155,9 +240,15 @@ def test_robust_plan_writes_the_price_of_robustness(tmp_path, capsys):
     # the robust row's box figures agree with an independent sweep of the exported table
     from schedsyn.sweep import verify_box
 
-    res = verify_box(read_steps(out / "steps.csv", Limits(duration_max_min=300.0)),
-                     (-10.0, 0.0), (2200.0, 2600.0), (2.0, 4.0), levels_required=3)
+    res = verify_box(
+        read_steps(out / "steps.csv", Limits(duration_max_min=300.0)),
+        (-10.0, 0.0),
+        (2200.0, 2600.0),
+        (2.0, 4.0),
+        levels_required=3,
+    )
     assert robust["box_full_share"] == pytest.approx(res.full_share)
     assert robust["extra_min"] == pytest.approx(
-        robust["duration_min"] - price.set_index("plan").loc["nominal", "duration_min"])
+        robust["duration_min"] - price.set_index("plan").loc["nominal", "duration_min"]
+    )
     assert "price of robustness" in capsys.readouterr().out

@@ -13,8 +13,10 @@ def test_simulate_writes_outputs(tmp_path, capsys):
         assert (out / name).stat().st_size > 0
     traj = pd.read_csv(out / "trajectory.csv")
     assert list(traj.columns) == ["time_min", "tk_c", "t_c", "g_c_per_min"]
-    assert traj["time_min"].iloc[1] - traj["time_min"].iloc[0] == 0.1 or abs(
-        traj["time_min"].iloc[1] - 0.1) < 1e-12
+    assert (
+        traj["time_min"].iloc[1] - traj["time_min"].iloc[0] == 0.1
+        or abs(traj["time_min"].iloc[1] - 0.1) < 1e-12
+    )
 
 
 def test_bad_input_is_one_line_exit_2(tmp_path, capsys):

@@ -15,7 +15,13 @@ def test_grid_edges_and_index():
     g = BinGrid(-50, -30)
     assert g.n_bins == 20
     assert g.index(np.array([-50.0, -49.0001, -30.0, -30.0001, -51, np.nan])).tolist() == [
-        0, 0, -1, 19, -1, -1]
+        0,
+        0,
+        -1,
+        19,
+        -1,
+        -1,
+    ]
 
 
 def test_grid_rejects_partial_bins():
@@ -85,6 +91,11 @@ def test_adding_samples_never_lowers_coverage_of_dense_sim():
 def test_report_frame_has_per_bin_columns():
     t, g = _sweep(0, 3, 0.2)
     frame = coverage_report(t, g, BinGrid(0, 3), levels_required=1).to_frame()
-    assert list(frame.columns[:5]) == ["bin_lo_c", "bin_hi_c", "passes", "distinct_levels",
-                                       "covered"]
+    assert list(frame.columns[:5]) == [
+        "bin_lo_c",
+        "bin_hi_c",
+        "passes",
+        "distinct_levels",
+        "covered",
+    ]
     assert frame["passes"].tolist() == [1, 1, 1]

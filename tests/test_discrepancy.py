@@ -55,17 +55,26 @@ def _run(job):
     effect, seed = job
     progs = _programmes()
     names = sorted(progs)
-    frame, truth, noise = blind_case(effect, 7919 * (seed + 1) + len(effect), progs[
-        names[seed % len(names)]], sample_s=10.0)
+    frame, truth, noise = blind_case(
+        effect, 7919 * (seed + 1) + len(effect), progs[names[seed % len(names)]], sample_s=10.0
+    )
     d = diagnose_frame(frame, SETTINGS)
     correct = d.effect == effect or (effect != "none" and effect in d.ambiguous_with)
     return {
-        "truth": effect, "seed": seed, "found": d.effect, "correct": correct,
+        "truth": effect,
+        "seed": seed,
+        "found": d.effect,
+        "correct": correct,
         "err": _main_error(effect, truth.parameters, d.parameters)
-        if correct and effect != "none" else math.nan,
-        "before": d.rms_before_c, "after": d.rms_after_c, "noise": noise,
-        "found_params": dict(d.parameters), "truth_params": dict(truth.parameters),
-        "ambiguous_with": d.ambiguous_with, "has_air": d.has_air,
+        if correct and effect != "none"
+        else math.nan,
+        "before": d.rms_before_c,
+        "after": d.rms_after_c,
+        "noise": noise,
+        "found_params": dict(d.parameters),
+        "truth_params": dict(truth.parameters),
+        "ambiguous_with": d.ambiguous_with,
+        "has_air": d.has_air,
     }
 
 
@@ -94,7 +103,8 @@ def test_blind_names_effect_and_parameter(blind, effect):
     if effect == "chamber_cycling":  # amplitude and period reported
         for _, r in good.iterrows():
             assert r["found_params"]["period_s"] == pytest.approx(
-                r["truth_params"]["period_s"], rel=0.25)
+                r["truth_params"]["period_s"], rel=0.25
+            )
 
 
 @pytest.mark.slow
@@ -107,8 +117,7 @@ def test_blind_says_none_on_clean_logs(blind):
 def _lag_log(with_air, seed=3):
     prog = blind_programmes()["cold"]
     truth = ModelSpec(2400.0, 3.0, "chamber_lag", {"tau_chamber_s": 400.0})
-    return synth_effect_log(prog, truth, sample_s=10.0, noise_c=0.02, seed=seed,
-                            with_air=with_air)
+    return synth_effect_log(prog, truth, sample_s=10.0, noise_c=0.02, seed=seed, with_air=with_air)
 
 
 def test_lag_vs_second_mass_needs_the_air_channel():
@@ -149,7 +158,8 @@ def test_json_schema_and_frame():
     prog = setpoint_programme(d.time_min * 60.0, _lag_log(True, seed=5)["tk_set_c"].to_numpy())
     pred = model.predict(prog, t, t0_c=d.candidates[0].t0_c)
     assert math.sqrt(np.mean((pred.t_c - d.measured_c) ** 2)) == pytest.approx(
-        d.rms_after_c, rel=1e-6)
+        d.rms_after_c, rel=1e-6
+    )
 
 
 def test_setpoint_reconstruction_recovers_breakpoints():
@@ -199,8 +209,9 @@ def test_real_tclab_sine_run_finds_a_second_lag():
     """Real heater/thermistor board: the heater-to-sensor lag is the missing effect."""
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location("tclab_diagnose",
-                                                  ROOT / "scripts" / "tclab_diagnose.py")
+    spec = importlib.util.spec_from_file_location(
+        "tclab_diagnose", ROOT / "scripts" / "tclab_diagnose.py"
+    )
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     log, k = mod.tclab_log(TCLAB / "validation_experiment_env_2_sin_5_50_run_1.csv")

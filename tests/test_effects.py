@@ -40,8 +40,7 @@ def _integrate(rhs, x0, shift=0.0):
     x = np.asarray(x0, dtype=float)
     for a, b in zip(stops[:-1], stops[1:], strict=True):
         m = (TIMES >= a) & (TIMES <= b)
-        sol = solve_ivp(rhs, (a, b), x, method="DOP853", rtol=1e-11, atol=1e-11,
-                        dense_output=True)
+        sol = solve_ivp(rhs, (a, b), x, method="DOP853", rtol=1e-11, atol=1e-11, dense_output=True)
         out[:, m] = sol.sol(TIMES[m])
         x = sol.y[:, -1]
     return out
@@ -109,16 +108,28 @@ def test_selfheat_slope_matches_ode():
 
 
 def test_rate_limit_matches_ode():
-    spec = ModelSpec(2400.0, 3.0, "chamber_rate_limit",
-                     {"max_cool_rate_c_per_min": 0.5, "max_heat_rate_c_per_min": 2.0})
+    spec = ModelSpec(
+        2400.0,
+        3.0,
+        "chamber_rate_limit",
+        {"max_cool_rate_c_per_min": 0.5, "max_heat_rate_c_per_min": 2.0},
+    )
     k = 1e4  # a stiff proportional follower saturated at the limits approximates the limiter
 
     def rhs(t, x):
         return [min(max(k * (_setpoint(t) - x[0]), -0.5), 2.0), (x[0] + 3.0 - x[1]) / 40.0]
 
     times = np.arange(0.0, TIMES[-1], 0.25)  # on the coarse grid: the limiter is exact there
-    sol = solve_ivp(rhs, (0, times[-1]), [20.0, 18.0], t_eval=times, method="LSODA",
-                    rtol=1e-9, atol=1e-9, max_step=0.05)
+    sol = solve_ivp(
+        rhs,
+        (0, times[-1]),
+        [20.0, 18.0],
+        t_eval=times,
+        method="LSODA",
+        rtol=1e-9,
+        atol=1e-9,
+        max_step=0.05,
+    )
     pred = spec.predict(PROG, times, t0_c=18.0, grid_min=0.25)
     # the follower lags by rate/k: 2.5e-4 degC; the grid update is exact for the limiter
     np.testing.assert_allclose(pred.tk_air_c, sol.y[0], atol=1e-3)
@@ -127,12 +138,16 @@ def test_rate_limit_matches_ode():
 
 
 def test_cycling_and_asymmetric_match_ode():
-    cyc = ModelSpec(2400.0, 3.0, "chamber_cycling",
-                    {"amplitude_c": 1.0, "period_s": 600.0, "phase_rad": 0.3})
-    ref = _integrate(lambda t, x: [(_setpoint(t) + math.sin(2 * math.pi * t / 10 + 0.3) + 3.0
-                                    - x[0]) / 40.0], [18.0])
-    np.testing.assert_allclose(cyc.predict(PROG, TIMES, t0_c=18.0, grid_min=0.02).t_c, ref[0],
-                               atol=1e-4)
+    cyc = ModelSpec(
+        2400.0, 3.0, "chamber_cycling", {"amplitude_c": 1.0, "period_s": 600.0, "phase_rad": 0.3}
+    )
+    ref = _integrate(
+        lambda t, x: [(_setpoint(t) + math.sin(2 * math.pi * t / 10 + 0.3) + 3.0 - x[0]) / 40.0],
+        [18.0],
+    )
+    np.testing.assert_allclose(
+        cyc.predict(PROG, TIMES, t0_c=18.0, grid_min=0.02).t_c, ref[0], atol=1e-4
+    )
 
     asym = ModelSpec(2400.0, 3.0, "asymmetric_tau", {"tau_heat_s": 2000.0, "tau_cool_s": 2800.0})
 
@@ -140,18 +155,19 @@ def test_cycling_and_asymmetric_match_ode():
         v = _setpoint(t) + 3.0
         return [(v - x[0]) / (2000.0 / 60 if v > x[0] else 2800.0 / 60)]
 
-    sol = solve_ivp(rhs, (0, TIMES[-1]), [18.0], t_eval=TIMES, rtol=1e-10, atol=1e-10,
-                    max_step=0.5)
-    np.testing.assert_allclose(asym.predict(PROG, TIMES, t0_c=18.0, grid_min=0.02).t_c,
-                               sol.y[0], atol=1e-4)
+    sol = solve_ivp(rhs, (0, TIMES[-1]), [18.0], t_eval=TIMES, rtol=1e-10, atol=1e-10, max_step=0.5)
+    np.testing.assert_allclose(
+        asym.predict(PROG, TIMES, t0_c=18.0, grid_min=0.02).t_c, sol.y[0], atol=1e-4
+    )
 
 
 def test_linear_effect_model_is_a_planner_model():
     """No effect = the first-order lag exactly; effects go through simulate(model=...)."""
     plain = LinearEffectModel(2400.0, 3.0)
     a = affine_response(plain, PROG.durations_min, TIMES, 20.0, 19.0)
-    b = affine_response(FirstOrderLag(ThermalParams(2400.0, 3.0)), PROG.durations_min, TIMES,
-                        20.0, 19.0)
+    b = affine_response(
+        FirstOrderLag(ThermalParams(2400.0, 3.0)), PROG.durations_min, TIMES, 20.0, 19.0
+    )
     np.testing.assert_allclose(a.a_t, b.a_t, atol=1e-12)
     np.testing.assert_allclose(a.b_t, b.b_t, atol=1e-12)
     spec = ModelSpec(2400.0, 3.0, "dead_time", {"delay_s": 120.0})
@@ -183,8 +199,12 @@ def test_augment_returns_new_model_and_validates():
 
 
 def test_rate_limit_gives_planner_limits():
-    spec = ModelSpec(2400.0, 3.0, "chamber_rate_limit",
-                     {"max_cool_rate_c_per_min": 0.6, "max_heat_rate_c_per_min": 20.0})
+    spec = ModelSpec(
+        2400.0,
+        3.0,
+        "chamber_rate_limit",
+        {"max_cool_rate_c_per_min": 0.6, "max_heat_rate_c_per_min": 20.0},
+    )
     lim = spec.planner_limits()
     assert lim.rate_min_c_per_min == pytest.approx(-0.6)
     assert lim.rate_max_c_per_min == 3.0
@@ -192,9 +212,15 @@ def test_rate_limit_gives_planner_limits():
 
 
 def test_model_file_round_trip(tmp_path):
-    for spec in (ModelSpec(2000.0, 2.5, "second_time_constant", {"tau2_s": 500.0}),
-                 ModelSpec(2000.0, 2.5, "chamber_cycling",
-                           {"amplitude_c": 0.5, "period_s": 900.0, "phase_rad": 1.0})):
+    for spec in (
+        ModelSpec(2000.0, 2.5, "second_time_constant", {"tau2_s": 500.0}),
+        ModelSpec(
+            2000.0,
+            2.5,
+            "chamber_cycling",
+            {"amplitude_c": 0.5, "period_s": 900.0, "phase_rad": 1.0},
+        ),
+    ):
         path = write_model(tmp_path / f"{spec.effect}.json", spec)
         back = load_model(path)
         assert back == spec
@@ -214,12 +240,14 @@ def test_model_file_round_trip(tmp_path):
 def test_planner_params_match_the_mean_delay():
     """tau of the first-order equivalent = first moment of the impulse response: the
     large-x asymptote of the unit-ramp response is x - tau_equivalent."""
-    for spec in (ModelSpec(2400.0, 3.0, "dead_time", {"delay_s": 300.0}),
-                 ModelSpec(2400.0, 3.0, "chamber_lag", {"tau_chamber_s": 600.0}),
-                 ModelSpec(2400.0, 3.0, "selfheat_slope", {"dt0_slope_c_per_c": 0.04})):
+    for spec in (
+        ModelSpec(2400.0, 3.0, "dead_time", {"delay_s": 300.0}),
+        ModelSpec(2400.0, 3.0, "chamber_lag", {"tau_chamber_s": 600.0}),
+        ModelSpec(2400.0, 3.0, "selfheat_slope", {"dt0_slope_c_per_c": 0.04}),
+    ):
         m = spec.linear_model()
         x = 2000.0
-        tau_eq_min = (x - m.ramp(np.array([x]))[0] / 1.0)
+        tau_eq_min = x - m.ramp(np.array([x]))[0] / 1.0
         assert spec.planner_params().tau_min == pytest.approx(tau_eq_min, rel=1e-9)
         assert spec.planner_params().dt0_c == 3.0
 

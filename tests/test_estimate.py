@@ -54,8 +54,7 @@ def test_kinematic_discretisation_matches_van_loan(h):
     f, qd = _van_loan(np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([0.0, 1.0]), q, h)
     a, b, q11, q12, q22 = kinematic_transition(np.array([h]), q)
     np.testing.assert_allclose([a[0], b[0]], [f[0, 0], f[0, 1]], rtol=1e-12)
-    np.testing.assert_allclose([q11[0], q12[0], q22[0]], [qd[0, 0], qd[0, 1], qd[1, 1]],
-                               rtol=1e-9)
+    np.testing.assert_allclose([q11[0], q12[0], q22[0]], [qd[0, 0], qd[0, 1], qd[1, 1]], rtol=1e-9)
 
 
 @pytest.mark.parametrize("h", [1 / 60, 1 / 6, 0.39, 5.0, 120.0])
@@ -65,8 +64,7 @@ def test_lag_discretisation_matches_van_loan(h):
     f, qd = _van_loan(a_cont, np.array([0.0, 1.0]), q, h)
     a, b, q11, q12, q22 = lag_transition(np.array([h]), tau, q)
     np.testing.assert_allclose([a[0], b[0]], [f[0, 0], f[0, 1]], rtol=1e-11)
-    np.testing.assert_allclose([q11[0], q12[0], q22[0]], [qd[0, 0], qd[0, 1], qd[1, 1]],
-                               rtol=1e-6)
+    np.testing.assert_allclose([q11[0], q12[0], q22[0]], [qd[0, 0], qd[0, 1], qd[1, 1]], rtol=1e-6)
 
 
 def test_lag_input_matches_ode():
@@ -101,11 +99,11 @@ def _batch_posterior(y, a, b, u, q11, q12, q22, r, x0, p0):
     for k in range(n):
         phi = np.eye(2)
         for j in range(k, -1, -1):
-            big[2 * k:2 * k + 2, 2 * j:2 * j + 2] = phi
+            big[2 * k : 2 * k + 2, 2 * j : 2 * j + 2] = phi
             phi = phi @ trans[j]
     cz = np.zeros((2 * n, 2 * n))
     for j in range(n):
-        cz[2 * j:2 * j + 2, 2 * j:2 * j + 2] = blocks[j]
+        cz[2 * j : 2 * j + 2, 2 * j : 2 * j + 2] = blocks[j]
     cov_x = big @ cz @ big.T
     obs = np.flatnonzero(np.isfinite(y))
     hsel = np.zeros((obs.size, 2 * n))
@@ -142,8 +140,9 @@ def test_filter_and_smoother_equal_batch_conditioning(kind, rng):
     else:
         a, b, q11, q12, q22 = lag_transition(h, 2.0, q)
         tk = 25.0 + 3.0 * np.sin(t)
-        u = np.concatenate(([0.0], lag_input(h[1:], tk[:-1], tk[1:],
-                                             FirstOrderLag(ThermalParams(tau_s=120.0)))))
+        u = np.concatenate(
+            ([0.0], lag_input(h[1:], tk[:-1], tk[1:], FirstOrderLag(ThermalParams(tau_s=120.0))))
+        )
     x0, p0 = (19.0, 0.1), (4.0, 0.3, 0.5)
     args = [v.tolist() for v in (a, b, u, q11, q12, q22)]
     filt, pred, innov, svar, m2ll = kalman_filter(y.tolist(), *args, r, x0, p0)
@@ -309,8 +308,9 @@ def _tclab_logs():
 def test_real_tclab_logs(path):
     """Real, coarsely quantised (~0.32 degC) logs: sensible estimates, r near step^2/12."""
     raw = pd.read_csv(path)
-    log = log_from_frame(pd.DataFrame({"time_s": raw["Time"], "t_int_c": raw["T1"]}),
-                         source=str(path))
+    log = log_from_frame(
+        pd.DataFrame({"time_s": raw["Time"], "t_int_c": raw["T1"]}), source=str(path)
+    )
     est = estimate_gradient(log)
     step = est.noise.quant_c
     assert step == pytest.approx(0.32, abs=0.01)
@@ -336,22 +336,28 @@ def test_ml_noise_levels_beat_a_brute_force_grid(rng):
     log = log_from_frame(pd.DataFrame({"time_s": t, "t_int_c": y}))
     est = estimate_gradient(log)
     assert est.noise.quant_c == pytest.approx(0.32)
-    grid = [estimate_gradient(log, q=q, r=r).minus2_log_likelihood
-            for q in 10.0 ** np.arange(-3.0, 3.5, 0.5)
-            for r in est.noise.quant_c**2 / 12 * np.array([1.0, 1.2, 1.5, 2.0])]
+    grid = [
+        estimate_gradient(log, q=q, r=r).minus2_log_likelihood
+        for q in 10.0 ** np.arange(-3.0, 3.5, 0.5)
+        for r in est.noise.quant_c**2 / 12 * np.array([1.0, 1.2, 1.5, 2.0])
+    ]
     assert est.minus2_log_likelihood <= min(grid) + 0.5
 
 
 def _fq(kind, h, q, tau=40.0):
-    a, b, q11, q12, q22 = (kinematic_transition(np.array([h]), q) if kind == "kinematic"
-                           else lag_transition(np.array([h]), tau, q))
+    a, b, q11, q12, q22 = (
+        kinematic_transition(np.array([h]), q)
+        if kind == "kinematic"
+        else lag_transition(np.array([h]), tau, q)
+    )
     f = np.array([[a[0], b[0]], [0.0, 1.0]])
     return f, np.array([[q11[0], q12[0]], [q12[0], q22[0]]])
 
 
 @settings(max_examples=60, deadline=None)
-@given(h1=st.floats(1e-3, 200.0), h2=st.floats(1e-3, 200.0),
-       kind=st.sampled_from(["kinematic", "lag"]))
+@given(
+    h1=st.floats(1e-3, 200.0), h2=st.floats(1e-3, 200.0), kind=st.sampled_from(["kinematic", "lag"])
+)
 def test_two_steps_compose_into_one(h1, h2, kind):
     """F(h1 + h2) = F(h2) F(h1) and Q(h1 + h2) = F(h2) Q(h1) F(h2)^T + Q(h2)."""
     q = 1e-3
@@ -402,8 +408,9 @@ def test_steady_state_fast_path_equals_plain_recursions(kind, rng, monkeypatch):
     np.testing.assert_allclose(fast[6], svar, rtol=1e-9)
     assert fast[7] == pytest.approx(m2ll, rel=1e-10)
     # likelihood only
-    assert filter_smooth(y, a, b, u, q11, q12, q22, 4e-4, x0, p0, smooth=False)[7] == \
-        pytest.approx(m2ll, rel=1e-10)
+    assert filter_smooth(y, a, b, u, q11, q12, q22, 4e-4, x0, p0, smooth=False)[7] == pytest.approx(
+        m2ll, rel=1e-10
+    )
 
 
 def test_strided_copy_composes_the_chamber_input_exactly(rng):

@@ -145,7 +145,13 @@ def test_synth_log_matches_simulation_within_noise():
     prog = read_steps("data/baseline_exp1_steps.csv")
     df = synth_log(prog, sample_s=10.0, noise_c=0.02, quant_c=0.01, seed=3)
     assert list(df.columns) == [
-        "time_s", "t_int_c", "tk_set_c", "tk_air_c", "t_true_c", "g_true_c_per_min"]
+        "time_s",
+        "t_int_c",
+        "tk_set_c",
+        "tk_air_c",
+        "t_true_c",
+        "g_true_c_per_min",
+    ]
     assert df["time_s"].iloc[-1] == prog.total_min * 60.0
     # quantised to 0.01 degC
     q = df["t_int_c"].to_numpy() / 0.01

@@ -28,9 +28,17 @@ def _ode_reference(programme, params, times_min, t0_c=20.0):
     stops = np.unique(np.concatenate((edges, [max(times_min.max(), edges[-1])])))
     for a, b in zip(stops[:-1], stops[1:], strict=True):
         mask = (times_min >= a) & (times_min <= b)
-        sol = solve_ivp(rhs, (a, b), x, t_eval=times_min[mask] if mask.any() else None,
-                        rtol=1e-11, atol=1e-11, method="DOP853", first_step=1e-3,
-                        max_step=(b - a) / 4)
+        sol = solve_ivp(
+            rhs,
+            (a, b),
+            x,
+            t_eval=times_min[mask] if mask.any() else None,
+            rtol=1e-11,
+            atol=1e-11,
+            method="DOP853",
+            first_step=1e-3,
+            max_step=(b - a) / 4,
+        )
         if mask.any():
             tk, temp = sol.y
             out[mask, 0] = temp

@@ -16,8 +16,14 @@ from schedsyn.planner import (
     turning_speed,
 )
 
-SMALL = dict(name="S", working_lo_c=-10.0, working_hi_c=0.0, approx_lo_c=-20.0,
-             approx_hi_c=10.0, levels_required=3)
+SMALL = dict(
+    name="S",
+    working_lo_c=-10.0,
+    working_hi_c=0.0,
+    approx_lo_c=-20.0,
+    approx_hi_c=10.0,
+    levels_required=3,
+)
 SMALL_LIMITS = Limits(duration_max_min=300.0)
 
 
@@ -32,8 +38,15 @@ def small_plan():
 def test_bands_are_delta_apart_at_every_temperature(region, direction, design):
     spec = ExperimentSpec("W", *region)
     delta = spec.delta_c_per_min
-    bands = make_bands(spec, 3, direction, delta + BAND_SAFETY_C_PER_MIN, [ThermalParams()],
-                       Limits(), design=DESIGNS[design])
+    bands = make_bands(
+        spec,
+        3,
+        direction,
+        delta + BAND_SAFETY_C_PER_MIN,
+        [ThermalParams()],
+        Limits(),
+        design=DESIGNS[design],
+    )
     t = np.linspace(region[0] - 0.5, region[1] + 0.5, 500)
     lows = [b.bounds(t)[0] for b in bands]
     highs = [b.bounds(t)[1] for b in bands]
@@ -51,8 +64,15 @@ def test_turning_speed_matches_a_simulated_stop(v0):
     within the room: checked by integrating the lag ODE with scipy."""
     tau_min, rate = 40.0, 1.0
     # distance travelled from v0 to standstill under U = -rate (heating device, cooling air)
-    sol = solve_ivp(lambda t, y: [y[1], (-rate - y[1]) / tau_min], (0, 400), [0.0, v0],
-                    events=lambda t, y: y[1], max_step=0.1, rtol=1e-9, atol=1e-12)
+    sol = solve_ivp(
+        lambda t, y: [y[1], (-rate - y[1]) / tau_min],
+        (0, 400),
+        [0.0, v0],
+        events=lambda t, y: y[1],
+        max_step=0.1,
+        rtol=1e-9,
+        atol=1e-12,
+    )
     room = float(sol.y_events[0][0][0])
     assert turning_speed(room, rate, tau_min, turn_fraction=1.0) == pytest.approx(v0, rel=1e-4)
     # with less of the rate available the allowed speed is lower
@@ -68,8 +88,9 @@ def test_direct_probe_lp_matches_cvxpy():
 
     spec = ExperimentSpec(**SMALL)
     p = ThermalParams()
-    planner = _Planner(spec, SMALL_LIMITS, _Responses([Scenario(p, FirstOrderLag(p))], 24, 5.0,
-                                                      SMALL_LIMITS))
+    planner = _Planner(
+        spec, SMALL_LIMITS, _Responses([Scenario(p, FirstOrderLag(p))], 24, 5.0, SMALL_LIMITS)
+    )
     lp = _SubLP(planner, np.zeros(0), 24, extra=1)
     lp.chamber()
     lp.device()
@@ -94,7 +115,7 @@ def test_bands_respect_the_chamber_floor_near_the_cold_edge():
     spec = ExperimentSpec("W1", -50, -30, -52, -20)
     p = ThermalParams()
     bands = make_bands(spec, 3, -1, 0.062, [p], Limits(chamber_min_c=-60.0))
-    g_floor = (-60.0 + p.dt0_c - (-50.5)) / p.tau_min   # most negative g at -50.5 degC
+    g_floor = (-60.0 + p.dt0_c - (-50.5)) / p.tau_min  # most negative g at -50.5 degC
     assert bands[-1].bounds(-50.5)[1] <= -g_floor + 1e-9
 
 
@@ -123,9 +144,14 @@ def _ode_trajectory(prog, params, dt_min=0.1):
     for dur, rate in zip(prog.durations_min, prog.rates_c_per_min, strict=True):
         n = int(round(dur / dt_min))
         t_eval = start + dt_min * np.arange(n + 1)
-        sol = solve_ivp(lambda t, x, r=rate, s0=start, k0=tk: [(k0 + r * (t - s0)
-                        + params.dt0_c - x[0]) / tau], (start, start + dur), [temp],
-                        t_eval=t_eval, rtol=1e-10, atol=1e-10)
+        sol = solve_ivp(
+            lambda t, x, r=rate, s0=start, k0=tk: [(k0 + r * (t - s0) + params.dt0_c - x[0]) / tau],
+            (start, start + dur),
+            [temp],
+            t_eval=t_eval,
+            rtol=1e-10,
+            atol=1e-10,
+        )
         tk_eval = tk + rate * (t_eval - start)
         keep = slice(0, -1)  # the end sample starts the next segment
         t_all.append(t_eval[keep])
@@ -161,8 +187,7 @@ def small_robust_plan():
     return plan_experiment(ExperimentSpec(**SMALL), limits=SMALL_LIMITS, **ROBUST_BOX)
 
 
-def test_robust_plan_holds_across_its_box_by_independent_resimulation(small_robust_plan,
-                                                                       tmp_path):
+def test_robust_plan_holds_across_its_box_by_independent_resimulation(small_robust_plan, tmp_path):
     """One programme for the whole box: the exported table, integrated by scipy at points
     between and beyond the planner's own 9 x 7 check grid, covers the region everywhere."""
     plan = small_robust_plan
@@ -180,8 +205,7 @@ def test_robust_plan_holds_across_its_box_by_independent_resimulation(small_robu
             assert temp.min() >= SMALL_LIMITS.device_min_c
 
 
-def test_robust_plan_reports_its_scenarios_and_spaces_levels_wider(small_plan,
-                                                                   small_robust_plan):
+def test_robust_plan_reports_its_scenarios_and_spaces_levels_wider(small_plan, small_robust_plan):
     """A robust plan carries its box check and scenarios; its bands are further apart, so
     its levels are spaced at least as wide as the nominal plan's."""
     assert small_plan.box_check is None
@@ -202,17 +226,22 @@ def test_too_wide_a_robust_box_says_which_part_is_covered(tmp_path):
     assert any("inner" in n or "nominal point" in n for n in plan.notes), plan.notes
     check = plan.box_check
     assert not check["holds"] and check["grid_points"] >= 63
-    res = verify_box(read_steps(plan.programme.to_csv(tmp_path / "s.csv"), limits),
-                     (-10.0, 0.0), box["robust_tau_s"], box["robust_dt0_c"],
-                     levels_required=3)
+    res = verify_box(
+        read_steps(plan.programme.to_csv(tmp_path / "s.csv"), limits),
+        (-10.0, 0.0),
+        box["robust_tau_s"],
+        box["robust_dt0_c"],
+        levels_required=3,
+    )
     assert res.full_share == pytest.approx(check["full_share"])
     assert res.worst()["coverage"] == pytest.approx(check["worst"]["coverage"])
     assert res.worst()["coverage"] < 1.0
     part = check["covered_box"]
     if part is not None:  # the named part of the box is covered at every grid point in it
         frame = res.to_frame()
-        inside = frame[frame.tau_s.between(*part["tau_s_range"])
-                       & frame.dt0_c.between(*part["dt0_c_range"])]
+        inside = frame[
+            frame.tau_s.between(*part["tau_s_range"]) & frame.dt0_c.between(*part["dt0_c_range"])
+        ]
         assert len(inside) == part["n_points"] and (inside.coverage >= 1.0).all()
         assert f"{part['tau_s_range'][0]:g}..{part['tau_s_range'][1]:g} s" in plan.notes[-1]
 
@@ -229,7 +258,7 @@ def test_shortfall_names_the_binding_chamber_limit():
     notes = explain_shortfall(w1, ThermalParams(), Limits(chamber_min_c=-52.0))
     assert any("cannot bring the device below -49" in n for n in notes)
     notes = explain_shortfall(w1, ThermalParams(), Limits(chamber_min_c=-60.0))
-    assert any("0.175" in n for n in notes)   # (Tk_min + dT0 - T)/tau at -50 degC
+    assert any("0.175" in n for n in notes)  # (Tk_min + dT0 - T)/tau at -50 degC
     assert explain_shortfall(w1, ThermalParams(), Limits()) == []
 
 
@@ -255,7 +284,7 @@ def test_robust_scenarios_cover_the_box_ends():
     taus = sorted({p.tau_s for p in sc})
     dt0s = sorted({p.dt0_c for p in sc})
     assert taus[0] == 2000.0 and taus[-1] == 2800.0 and len(taus) == 3
-    assert dt0s == [0.0, 6.0]   # T and g are affine in dT0: the two ends suffice
+    assert dt0s == [0.0, 6.0]  # T and g are affine in dT0: the two ends suffice
     assert robust_scenarios(ThermalParams(), None, None) == [ThermalParams()]
     with pytest.raises(ParameterError, match="tau_s"):
         robust_scenarios(ThermalParams(), (2800.0, 2000.0), None)
@@ -282,9 +311,15 @@ def test_check_tables_script_agrees_with_the_plan(small_plan, tmp_path):
     spec_.loader.exec_module(mod)
     plan = small_plan
     steps = plan.programme.to_csv(tmp_path / "steps.csv")
-    res = mod.check(steps, plan.params.tau_s, plan.params.dt0_c, plan.spec.working_lo_c,
-                    plan.spec.working_hi_c, plan.spec.levels_required,
-                    plan.spec.delta_c_per_min)
+    res = mod.check(
+        steps,
+        plan.params.tau_s,
+        plan.params.dt0_c,
+        plan.spec.working_lo_c,
+        plan.spec.working_hi_c,
+        plan.spec.levels_required,
+        plan.spec.delta_c_per_min,
+    )
     assert res["coverage"] == pytest.approx(plan.coverage.coverage)
     assert res["min_levels"] == plan.coverage.min_levels
     assert res["chamber_start_c"] == 20.0 and abs(res["chamber_end_c"] - 20.0) <= 0.5
@@ -293,9 +328,15 @@ def test_check_tables_script_agrees_with_the_plan(small_plan, tmp_path):
     # a table that stops half-way is caught: its coverage drops
     half = plan.programme.to_frame().iloc[: plan.steps // 2]
     half.to_csv(tmp_path / "half.csv", index=False)
-    cut = mod.check(tmp_path / "half.csv", plan.params.tau_s, plan.params.dt0_c,
-                    plan.spec.working_lo_c, plan.spec.working_hi_c,
-                    plan.spec.levels_required, plan.spec.delta_c_per_min)
+    cut = mod.check(
+        tmp_path / "half.csv",
+        plan.params.tau_s,
+        plan.params.dt0_c,
+        plan.spec.working_lo_c,
+        plan.spec.working_hi_c,
+        plan.spec.levels_required,
+        plan.spec.delta_c_per_min,
+    )
     assert cut["coverage"] < res["coverage"]
 
 

@@ -44,8 +44,9 @@ def test_merge_keeps_path():
     m = prog.merged()
     assert m.n_segments == 2
     t = np.linspace(0, 30, 61)
-    np.testing.assert_allclose(simulate(m, times_min=t).t_c, simulate(prog, times_min=t).t_c,
-                               atol=1e-10)
+    np.testing.assert_allclose(
+        simulate(m, times_min=t).t_c, simulate(prog, times_min=t).t_c, atol=1e-10
+    )
 
 
 def _table(tmp_path, edit):

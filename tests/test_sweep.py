@@ -105,8 +105,12 @@ def test_sweep_equals_direct_simulation(programme, full_grid):
 def test_frame_layout(full_grid):
     frame = full_grid.to_frame()
     assert list(frame.columns[:4]) == ["tau_s", "dt0_c", "coverage", "min_levels"]
-    for c in ("coverage_delta_0p05", "min_levels_delta_0p05", "coverage_delta_0p1",
-              "min_levels_delta_0p1"):
+    for c in (
+        "coverage_delta_0p05",
+        "min_levels_delta_0p05",
+        "coverage_delta_0p1",
+        "min_levels_delta_0p1",
+    ):
         assert c in frame.columns
     assert len(frame) == 169
     assert frame[["tau_s", "dt0_c"]].drop_duplicates().shape[0] == 169
@@ -122,8 +126,13 @@ def test_monotone_in_delta_and_levels(programme, full_grid):
     assert np.all(lev[:, :, 1] <= lev[:, :, 0])
     assert np.any(cov[:, :, 1] < cov[:, :, 0])  # the check can fail: it bites somewhere
     # demanding more levels can only lower coverage
-    harder = sweep_fixed(programme, REGION, full_grid.tau_s_values[::4],
-                         full_grid.dt0_c_values[::4], levels_required=7)
+    harder = sweep_fixed(
+        programme,
+        REGION,
+        full_grid.tau_s_values[::4],
+        full_grid.dt0_c_values[::4],
+        levels_required=7,
+    )
     assert np.all(harder.coverage_grid <= full_grid.coverage_grid[::4, ::4])
 
 
@@ -177,15 +186,25 @@ class _FakePlan:
         self.tau_s, self.dt0_c = tau_s, dt0_c
 
     def to_summary_dict(self):
-        return {"duration_min": 300.0 + self.tau_s / 10.0 + self.dt0_c,
-                "coverage_margin": 0.01 * self.dt0_c, "tau_s": -1.0}
+        return {
+            "duration_min": 300.0 + self.tau_s / 10.0 + self.dt0_c,
+            "coverage_margin": 0.01 * self.dt0_c,
+            "tau_s": -1.0,
+        }
 
 
 def _all_backends(programme, backend, workers=None):
-    fixed = sweep_fixed(programme, REGION, [1800.0, 2400.0, 3000.0], [0.0, 3.0, 6.0],
-                        backend=backend, workers=workers).to_frame()
-    replan = sweep_replan(fake_plan, [2000.0, 2400.0, 2800.0], [0.0, 3.0],
-                          backend=backend, workers=workers).to_frame()
+    fixed = sweep_fixed(
+        programme,
+        REGION,
+        [1800.0, 2400.0, 3000.0],
+        [0.0, 3.0, 6.0],
+        backend=backend,
+        workers=workers,
+    ).to_frame()
+    replan = sweep_replan(
+        fake_plan, [2000.0, 2400.0, 2800.0], [0.0, 3.0], backend=backend, workers=workers
+    ).to_frame()
     mapped = run_map(np.sqrt, [1.0, 4.0, 9.0, 16.0], backend, workers=workers, progress=False)
     return fixed, replan, mapped
 
@@ -215,9 +234,14 @@ def test_backends_agree(programme):
 def dask_address():
     """A 2-worker Dask cluster on 127.0.0.1 (threads, real TCP), for this module only."""
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
-                                  protocol="tcp://", host="127.0.0.1",
-                                  dashboard_address=None) as cluster:
+    with distributed.LocalCluster(
+        n_workers=2,
+        threads_per_worker=1,
+        processes=False,
+        protocol="tcp://",
+        host="127.0.0.1",
+        dashboard_address=None,
+    ) as cluster:
         yield cluster.scheduler_address
 
 
@@ -231,8 +255,10 @@ def test_dask_backend_agrees(programme, dask_address):
 
 
 def test_import_stays_light():
-    code = ("import sys, schedsyn.sweep; "
-            "print(sorted(m for m in ('matplotlib', 'distributed', 'tqdm') if m in sys.modules))")
+    code = (
+        "import sys, schedsyn.sweep; "
+        "print(sorted(m for m in ('matplotlib', 'distributed', 'tqdm') if m in sys.modules))"
+    )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert res.stdout.strip() == "[]"
 
@@ -240,8 +266,24 @@ def test_import_stays_light():
 # -- command line ----------------------------------------------------------------------------
 def test_cli_writes_table_and_heatmap(tmp_path, capsys, programme):
     out = tmp_path / "sw"
-    rc = main(["sweep", STEPS, "--region", "-50", "-30", "--tau-s", "2000:2800:3",
-               "--dt0-c", "0:6:4", "--out", str(out), "--workers", "2", "--no-progress"])
+    rc = main(
+        [
+            "sweep",
+            STEPS,
+            "--region",
+            "-50",
+            "-30",
+            "--tau-s",
+            "2000:2800:3",
+            "--dt0-c",
+            "0:6:4",
+            "--out",
+            str(out),
+            "--workers",
+            "2",
+            "--no-progress",
+        ]
+    )
     assert rc == 0
     text = capsys.readouterr().out
     assert "at the nominal point (tau 2400 s, dT0 3 °C): coverage 55.0%" in text
@@ -250,7 +292,8 @@ def test_cli_writes_table_and_heatmap(tmp_path, capsys, programme):
     assert len(frame) == 12
     assert list(frame.columns[:4]) == ["tau_s", "dt0_c", "coverage", "min_levels"]
     assert {"coverage_delta_0p05", "coverage_delta_0p1", "min_levels_delta_0p1"} <= set(
-        frame.columns)
+        frame.columns
+    )
     api = sweep_fixed(programme, REGION, [2000.0, 2400.0, 2800.0], [0.0, 2.0, 4.0, 6.0])
     np.testing.assert_array_equal(frame["coverage"], api.to_frame()["coverage"])
     assert (out / "sweep.png").read_bytes()[:4] == b"\x89PNG"
@@ -291,8 +334,21 @@ def test_cli_replan_writes_rows(tmp_path, capsys, monkeypatch):
 
     monkeypatch.setattr(cli_sweep, "_planner_available", lambda: True)
     monkeypatch.setattr(cli_sweep, "PlanAtPoint", lambda *args: fake_plan)
-    rc = main(["sweep", "--replan", "--tau-s", "2000:2800:3", "--dt0-c", "0:6:3",
-               "--out", str(tmp_path), "--workers", "1", "--no-progress"])
+    rc = main(
+        [
+            "sweep",
+            "--replan",
+            "--tau-s",
+            "2000:2800:3",
+            "--dt0-c",
+            "0:6:3",
+            "--out",
+            str(tmp_path),
+            "--workers",
+            "1",
+            "--no-progress",
+        ]
+    )
     assert rc == 0
     frame = pd.read_csv(tmp_path / "sweep.csv")
     assert len(frame) == 9 and (frame["status"] == "infeasible").sum() == 3
@@ -309,32 +365,46 @@ def _result_with_coverage(cov):
     cov = np.asarray(cov, dtype=float)
     n_tau, n_dt0 = cov.shape
     return SweepResult(
-        region_c=REGION, tau_s_values=2000.0 + 100.0 * np.arange(n_tau),
-        dt0_c_values=np.arange(n_dt0, dtype=float), levels_required=6,
-        deltas_c_per_min=(0.05,), coverage=cov[:, :, None],
+        region_c=REGION,
+        tau_s_values=2000.0 + 100.0 * np.arange(n_tau),
+        dt0_c_values=np.arange(n_dt0, dtype=float),
+        levels_required=6,
+        deltas_c_per_min=(0.05,),
+        coverage=cov[:, :, None],
         min_levels=np.where(cov[:, :, None] >= 1.0, 6, 3),
-        t_min_c=np.zeros(cov.shape), t_max_c=np.zeros(cov.shape))
+        t_min_c=np.zeros(cov.shape),
+        t_max_c=np.zeros(cov.shape),
+    )
 
 
 def test_covered_box_is_the_largest_full_sub_box():
-    cov = np.array([
-        [1.0, 1.0, 0.9, 1.0],
-        [1.0, 1.0, 1.0, 1.0],
-        [1.0, 1.0, 1.0, 1.0],
-        [0.5, 1.0, 1.0, 1.0],
-    ])
+    cov = np.array(
+        [
+            [1.0, 1.0, 0.9, 1.0],
+            [1.0, 1.0, 1.0, 1.0],
+            [1.0, 1.0, 1.0, 1.0],
+            [0.5, 1.0, 1.0, 1.0],
+        ]
+    )
     res = _result_with_coverage(cov)
     # the full 2 x 4 band (rows 1-2, 8 points) and the 3 x 2 block (rows 0-2, cols 0-1)
     # lose to rows 1-3 x cols 1-3 with 9 points
-    assert res.covered_box() == {"tau_s_range": (2100.0, 2300.0),
-                                 "dt0_c_range": (1.0, 3.0), "n_points": 9}
+    assert res.covered_box() == {
+        "tau_s_range": (2100.0, 2300.0),
+        "dt0_c_range": (1.0, 3.0),
+        "n_points": 9,
+    }
     assert res.covered_box(0.5)["n_points"] == 16
     assert _result_with_coverage(np.zeros((3, 3))).covered_box() is None
     # brute force over every sub-box agrees on the size
-    best = max((i1 - i0) * (j1 - j0)
-               for i0 in range(4) for i1 in range(i0 + 1, 5)
-               for j0 in range(4) for j1 in range(j0 + 1, 5)
-               if np.all(cov[i0:i1, j0:j1] >= 1.0))
+    best = max(
+        (i1 - i0) * (j1 - j0)
+        for i0 in range(4)
+        for i1 in range(i0 + 1, 5)
+        for j0 in range(4)
+        for j1 in range(j0 + 1, 5)
+        if np.all(cov[i0:i1, j0:j1] >= 1.0)
+    )
     assert best == 9
 
 
@@ -342,8 +412,11 @@ def test_cli_on_dask_matches_serial(tmp_path, dask_address):
     common = ["sweep", STEPS, "--tau-s", "2000:2800:3", "--dt0-c", "0:6:3", "--no-progress"]
     assert main([*common, "--out", str(tmp_path / "d"), "--dask", dask_address]) == 0
     assert main([*common, "--out", str(tmp_path / "s"), "--workers", "1"]) == 0
-    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "d" / "sweep.csv"),
-                                  pd.read_csv(tmp_path / "s" / "sweep.csv"), check_exact=True)
+    pd.testing.assert_frame_equal(
+        pd.read_csv(tmp_path / "d" / "sweep.csv"),
+        pd.read_csv(tmp_path / "s" / "sweep.csv"),
+        check_exact=True,
+    )
 
 
 def test_heatmaps_draw_mixed_and_single_point_grids(tmp_path):
@@ -351,8 +424,14 @@ def test_heatmaps_draw_mixed_and_single_point_grids(tmp_path):
 
     mixed = _result_with_coverage([[1.0, 0.5], [1.0, 1.0], [0.2, 1.0]]).to_frame()
     single = _result_with_coverage([[0.75]]).to_frame()
-    axes = plots.sweep_panels([(mixed, "coverage", "mixed"), (mixed, "min_levels", "levels"),
-                               (single, "coverage", "one point")], nominal=(2100.0, 0.5))
+    axes = plots.sweep_panels(
+        [
+            (mixed, "coverage", "mixed"),
+            (mixed, "min_levels", "levels"),
+            (single, "coverage", "one point"),
+        ],
+        nominal=(2100.0, 0.5),
+    )
     assert len(axes) == 3 and axes[0].get_title() == "mixed"
     assert len(axes[0].collections) >= 2  # the mesh and the full-coverage outline
     plots.save_figure(axes[0], tmp_path / "h.png")
@@ -384,6 +463,10 @@ def test_replan_adapter_builds_the_paper_spec(monkeypatch):
     fn(ThermalParams(tau_s=2100.0, dt0_c=1.0))
     spec = seen["spec"]
     assert (spec.working_lo_c, spec.working_hi_c, spec.approx_lo_c, spec.approx_hi_c) == (
-        -50.0, -30.0, -52.0, -20.0)
+        -50.0,
+        -30.0,
+        -52.0,
+        -20.0,
+    )
     assert spec.levels_required == 6 and spec.delta_c_per_min == 0.05
     assert seen["params"] == ThermalParams(tau_s=2100.0, dt0_c=1.0)

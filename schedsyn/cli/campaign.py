@@ -18,17 +18,32 @@ from . import _common
 
 
 def register(sub) -> None:
-    p = sub.add_parser("campaign", help="plan a campaign of experiments (default: the paper's)",
-                       description=__doc__,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("config", nargs="?", default=None, metavar="CONFIG.toml",
-                   help="campaign file (default: the paper's four experiments)")
+    p = sub.add_parser(
+        "campaign",
+        help="plan a campaign of experiments (default: the paper's)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "config",
+        nargs="?",
+        default=None,
+        metavar="CONFIG.toml",
+        help="campaign file (default: the paper's four experiments)",
+    )
     p.add_argument("--out", default=None, help="output directory (default out/campaign)")
-    p.add_argument("--backend", default="local",
-                   help="'local' (process pool over the cores, default), 'serial' or a Dask "
-                        "scheduler address tcp://HOST:PORT")
-    p.add_argument("--workers", type=int, default=None,
-                   help="processes of the local pool (default: the number of cores)")
+    p.add_argument(
+        "--backend",
+        default="local",
+        help="'local' (process pool over the cores, default), 'serial' or a Dask "
+        "scheduler address tcp://HOST:PORT",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="processes of the local pool (default: the number of cores)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress messages on stderr")
     p.set_defaults(func=run)
 
@@ -44,8 +59,12 @@ def run(args: argparse.Namespace) -> int:
     out = _common.out_dir(args.out, "out/campaign")
     inputs = [args.config] if args.config else []
     inputs += [b for b in config.baseline_steps if b is not None]
-    result = plan_campaign(config, progress=None if args.quiet else stderr_progress,
-                           backend=args.backend, workers=args.workers)
+    result = plan_campaign(
+        config,
+        progress=None if args.quiet else stderr_progress,
+        backend=args.backend,
+        workers=args.workers,
+    )
     lines = []
     for spec, plan, err in zip(config.experiments, result.plans, result.errors, strict=True):
         if plan is None:
@@ -59,9 +78,16 @@ def run(args: argparse.Namespace) -> int:
         print(frame.to_string(index=False, float_format=lambda x: f"{x:.4g}"))
     print("\n".join(lines))
     n_bad = sum(not (p is not None and p.complete) for p in result.plans)
-    print(f"campaign planned in {result.wall_s:.1f} s; "
-          + ("every experiment is complete" if n_bad == 0
-             else f"{n_bad} of {len(result.plans)} experiments are NOT complete"))
-    print(f"wrote {out}/summary.csv and {out}/<experiment>/steps.csv, plan.json, program.png, "
-          "phase.png, coverage.png")
+    print(
+        f"campaign planned in {result.wall_s:.1f} s; "
+        + (
+            "every experiment is complete"
+            if n_bad == 0
+            else f"{n_bad} of {len(result.plans)} experiments are NOT complete"
+        )
+    )
+    print(
+        f"wrote {out}/summary.csv and {out}/<experiment>/steps.csv, plan.json, program.png, "
+        "phase.png, coverage.png"
+    )
     return 0 if n_bad == 0 else 1

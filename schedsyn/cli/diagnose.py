@@ -15,17 +15,34 @@ from . import _common
 
 
 def register(sub) -> None:
-    p = sub.add_parser("diagnose", help="name the effect a measured log shows that the model "
-                       "lacks, and write the augmented model", description=__doc__)
-    p.add_argument("log", metavar="LOG.csv", help="measured log (time_s, t_int_c, tk_set_c "
-                   "[, tk_air_c])")
+    p = sub.add_parser(
+        "diagnose",
+        help="name the effect a measured log shows that the model "
+        "lacks, and write the augmented model",
+        description=__doc__,
+    )
+    p.add_argument(
+        "log", metavar="LOG.csv", help="measured log (time_s, t_int_c, tk_set_c [, tk_air_c])"
+    )
     p.add_argument("--out", default=None, help="output directory (default out/diagnose)")
-    p.add_argument("--json", action="store_true", help="print one JSON object to stdout "
-                   "(messages go to stderr)")
-    p.add_argument("--fit-step-s", type=float, default=None, help="averaging block of the "
-                   "fit, s (default: log length/1500, at most 20 s)")
-    p.add_argument("--effects", nargs="+", default=None, metavar="EFFECT",
-                   help="candidates to try (default: the whole library)")
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object to stdout (messages go to stderr)",
+    )
+    p.add_argument(
+        "--fit-step-s",
+        type=float,
+        default=None,
+        help="averaging block of the fit, s (default: log length/1500, at most 20 s)",
+    )
+    p.add_argument(
+        "--effects",
+        nargs="+",
+        default=None,
+        metavar="EFFECT",
+        help="candidates to try (default: the whole library)",
+    )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     p.set_defaults(func=run)
 
@@ -43,10 +60,16 @@ def run(args: argparse.Namespace) -> int:
     write_json_atomic(out / "diagnosis.json", d.to_json_dict(), inputs)
     write_frame_atomic(out / "candidates.csv", d.to_frame(), inputs)
     write_frame_atomic(out / "residual_segments.csv", d.residuals_before.segments, inputs)
-    write_frame_atomic(out / "residual_by_temperature.csv", d.residuals_before.by_temperature,
-                       inputs)
-    written = ["model.json", "diagnosis.json", "candidates.csv", "residual_segments.csv",
-               "residual_by_temperature.csv"]
+    write_frame_atomic(
+        out / "residual_by_temperature.csv", d.residuals_before.by_temperature, inputs
+    )
+    written = [
+        "model.json",
+        "diagnosis.json",
+        "candidates.csv",
+        "residual_segments.csv",
+        "residual_by_temperature.csv",
+    ]
     if not args.no_plots:
         written += _plots(d, log, out, inputs, args.log)
     msg = sys.stderr if args.json else sys.stdout
@@ -54,8 +77,11 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(d.to_json_dict()))
     else:
         print(d.summary())
-        print(d.to_frame()[["effect", "delta_bic_vs_none", "rms_c", "parameters"]]
-              .to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+        print(
+            d.to_frame()[["effect", "delta_bic_vs_none", "rms_c", "parameters"]].to_string(
+                index=False, float_format=lambda v: f"{v:.4g}"
+            )
+        )
     print(f"wrote {out}/" + ", ".join(written), file=msg)
     return 0
 
@@ -66,21 +92,33 @@ def _plots(d, log, out, inputs, name) -> list[str]:
     from ..estimate import estimate_gradient
 
     plots.save_figure(
-        plots.residual_plot(d.time_min, d.before_c - d.measured_c, d.after_c - d.measured_c,
-                            title=f"{name}: residuals, base vs {d.effect}",
-                            labels=("base model", f"with {d.effect}")),
-        out / "residuals.png", inputs)
+        plots.residual_plot(
+            d.time_min,
+            d.before_c - d.measured_c,
+            d.after_c - d.measured_c,
+            title=f"{name}: residuals, base vs {d.effect}",
+            labels=("base model", f"with {d.effect}"),
+        ),
+        out / "residuals.png",
+        inputs,
+    )
     ax = plots._axes(None)
     try:  # the measured gradient from the Kalman smoother
         est = estimate_gradient(log)
         ok = log.finite
-        plots.phase_plot(est.t_est_c[ok], est.g_est_c_per_min[ok], ax=ax, label="measured",
-                         color="k")
+        plots.phase_plot(
+            est.t_est_c[ok], est.g_est_c_per_min[ok], ax=ax, label="measured", color="k"
+        )
     except SchedsynError as exc:
         print(f"note: no measured phase portrait ({exc})", file=sys.stderr)
-    plots.phase_plot(d.before_c, d.before_g_c_per_min, ax=ax, label="base model",
-                     color="tab:red")
-    plots.phase_plot(d.after_c, d.after_g_c_per_min, ax=ax, label=f"with {d.effect}",
-                     color="tab:blue", title=f"{name}: phase portraits")
+    plots.phase_plot(d.before_c, d.before_g_c_per_min, ax=ax, label="base model", color="tab:red")
+    plots.phase_plot(
+        d.after_c,
+        d.after_g_c_per_min,
+        ax=ax,
+        label=f"with {d.effect}",
+        color="tab:blue",
+        title=f"{name}: phase portraits",
+    )
     plots.save_figure(ax, out / "phase.png", inputs)
     return ["residuals.png", "phase.png"]

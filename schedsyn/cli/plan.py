@@ -26,44 +26,106 @@ from . import _common
 
 
 def register(sub) -> None:
-    p = sub.add_parser("plan", help="plan one experiment (programme with full coverage)",
-                       description=__doc__,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--working", nargs=2, type=float, required=True, metavar=("LO_C", "HI_C"),
-                   help="working region, °C: every 1 °C bin gets the required levels")
-    p.add_argument("--approx", nargs=2, type=float, default=None, metavar=("LO_C", "HI_C"),
-                   help="approximation region, °C (default: the working region widened by "
-                        "10 °C on each side, clipped to the device limits)")
+    p = sub.add_parser(
+        "plan",
+        help="plan one experiment (programme with full coverage)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "--working",
+        nargs=2,
+        type=float,
+        required=True,
+        metavar=("LO_C", "HI_C"),
+        help="working region, °C: every 1 °C bin gets the required levels",
+    )
+    p.add_argument(
+        "--approx",
+        nargs=2,
+        type=float,
+        default=None,
+        metavar=("LO_C", "HI_C"),
+        help="approximation region, °C (default: the working region widened by "
+        "10 °C on each side, clipped to the device limits)",
+    )
     p.add_argument("--name", default="plan", help="experiment name (default plan)")
-    p.add_argument("--levels", type=int, default=6,
-                   help="distinct gradient levels per bin (default 6)")
-    p.add_argument("--delta-c-per-min", type=float, default=0.05,
-                   help="minimum gradient difference between levels, °C/min (default 0.05)")
-    p.add_argument("--segment-min", type=float, default=5.0,
-                   help="decision segment length, whole min (default 5)")
-    p.add_argument("--objective", choices=OBJECTIVES, default="shortest",
-                   help="shortest programme, or largest margin within the time limit")
-    p.add_argument("--max-steps", type=int, default=80,
-                   help="most steps the exported table may have (default 80)")
-    p.add_argument("--duration-max-min", type=float, default=None,
-                   help="time limit of the experiment, min (default 540)")
+    p.add_argument(
+        "--levels", type=int, default=6, help="distinct gradient levels per bin (default 6)"
+    )
+    p.add_argument(
+        "--delta-c-per-min",
+        type=float,
+        default=0.05,
+        help="minimum gradient difference between levels, °C/min (default 0.05)",
+    )
+    p.add_argument(
+        "--segment-min",
+        type=float,
+        default=5.0,
+        help="decision segment length, whole min (default 5)",
+    )
+    p.add_argument(
+        "--objective",
+        choices=OBJECTIVES,
+        default="shortest",
+        help="shortest programme, or largest margin within the time limit",
+    )
+    p.add_argument(
+        "--max-steps",
+        type=int,
+        default=80,
+        help="most steps the exported table may have (default 80)",
+    )
+    p.add_argument(
+        "--duration-max-min",
+        type=float,
+        default=None,
+        help="time limit of the experiment, min (default 540)",
+    )
     _common.add_model_options(p)
-    p.add_argument("--chamber-min-c", type=float, nargs="+", default=None, metavar="C",
-                   help="chamber air floor, °C (default -70); several values: coverage vs "
-                        "floor in chamber.csv")
-    p.add_argument("--chamber-max-c", type=float, nargs="+", default=None, metavar="C",
-                   help="chamber air ceiling, °C (default 80); several values: coverage vs "
-                        "ceiling in chamber.csv")
-    p.add_argument("--robust-tau-s", default=None, metavar="LO:HI",
-                   help="plan for every tau in LO..HI s (robust box), e.g. 2200:2600")
-    p.add_argument("--robust-dt0-c", default=None, metavar="LO:HI",
-                   help="plan for every dT0 in LO..HI °C (robust box), e.g. 2:4")
-    p.add_argument("--no-price", action="store_true",
-                   help="with a robust box: skip the nominal plan that prices robustness "
-                        "(price.csv)")
-    p.add_argument("--model", default=None, metavar="MODEL.json",
-                   help="plan with a linear augmented model file (from `schedsyn diagnose`); "
-                        "--tau-s/--dt0-c then override its base")
+    p.add_argument(
+        "--chamber-min-c",
+        type=float,
+        nargs="+",
+        default=None,
+        metavar="C",
+        help="chamber air floor, °C (default -70); several values: coverage vs "
+        "floor in chamber.csv",
+    )
+    p.add_argument(
+        "--chamber-max-c",
+        type=float,
+        nargs="+",
+        default=None,
+        metavar="C",
+        help="chamber air ceiling, °C (default 80); several values: coverage vs "
+        "ceiling in chamber.csv",
+    )
+    p.add_argument(
+        "--robust-tau-s",
+        default=None,
+        metavar="LO:HI",
+        help="plan for every tau in LO..HI s (robust box), e.g. 2200:2600",
+    )
+    p.add_argument(
+        "--robust-dt0-c",
+        default=None,
+        metavar="LO:HI",
+        help="plan for every dT0 in LO..HI °C (robust box), e.g. 2:4",
+    )
+    p.add_argument(
+        "--no-price",
+        action="store_true",
+        help="with a robust box: skip the nominal plan that prices robustness (price.csv)",
+    )
+    p.add_argument(
+        "--model",
+        default=None,
+        metavar="MODEL.json",
+        help="plan with a linear augmented model file (from `schedsyn diagnose`); "
+        "--tau-s/--dt0-c then override its base",
+    )
     p.add_argument("--out", default=None, help="output directory (default out/plan)")
     p.add_argument("--quiet", action="store_true", help="no progress messages on stderr")
     p.set_defaults(func=run)
@@ -81,39 +143,68 @@ def write_plan_outputs(plan: Plan, out: Path, inputs=(), model=None) -> list[Pat
     out = Path(out)
     spec = plan.spec
     region = (spec.working_lo_c, spec.working_hi_c)
-    written = [plan.programme.to_csv(out / "steps.csv", inputs),
-               write_json_atomic(out / "plan.json", plan.to_json_dict(), inputs)]
-    traj = simulate(plan.programme, plan.params, model=model, dt_min=0.1,
-                    t0_c=plan.limits.t_init_c)
+    written = [
+        plan.programme.to_csv(out / "steps.csv", inputs),
+        write_json_atomic(out / "plan.json", plan.to_json_dict(), inputs),
+    ]
+    traj = simulate(plan.programme, plan.params, model=model, dt_min=0.1, t0_c=plan.limits.t_init_c)
     state = "complete" if plan.complete else f"NOT COMPLETE ({plan.status})"
-    written.append(plots.save_figure(plots.programme_plot(
-        traj, region=region,
-        title=f"{spec.name}: {plan.duration_min:g} min, {plan.steps} steps, {state}"),
-        out / "program.png", inputs))
-    written.append(plots.save_figure(plots.phase_plot(
-        traj.t_c, traj.g_c_per_min, region=region,
-        title=f"{spec.name}: phase portrait (tau {plan.params.tau_s:g} s, "
-              f"dT0 {plan.params.dt0_c:g} °C)"), out / "phase.png", inputs))
-    written.append(plots.save_figure(plots.coverage_plot(
-        plan.coverage, title=f"{spec.name}: {'' if plan.complete else 'NOT COMPLETE, '}"
-                             f"coverage {plan.coverage.coverage:.0%} "
-                             f"(Δ {spec.delta_c_per_min:g}), "
-                             f"{plan.coverage_0p1.coverage:.0%} at Δ 0.1 °C/min"),
-        out / "coverage.png", inputs))
+    written.append(
+        plots.save_figure(
+            plots.programme_plot(
+                traj,
+                region=region,
+                title=f"{spec.name}: {plan.duration_min:g} min, {plan.steps} steps, {state}",
+            ),
+            out / "program.png",
+            inputs,
+        )
+    )
+    written.append(
+        plots.save_figure(
+            plots.phase_plot(
+                traj.t_c,
+                traj.g_c_per_min,
+                region=region,
+                title=f"{spec.name}: phase portrait (tau {plan.params.tau_s:g} s, "
+                f"dT0 {plan.params.dt0_c:g} °C)",
+            ),
+            out / "phase.png",
+            inputs,
+        )
+    )
+    written.append(
+        plots.save_figure(
+            plots.coverage_plot(
+                plan.coverage,
+                title=f"{spec.name}: {'' if plan.complete else 'NOT COMPLETE, '}"
+                f"coverage {plan.coverage.coverage:.0%} "
+                f"(Δ {spec.delta_c_per_min:g}), "
+                f"{plan.coverage_0p1.coverage:.0%} at Δ 0.1 °C/min",
+            ),
+            out / "coverage.png",
+            inputs,
+        )
+    )
     return written
 
 
 def report_plan(plan: Plan) -> list[str]:
     """Lines describing a plan; an incomplete plan says so loudly, with its short bins."""
     s = plan.spec
-    lines = [f"{s.name}: [{s.working_lo_c:g}, {s.working_hi_c:g}] °C, "
-             f"{plan.duration_min:g} min, {plan.steps} steps, status {plan.status}, "
-             f"solved in {plan.solve_s:.1f} s",
-             "  " + plan.coverage.summary(),
-             f"  coverage at Δ 0.1 °C/min: {plan.coverage_0p1.coverage:.1%}"]
+    lines = [
+        f"{s.name}: [{s.working_lo_c:g}, {s.working_hi_c:g}] °C, "
+        f"{plan.duration_min:g} min, {plan.steps} steps, status {plan.status}, "
+        f"solved in {plan.solve_s:.1f} s",
+        "  " + plan.coverage.summary(),
+        f"  coverage at Δ 0.1 °C/min: {plan.coverage_0p1.coverage:.1%}",
+    ]
     if not plan.complete:
-        lines.insert(0, f"*** {s.name} IS NOT COMPLETE ({plan.status}): do not run it as a "
-                        "full calibration ***")
+        lines.insert(
+            0,
+            f"*** {s.name} IS NOT COMPLETE ({plan.status}): do not run it as a "
+            "full calibration ***",
+        )
         lines += [f"  violation: {v}" for v in plan.violations]
         lines += [f"  note: {n}" for n in plan.notes]
     return lines
@@ -146,7 +237,8 @@ def _model(args, params: ThermalParams, limits: Limits):
         raise ParameterError(
             f"model file {args.model}: the effect {spec.effect!r} is not linear; the planner "
             "needs a linear model (plan with the base model and check the plan with "
-            "`schedsyn simulate --model`)")
+            "`schedsyn simulate --model`)"
+        )
     return params, spec.planner_limits(limits), spec.linear_model()
 
 
@@ -157,9 +249,17 @@ def build_spec(args, limits: Limits) -> ExperimentSpec:
         if not math.isfinite(v):
             raise ParameterError(f"{name} values must be finite numbers, got {v}")
     return ExperimentSpec(
-        name=args.name, working_lo_c=lo, working_hi_c=hi, approx_lo_c=alo, approx_hi_c=ahi,
-        levels_required=args.levels, delta_c_per_min=args.delta_c_per_min,
-        segment_min=args.segment_min, objective=args.objective, max_steps=args.max_steps)
+        name=args.name,
+        working_lo_c=lo,
+        working_hi_c=hi,
+        approx_lo_c=alo,
+        approx_hi_c=ahi,
+        levels_required=args.levels,
+        delta_c_per_min=args.delta_c_per_min,
+        segment_min=args.segment_min,
+        objective=args.objective,
+        max_steps=args.max_steps,
+    )
 
 
 def _pick(pairs, results):
@@ -200,19 +300,36 @@ def run(args: argparse.Namespace) -> int:
 
         def progress(message: str) -> None:  # experiment, solver time so far, message
             stderr_progress(f"{spec.name} [{time.perf_counter() - tic:6.1f} s] {message}")
+
     inputs = [args.model] if args.model else []
 
     if len(floors) == 1 and len(ceilings) == 1:
-        plan = plan_experiment(spec, params, limits, model=model, robust_tau_s=robust_tau,
-                               robust_dt0_c=robust_dt0, progress=progress)
+        plan = plan_experiment(
+            spec,
+            params,
+            limits,
+            model=model,
+            robust_tau_s=robust_tau,
+            robust_dt0_c=robust_dt0,
+            progress=progress,
+        )
     else:
         if model is not None:
-            raise ParameterError("--model with several chamber floors/ceilings is not "
-                                 "supported; give one --chamber-min-c/--chamber-max-c")
-        pairs, results = chamber_plans(spec, floors, ceilings, params, limits,
-                                       robust_tau_s=robust_tau, robust_dt0_c=robust_dt0,
-                                       # runs in worker processes: a picklable callable
-                                       progress=None if args.quiet else stderr_progress)
+            raise ParameterError(
+                "--model with several chamber floors/ceilings is not "
+                "supported; give one --chamber-min-c/--chamber-max-c"
+            )
+        pairs, results = chamber_plans(
+            spec,
+            floors,
+            ceilings,
+            params,
+            limits,
+            robust_tau_s=robust_tau,
+            robust_dt0_c=robust_dt0,
+            # runs in worker processes: a picklable callable
+            progress=None if args.quiet else stderr_progress,
+        )
         frame = chamber_frame(pairs, results)
         write_frame_atomic(out / "chamber.csv", frame, inputs)
         print("coverage vs chamber floor/ceiling:")
@@ -220,25 +337,28 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {out}/chamber.csv")
         plan = _pick(pairs, results)
         if plan is None:
-            best = max(r.best_coverage for r in results)
+            best = max(r.best_coverage for r in results if not isinstance(r, Plan))
             raise InfeasiblePlanError(
                 f"no chamber in the list can plan {spec.name}; best reachable coverage is "
-                f"{best:.0%} ({results[0]})", best_coverage=best)
-        print(f"files below are for the chamber {plan.limits.chamber_min_c:g} .. "
-              f"{plan.limits.chamber_max_c:g} °C")
+                f"{best:.0%} ({results[0]})",
+                best_coverage=best,
+            )
+        print(
+            f"files below are for the chamber {plan.limits.chamber_min_c:g} .. "
+            f"{plan.limits.chamber_max_c:g} °C"
+        )
     write_plan_outputs(plan, out, inputs, model=model)
     print("\n".join(report_plan(plan)))
     print(f"wrote {out}/steps.csv, plan.json, program.png, phase.png, coverage.png")
     if (robust_tau is not None or robust_dt0 is not None) and not args.no_price:
         from ..planner import robustness_price
 
-        if progress:
+        if progress is not None:
             progress("planning the nominal point for the price of robustness")
         try:
             nominal = plan_experiment(spec, params, plan.limits, progress=progress)
         except InfeasiblePlanError as exc:  # the robust plan's files are written already
-            print(f"price of robustness not computed: the nominal point cannot be planned "
-                  f"({exc})")
+            print(f"price of robustness not computed: the nominal point cannot be planned ({exc})")
         else:
             price = robustness_price(nominal, plan, robust_tau, robust_dt0)
             write_frame_atomic(out / "price.csv", price, inputs)

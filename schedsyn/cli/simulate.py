@@ -13,20 +13,29 @@ from . import _common
 
 
 def register(sub) -> None:
-    p = sub.add_parser("simulate", help="simulate a step table and report its coverage",
-                       description=__doc__)
+    p = sub.add_parser(
+        "simulate", help="simulate a step table and report its coverage", description=__doc__
+    )
     p.add_argument("steps", metavar="STEPS.csv", help="chamber step table")
     p.add_argument("--out", default=None, help="output directory (default out/simulate)")
     _common.add_model_options(p)
     _common.add_region_option(p)
     _common.add_limit_options(p)
     p.add_argument("--levels", type=int, default=6, help="required distinct gradient levels")
-    p.add_argument("--delta-c-per-min", type=float, default=0.05,
-                   help="minimum gradient difference between levels, °C/min")
+    p.add_argument(
+        "--delta-c-per-min",
+        type=float,
+        default=0.05,
+        help="minimum gradient difference between levels, °C/min",
+    )
     p.add_argument("--dt-min", type=float, default=0.1, help="simulation step, min")
-    p.add_argument("--model", default=None, metavar="MODEL.json",
-                   help="augmented model file (from `schedsyn diagnose --out DIR`); "
-                        "--tau-s/--dt0-c then override its base")
+    p.add_argument(
+        "--model",
+        default=None,
+        metavar="MODEL.json",
+        help="augmented model file (from `schedsyn diagnose --out DIR`); "
+        "--tau-s/--dt0-c then override its base",
+    )
     p.set_defaults(func=run)
 
 
@@ -46,8 +55,10 @@ def run(args: argparse.Namespace) -> int:
         spec = dataclasses.replace(spec, tau_s=params.tau_s, dt0_c=params.dt0_c)
         limits = spec.planner_limits(limits)
         traj = simulate_effect(programme, spec, dt_min=args.dt_min, t0_c=limits.t_init_c)
-        print(f"model {args.model}: effect {spec.effect} "
-              f"{dict(spec.parameters) if spec.parameters else ''}")
+        print(
+            f"model {args.model}: effect {spec.effect} "
+            f"{dict(spec.parameters) if spec.parameters else ''}"
+        )
     else:
         traj = simulate(programme, params, dt_min=args.dt_min, t0_c=limits.t_init_c)
     lo, hi = args.region
@@ -58,22 +69,36 @@ def run(args: argparse.Namespace) -> int:
     write_frame_atomic(out / "coverage.csv", report.to_frame(), inputs)
     plots.save_figure(
         plots.programme_plot(traj, region=(lo, hi), title=f"programme {args.steps}"),
-        out / "program.png", inputs)
+        out / "program.png",
+        inputs,
+    )
     plots.save_figure(
-        plots.phase_plot(traj.t_c, traj.g_c_per_min, region=(lo, hi),
-                         title=f"phase portrait (tau {params.tau_s:g} s, dT0 {params.dt0_c:g} °C)"),
-        out / "phase.png", inputs)
+        plots.phase_plot(
+            traj.t_c,
+            traj.g_c_per_min,
+            region=(lo, hi),
+            title=f"phase portrait (tau {params.tau_s:g} s, dT0 {params.dt0_c:g} °C)",
+        ),
+        out / "phase.png",
+        inputs,
+    )
     plots.save_figure(plots.coverage_plot(report), out / "coverage.png", inputs)
-    print(f"programme: {programme.n_segments} steps, {programme.total_min:.1f} min, "
-          f"chamber {programme.boundary_temps_c.min():.1f} .. "
-          f"{programme.boundary_temps_c.max():.1f} °C")
-    print(f"internal temperature: min {traj.t_c.min():.2f} °C, max {traj.t_c.max():.2f} °C "
-          f"(tau {params.tau_s:g} s, dT0 {params.dt0_c:g} °C)")
+    print(
+        f"programme: {programme.n_segments} steps, {programme.total_min:.1f} min, "
+        f"chamber {programme.boundary_temps_c.min():.1f} .. "
+        f"{programme.boundary_temps_c.max():.1f} °C"
+    )
+    print(
+        f"internal temperature: min {traj.t_c.min():.2f} °C, max {traj.t_c.max():.2f} °C "
+        f"(tau {params.tau_s:g} s, dT0 {params.dt0_c:g} °C)"
+    )
     for v in programme.violations(limits):
         print(f"warning: {v}")
     if traj.t_c.min() < limits.device_min_c or traj.t_c.max() > limits.device_max_c:
-        print(f"warning: the internal temperature leaves the device limits "
-              f"{limits.device_min_c:g} .. {limits.device_max_c:g} °C")
+        print(
+            f"warning: the internal temperature leaves the device limits "
+            f"{limits.device_min_c:g} .. {limits.device_max_c:g} °C"
+        )
     print(report.summary())
     print(f"wrote {out}/trajectory.csv, coverage.csv, program.png, phase.png, coverage.png")
     return 0

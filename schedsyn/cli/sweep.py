@@ -20,37 +20,83 @@ from . import _common
 
 
 def register(sub) -> None:
-    p = sub.add_parser("sweep", help="coverage of a plan over a grid of tau and dT0 "
-                       "(or re-plan at every grid point)", description=__doc__,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("steps", metavar="STEPS.csv", nargs="?", default=None,
-                   help="chamber step table (not needed with --replan)")
+    p = sub.add_parser(
+        "sweep",
+        help="coverage of a plan over a grid of tau and dT0 (or re-plan at every grid point)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "steps",
+        metavar="STEPS.csv",
+        nargs="?",
+        default=None,
+        help="chamber step table (not needed with --replan)",
+    )
     _common.add_region_option(p)
-    p.add_argument("--approx", nargs=2, type=float, default=None, metavar=("LO_C", "HI_C"),
-                   help="approximation region for --replan, °C (default: 10 °C beyond the "
-                   "working region, within the device limits)")
-    p.add_argument("--tau-s", default="1800:3000:13", metavar="START:STOP:N",
-                   help="grid of time constants, s (default 1800:3000:13)")
-    p.add_argument("--dt0-c", default="0:6:13", metavar="START:STOP:N",
-                   help="grid of self-heating offsets, °C (default 0:6:13); attach a "
-                   "negative start with '=', e.g. --dt0-c=-2:4:7")
+    p.add_argument(
+        "--approx",
+        nargs=2,
+        type=float,
+        default=None,
+        metavar=("LO_C", "HI_C"),
+        help="approximation region for --replan, °C (default: 10 °C beyond the "
+        "working region, within the device limits)",
+    )
+    p.add_argument(
+        "--tau-s",
+        default="1800:3000:13",
+        metavar="START:STOP:N",
+        help="grid of time constants, s (default 1800:3000:13)",
+    )
+    p.add_argument(
+        "--dt0-c",
+        default="0:6:13",
+        metavar="START:STOP:N",
+        help="grid of self-heating offsets, °C (default 0:6:13); attach a "
+        "negative start with '=', e.g. --dt0-c=-2:4:7",
+    )
     p.add_argument("--out", default=None, help="output directory (default out/sweep)")
     p.add_argument("--levels", type=int, default=6, help="required distinct gradient levels")
-    p.add_argument("--deltas-c-per-min", type=float, nargs="+", default=[0.05, 0.1],
-                   metavar="DELTA", help="gradient separations of distinct levels, °C/min; "
-                   "the first is the headline coverage (default 0.05 0.1)")
+    p.add_argument(
+        "--deltas-c-per-min",
+        type=float,
+        nargs="+",
+        default=[0.05, 0.1],
+        metavar="DELTA",
+        help="gradient separations of distinct levels, °C/min; "
+        "the first is the headline coverage (default 0.05 0.1)",
+    )
     p.add_argument("--dt-min", type=float, default=0.1, help="simulation step, min")
-    p.add_argument("--nominal-tau-s", type=float, default=None,
-                   help="nominal time constant marked on the heatmap, s (default 2400)")
-    p.add_argument("--nominal-dt0-c", type=float, default=None,
-                   help="nominal offset marked on the heatmap, °C (default 3.0)")
-    p.add_argument("--replan", action="store_true",
-                   help="re-plan at every grid point (needs the planner) instead of "
-                   "sweeping a fixed plan")
-    p.add_argument("--dask", default=None, metavar="ADDR",
-                   help="run on the Dask scheduler at ADDR, e.g. tcp://HOST:PORT")
-    p.add_argument("--workers", type=int, default=None,
-                   help="local worker processes (default: all cores; 1 = in this process)")
+    p.add_argument(
+        "--nominal-tau-s",
+        type=float,
+        default=None,
+        help="nominal time constant marked on the heatmap, s (default 2400)",
+    )
+    p.add_argument(
+        "--nominal-dt0-c",
+        type=float,
+        default=None,
+        help="nominal offset marked on the heatmap, °C (default 3.0)",
+    )
+    p.add_argument(
+        "--replan",
+        action="store_true",
+        help="re-plan at every grid point (needs the planner) instead of sweeping a fixed plan",
+    )
+    p.add_argument(
+        "--dask",
+        default=None,
+        metavar="ADDR",
+        help="run on the Dask scheduler at ADDR, e.g. tcp://HOST:PORT",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="local worker processes (default: all cores; 1 = in this process)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=run)
 
@@ -73,8 +119,14 @@ class PlanAtPoint:
         from ..planner import ExperimentSpec, plan_experiment
 
         spec = ExperimentSpec(
-            "sweep", self.region[0], self.region[1], self.approx[0], self.approx[1],
-            levels_required=self.levels_required, delta_c_per_min=self.delta_c_per_min)
+            "sweep",
+            self.region[0],
+            self.region[1],
+            self.approx[0],
+            self.approx[1],
+            levels_required=self.levels_required,
+            delta_c_per_min=self.delta_c_per_min,
+        )
         return plan_experiment(spec, params, self.limits)
 
 
@@ -104,8 +156,12 @@ def run(args: argparse.Namespace) -> int:
     taus = parse_grid(args.tau_s, "--tau-s", "s")
     dt0s = parse_grid(args.dt0_c, "--dt0-c", "°C")
     nominal = ThermalParams(
-        **{k: v for k, v in (("tau_s", args.nominal_tau_s), ("dt0_c", args.nominal_dt0_c))
-           if v is not None})
+        **{
+            k: v
+            for k, v in (("tau_s", args.nominal_tau_s), ("dt0_c", args.nominal_dt0_c))
+            if v is not None
+        }
+    )
     limits = Limits()
     lo, hi = args.region
     out = _common.out_dir(args.out, "out/sweep")
@@ -116,34 +172,51 @@ def run(args: argparse.Namespace) -> int:
 
     if args.replan:
         if not _planner_available():
-            raise SchedsynError("re-planning needs the planner (schedsyn.planner), which this "
-                                "installation lacks; run the sweep without --replan")
+            raise SchedsynError(
+                "re-planning needs the planner (schedsyn.planner), which this "
+                "installation lacks; run the sweep without --replan"
+            )
         approx = tuple(args.approx) if args.approx else default_approx((lo, hi), limits)
         plan_fn = PlanAtPoint((lo, hi), approx, args.levels, args.deltas_c_per_min[0], limits)
-        result = sweep_replan(plan_fn, taus, dt0s, backend=backend, workers=args.workers,
-                              progress=progress)
-        frame = result.to_frame()
+        replanned = sweep_replan(
+            plan_fn, taus, dt0s, backend=backend, workers=args.workers, progress=progress
+        )
+        frame = replanned.to_frame()
         write_frame_atomic(out / "sweep.csv", frame, inputs)
-        numeric = [c for c in frame.columns
-                   if c not in ("tau_s", "dt0_c") and frame[c].dtype.kind in "if"]
+        numeric = [
+            c for c in frame.columns if c not in ("tau_s", "dt0_c") and frame[c].dtype.kind in "if"
+        ]
         wanted = ("duration_min", "coverage", "margin_g_c_per_min")
         preferred = [c for c in wanted if c in numeric] or numeric[:2]
         if preferred:
             ok = frame[frame["status"] == "ok"]
             panels = [(ok, c, f"re-planned: {c}") for c in preferred]
-            plots.save_figure(plots.sweep_panels(panels, nominal=marker)[0],
-                              out / "sweep.png", inputs)
-        print(result.summary())
+            plots.save_figure(
+                plots.sweep_panels(panels, nominal=marker)[0], out / "sweep.png", inputs
+            )
+        print(replanned.summary())
         print(f"wrote {out}/sweep.csv" + (", sweep.png" if preferred else ""))
         return 0
 
     if args.steps is None:
         raise ParameterError("give the step table STEPS.csv to sweep (or --replan to re-plan)")
     programme = read_steps(args.steps, limits)
-    kw = dict(levels_required=args.levels, deltas_c_per_min=args.deltas_c_per_min,
-              dt_min=args.dt_min, t0_c=limits.t_init_c)
-    result = sweep_fixed(programme, (lo, hi), taus, dt0s, backend=backend,
-                         workers=args.workers, progress=progress, **kw)
+    kw = dict(
+        levels_required=args.levels,
+        deltas_c_per_min=args.deltas_c_per_min,
+        dt_min=args.dt_min,
+        t0_c=limits.t_init_c,
+    )
+    result = sweep_fixed(
+        programme,
+        (lo, hi),
+        taus,
+        dt0s,
+        backend=backend,
+        workers=args.workers,
+        progress=progress,
+        **kw,
+    )
     at_nominal = sweep_fixed(programme, (lo, hi), [nominal.tau_s], [nominal.dt0_c], **kw)
     frame = result.to_frame()
     write_frame_atomic(out / "sweep.csv", frame, inputs)
@@ -153,21 +226,30 @@ def run(args: argparse.Namespace) -> int:
         (frame, "min_levels", f"fewest distinct levels of any bin (Δ {d0:g} °C/min)"),
     ]
     plots.save_figure(
-        plots.sweep_panels(panels, nominal=marker,
-                           suptitle=f"{args.steps}: working region [{lo:g}, {hi:g}] °C")[0],
-        out / "sweep.png", inputs)
+        plots.sweep_panels(
+            panels, nominal=marker, suptitle=f"{args.steps}: working region [{lo:g}, {hi:g}] °C"
+        )[0],
+        out / "sweep.png",
+        inputs,
+    )
     print(f"programme: {programme.n_segments} steps, {programme.total_min:.1f} min")
-    print(f"at the nominal point (tau {nominal.tau_s:g} s, dT0 {nominal.dt0_c:g} °C): coverage "
-          f"{at_nominal.coverage_grid[0, 0]:.1%}, min {at_nominal.min_levels_grid[0, 0]} levels")
+    print(
+        f"at the nominal point (tau {nominal.tau_s:g} s, dT0 {nominal.dt0_c:g} °C): coverage "
+        f"{at_nominal.coverage_grid[0, 0]:.1%}, min {at_nominal.min_levels_grid[0, 0]} levels"
+    )
     print(result.summary())
     box = result.covered_box()
     if box is not None:
         (t0, t1), (c0, c1) = box["tau_s_range"], box["dt0_c_range"]
-        print(f"largest fully covered box: tau {t0:g} .. {t1:g} s x dT0 {c0:g} .. {c1:g} °C "
-              f"({box['n_points']} grid points)")
+        print(
+            f"largest fully covered box: tau {t0:g} .. {t1:g} s x dT0 {c0:g} .. {c1:g} °C "
+            f"({box['n_points']} grid points)"
+        )
     for j, d in enumerate(result.deltas_c_per_min[1:], start=1):
         cov = result.coverage[:, :, j]
-        print(f"at delta {d:g} °C/min: coverage {cov.min():.1%} .. {cov.max():.1%}, min "
-              f"levels {result.min_levels[:, :, j].min()} .. {result.min_levels[:, :, j].max()}")
+        print(
+            f"at delta {d:g} °C/min: coverage {cov.min():.1%} .. {cov.max():.1%}, min "
+            f"levels {result.min_levels[:, :, j].min()} .. {result.min_levels[:, :, j].max()}"
+        )
     print(f"wrote {out}/sweep.csv, sweep.png")
     return 0
