@@ -53,28 +53,21 @@ def probe_lp_timing(repeats: int = 30) -> dict:
 
     from schedsyn import Limits, ThermalParams
     from schedsyn.model import FirstOrderLag
-    from schedsyn.planner import (
-        ExperimentSpec,
-        Scenario,
-        _Planner,
-        _Responses,
-        _SubLP,
-        _Window,
-        make_bands,
-    )
+    from schedsyn.planner import ExperimentSpec, Scenario, make_bands
+    from schedsyn.planner.lp import Context, LpStats, Responses, SubLP, Window
 
     spec = ExperimentSpec("W1", -50, -30, -52, -20)
     p, lim = ThermalParams(), Limits()
-    planner = _Planner(spec, lim, _Responses([Scenario(p, FirstOrderLag(p))], 40, 5.0, lim))
+    ctx = Context(spec, lim, Responses([Scenario(p, FirstOrderLag(p))], 40, 5.0, lim), LpStats())
     band = make_bands(spec, 3, -1, 0.062, [p], lim)[2]
     steps = np.maximum(1, np.round(band.minutes(1.0)[::-1])).astype(int)
     s0 = 60
     bounds = s0 + np.concatenate(([0], np.cumsum(steps)))
-    win = _Window(-1, band, s0, int(bounds[-1]), tuple(int(c) for c in bounds[1:-1]))
+    win = Window(-1, band, s0, int(bounds[-1]), tuple(int(c) for c in bounds[1:-1]))
     j1 = int(np.ceil(bounds[-1] / 5.0))
 
     def build():
-        lp = _SubLP(planner, np.zeros(0), j1, extra=1)
+        lp = SubLP(ctx, np.zeros(0), j1, extra=1)
         lp.chamber()
         lp.device()
         lp.window(win)

@@ -84,14 +84,16 @@ def test_direct_probe_lp_matches_cvxpy():
     import cvxpy as cp
 
     from schedsyn.model import FirstOrderLag
-    from schedsyn.planner import Scenario, _Planner, _Responses, _SubLP
+    from schedsyn.planner import Scenario
+    from schedsyn.planner.lp import Context, LpStats, Responses, SubLP
 
     spec = ExperimentSpec(**SMALL)
     p = ThermalParams()
-    planner = _Planner(
-        spec, SMALL_LIMITS, _Responses([Scenario(p, FirstOrderLag(p))], 24, 5.0, SMALL_LIMITS)
+    stats = LpStats()
+    ctx = Context(
+        spec, SMALL_LIMITS, Responses([Scenario(p, FirstOrderLag(p))], 24, 5.0, SMALL_LIMITS), stats
     )
-    lp = _SubLP(planner, np.zeros(0), 24, extra=1)
+    lp = SubLP(ctx, np.zeros(0), 24, extra=1)
     lp.chamber()
     lp.device()
     lp.chamber_end(20.0)
@@ -109,6 +111,9 @@ def test_direct_probe_lp_matches_cvxpy():
     lp.le(lp.scen[0][0][30], -60.0 - lp.scen[0][1][30])
     assert lp.solve_direct(cost) is None
     assert lp.solve(lambda v: v[-1]) is None
+    # ... and counted as infeasible, not as a solver failure
+    assert (stats.infeasible, stats.failed) == (2, 0)
+    assert stats.solves == 4
 
 
 def test_bands_respect_the_chamber_floor_near_the_cold_edge():
@@ -350,3 +355,81 @@ def test_narrow_mid_range_region_with_six_levels_plans_completely(tmp_path):
     _, temp, grad = _ode_trajectory(prog, plan.params)
     rep = coverage_report(temp, grad, BinGrid(-5.0, 5.0), 6)
     assert rep.complete and prog.total_min <= 540.0
+
+
+def _small_probe():
+    """A feasible probe LP on the small spec and its LP statistics."""
+    from schedsyn.model import FirstOrderLag
+    from schedsyn.planner import Scenario
+    from schedsyn.planner.lp import Context, LpStats, Responses, SubLP
+
+    spec = ExperimentSpec(**SMALL)
+    p = ThermalParams()
+    stats = LpStats()
+    resp = Responses([Scenario(p, FirstOrderLag(p))], 24, 5.0, SMALL_LIMITS)
+    lp = SubLP(Context(spec, SMALL_LIMITS, resp, stats), np.zeros(0), 24)
+    lp.chamber()
+    lp.device()
+    lp.chamber_end(20.0)
+    lp.le(lp.scen[0][0][60], -5.0 - lp.scen[0][1][60])  # reach -5 degC at 60 min
+    return lp, stats
+
+
+class _FailedClarabel:
+    """Stands in for clarabel.DefaultSolver: gives up as on a numerical failure."""
+
+    def __init__(self, *args):
+        pass
+
+    def solve(self):
+        return type("Solution", (), {"status": "NumericalError", "x": []})()
+
+
+def test_a_solver_failure_falls_back_to_highs_and_is_never_counted_as_infeasible(monkeypatch):
+    import clarabel
+    from scipy import optimize
+
+    from schedsyn.errors import SolverFailedError
+    from schedsyn.planner.lp import require_solvable
+
+    lp, stats = _small_probe()
+    reference = lp.solve_direct(np.zeros(lp.n), l1_weight=1.0)
+    assert reference is not None and stats.optimal == 1
+    monkeypatch.setattr(clarabel, "DefaultSolver", _FailedClarabel)
+    # HiGHS solves the same LP: the same optimum (the L1 norm of the rates)
+    x = lp.solve_direct(np.zeros(lp.n), l1_weight=1.0)
+    assert x is not None and stats.fallbacks == 1
+    assert np.abs(x).sum() == pytest.approx(np.abs(reference).sum(), rel=1e-6)
+    # both fail: a failure, not infeasibility -- and it says so when nothing else is known
+    failed = type("Result", (), {"status": 4, "message": "numerical difficulties", "x": None})
+    monkeypatch.setattr(optimize, "linprog", lambda *a, **k: failed())
+    assert lp.solve_direct(np.zeros(lp.n)) is None
+    assert (stats.failed, stats.infeasible) == (1, 0)
+    with pytest.raises(SolverFailedError, match="not evidence that the request is impossible"):
+        require_solvable(stats, "S")
+
+
+def test_plan_experiment_raises_solver_failed_when_the_solvers_fail(monkeypatch):
+    import clarabel
+    from scipy import optimize
+
+    from schedsyn.errors import SolverFailedError
+
+    failed = type("Result", (), {"status": 4, "message": "numerical difficulties", "x": None})
+    monkeypatch.setattr(clarabel, "DefaultSolver", _FailedClarabel)
+    monkeypatch.setattr(optimize, "linprog", lambda *a, **k: failed())
+    with pytest.raises(SolverFailedError) as info:
+        plan_experiment(ExperimentSpec(**SMALL), ThermalParams(), SMALL_LIMITS)
+    assert not isinstance(info.value, InfeasiblePlanError)
+
+
+def test_a_region_beyond_the_device_limits_is_refused_before_any_lp(monkeypatch):
+    from schedsyn.planner import core
+
+    def no_search(*args, **kwargs):
+        raise AssertionError("the planner searched a request it should have refused")
+
+    monkeypatch.setattr(core, "synthesise", no_search)
+    spec = ExperimentSpec("hot", 40.0, 62.0, 30.0, 62.0)  # the top edge + 0.5 > device 62
+    with pytest.raises(ParameterError, match="outside its limits -52 .. 62"):
+        plan_experiment(spec, ThermalParams(), Limits())

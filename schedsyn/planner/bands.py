@@ -1,0 +1,236 @@
+"""Stage 3: gradient bands -- the level each sweep is held to, piecewise linear in T.
+
+Each sweep of one direction gets its own band ``lo(T) <= d * g <= hi(T)``; the bands of
+one direction are stacked ``delta`` plus a safety gap apart at every temperature, so every
+pass of a bin by different sweeps has a distinct level. The bands sit as high as the
+physics allows (slow sweeps cost time; :mod:`.physics`) and are linear between knots, so
+that inside a sweep -- where the planner knows which samples lie between which knots --
+every band constraint is linear in the rates.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..params import Limits, ThermalParams
+from .physics import (
+    TURN_ACCEL_FRACTION,
+    available_rate,
+    constant_decel_speed,
+    dynamic_tops,
+    turnaround_minutes,
+    turning_speed,
+)
+from .request import ExperimentSpec
+
+#: Extra separation between neighbouring bands beyond delta, degC/min (sampling, rounding).
+BAND_SAFETY_C_PER_MIN = 0.012
+#: Preferred width of one gradient band, degC/min (room for the LP to manoeuvre).
+BAND_WIDTH_C_PER_MIN = 0.05
+#: Distances of the inner band knots from the working edges, degC.
+KNOT_INSETS_C = (1.5, 4.0)
+#: Points per piece for the crossing-time integral of :meth:`Band.minutes`.
+MINUTES_POINTS = 50
+#: Slowest speed :meth:`Band.minutes` divides by, degC/min (a band touching zero).
+MINUTES_FLOOR_C_PER_MIN = 1e-3
+
+
+@dataclass(frozen=True, slots=True)
+class Band:
+    """Gradient band of one sweep, piecewise linear in T between ``knots_c``.
+
+    ``lo(T) <= d * g <= hi(T)``; ``lo`` and ``hi`` are linear between the knots. Inside
+    a sweep the samples between two knots are held to that piece's affine bounds, which
+    keeps every constraint linear in the rates.
+    """
+
+    direction: int
+    rank: int
+    knots_c: tuple[float, ...]
+    lo_c_per_min: tuple[float, ...]
+    hi_c_per_min: tuple[float, ...]
+    #: the fastest band of its direction: no band above it, so its upper bound only
+    #: shapes the plan, it is not needed for distinct levels
+    top: bool = False
+
+    def bounds(self, temp_c):
+        t = np.asarray(temp_c, dtype=float)
+        return (
+            np.interp(t, self.knots_c, self.lo_c_per_min),
+            np.interp(t, self.knots_c, self.hi_c_per_min),
+        )
+
+    def piece(self, i: int) -> tuple[float, float, float, float, float]:
+        """``(t_ref, lo0, lo1, hi0, hi1)`` of the affine piece between knots i and i+1."""
+        t0, t1 = self.knots_c[i], self.knots_c[i + 1]
+        lo0, lo_1 = self.lo_c_per_min[i], self.lo_c_per_min[i + 1]
+        hi0, hi_1 = self.hi_c_per_min[i], self.hi_c_per_min[i + 1]
+        return t0, lo0, (lo_1 - lo0) / (t1 - t0), hi0, (hi_1 - hi0) / (t1 - t0)
+
+    def minutes(self, fraction: float = 0.5) -> np.ndarray:
+        """Time to cross each piece at ``lo + fraction (hi - lo)`` (min per piece)."""
+        out = []
+        for i in range(len(self.knots_c) - 1):
+            t = np.linspace(self.knots_c[i], self.knots_c[i + 1], MINUTES_POINTS)
+            lo, hi = self.bounds(t)
+            v = np.maximum(lo + fraction * (hi - lo), MINUTES_FLOOR_C_PER_MIN)
+            out.append(float(np.trapezoid(1.0 / v, t)))
+        return np.array(out)
+
+    def edge_speeds(self) -> tuple[float, float]:
+        """``(entry, exit)`` lower-bound speed of a sweep in this band, degC/min."""
+        lo = self.lo_c_per_min
+        return (lo[-1], lo[0]) if self.direction < 0 else (lo[0], lo[-1])
+
+
+def band_knots(spec: ExperimentSpec, insets_c: Sequence[float] | None = None) -> tuple[float, ...]:
+    """Knots of the piecewise-linear bands: the extended edges and, inside each edge,
+    knots at ``insets_c`` (default ``KNOT_INSETS_C``) where they fit (the device must
+    slow down near the device limits to turn round, so the bands bend there)."""
+    m = spec.edge_margin_c
+    lo, hi = spec.working_lo_c, spec.working_hi_c
+    insets_c = KNOT_INSETS_C if insets_c is None else insets_c
+    inner = [k for k in insets_c if 2 * k + 2 <= hi - lo]
+    return (lo - m, *(lo + k for k in inner), *(hi - k for k in reversed(inner)), hi + m)
+
+
+@dataclass(frozen=True, slots=True)
+class BandDesign:
+    """How band tops are derived from the physics.
+
+    ``room``: ``"sqrt"`` bounds the speed near a device limit by a constant-deceleration
+    estimate at half the planned deceleration (conservative), ``"exact"`` by the exact
+    first-order stopping distance (:func:`~.physics.turning_speed`), which allows faster
+    passes near the edges. ``knot_insets_c``: inner knots (more knots let the bands
+    follow the curved speed limits). ``turn_fraction``: share of the full chamber rate
+    assumed when speeding up or turning.
+    """
+
+    room: str = "sqrt"
+    knot_insets_c: tuple[float, ...] = KNOT_INSETS_C
+    turn_fraction: float = TURN_ACCEL_FRACTION
+
+
+#: The band designs the search tries (see ``search.CANDIDATES``).
+DESIGNS = {
+    "sqrt": BandDesign(),
+    "exact": BandDesign(room="exact", knot_insets_c=(1.5, 4.0, 8.0, 12.0), turn_fraction=0.9),
+}
+
+
+def _room_speed(
+    design: BandDesign, room_lo: float, room_hi: float, limits: Limits, tau_min: float
+) -> float:
+    """Fastest speed from which the device turns round before either device limit.
+
+    Turning up near the floor of the device range uses the heating rate, turning down
+    near its ceiling the cooling rate.
+    """
+    k = design.turn_fraction
+    heat, cool = limits.rate_max_c_per_min, -limits.rate_min_c_per_min
+    if design.room == "exact":
+        return min(
+            turning_speed(room_lo, heat, tau_min, k), turning_speed(room_hi, cool, tau_min, k)
+        )
+    # constant deceleration at half the planned rate k * rate / tau (conservative)
+    return min(
+        constant_decel_speed(room_lo, 0.5 * k * heat / tau_min),
+        constant_decel_speed(room_hi, 0.5 * k * cool / tau_min),
+    )
+
+
+def make_bands(
+    spec: ExperimentSpec,
+    n_dir: int,
+    direction: int,
+    sep_c_per_min: float,
+    params_list: Sequence[ThermalParams],
+    limits: Limits,
+    width_c_per_min: float = BAND_WIDTH_C_PER_MIN,
+    caps: tuple[float, float] | None = None,
+    dynamic: bool = True,
+    knot_insets_c: Sequence[float] | None = None,
+    design: BandDesign | None = None,
+) -> list[Band]:
+    """``n_dir`` bands ``sep`` apart, stacked down from the fastest gradient available.
+
+    Slow sweeps cost time (a sweep lasts span / gradient), so the bands sit as high as
+    the chamber allows. At each knot the top of the fastest band is ``V(T)``, the least
+    of: the cap of that side (``caps = (cap at lo, cap at hi)``, linear in between), the
+    gradient the chamber limits allow at T (for the least favourable scenario), and the
+    speed from which the device can still turn round before its limit (``design.room``).
+    With ``dynamic`` the tops are then lowered to what one sweep can follow
+    (:func:`~.physics.dynamic_tops`). Bands are ``width`` wide where there is room and
+    narrower where a limit squeezes them, never closer than ``delta/2`` to zero, so
+    heating and cooling passes stay ``delta`` apart.
+    """
+    design = DESIGNS["sqrt"] if design is None else design
+    if knot_insets_c is None:
+        knot_insets_c = design.knot_insets_c
+    knots = band_knots(spec, knot_insets_c)
+    v_min = spec.delta_c_per_min / 2 + BAND_SAFETY_C_PER_MIN
+    cap0 = spec.max_cool_c_per_min if direction < 0 else spec.max_heat_c_per_min
+    cap_lo, cap_hi = caps or (cap0, cap0)
+    tau_max = max(p.tau_min for p in params_list)
+    tops = []
+    for t in knots:
+        f = (t - knots[0]) / (knots[-1] - knots[0])
+        cap = cap_lo + f * (cap_hi - cap_lo)
+        v_lim = min(available_rate(direction, t, p, limits, cap) for p in params_list)
+        v_room = _room_speed(
+            design, t - limits.device_min_c, limits.device_max_c - t, limits, tau_max
+        )
+        tops.append(min(v_lim, v_room))
+    if dynamic:
+        tops = dynamic_tops(tops, knots, direction, tau_max, limits, design.turn_fraction)
+    widths = [min(width_c_per_min, (v - v_min - (n_dir - 1) * sep_c_per_min) / n_dir) for v in tops]
+    bands = []
+    for r in range(1, n_dir + 1):  # rank 1 = slowest
+        hi = tuple(v - (n_dir - r) * (w + sep_c_per_min) for v, w in zip(tops, widths, strict=True))
+        lo = tuple(h - w for h, w in zip(hi, widths, strict=True))
+        bands.append(Band(direction, r, tuple(knots), lo, hi, top=r == n_dir))
+    return bands
+
+
+def band_feasibility(bands: Sequence[Band]) -> float:
+    """Smallest band width at any knot (negative: the bands do not fit)."""
+    return float(min(np.min(np.subtract(b.hi_c_per_min, b.lo_c_per_min)) for b in bands))
+
+
+def order_bands(
+    directions: Sequence[int],
+    bands_by_dir: dict[int, list[Band]],
+    params: ThermalParams,
+    limits: Limits,
+) -> list[Band]:
+    """Assign bands to sweeps so that the estimated total time is smallest.
+
+    Estimated time = sum of sweep times (region span / band centre) + turnarounds (the
+    first-order response to the full chamber rate, :func:`~.physics.turnaround_minutes`),
+    over every assignment of the bands of each direction to that direction's sweeps.
+    """
+    from itertools import permutations
+
+    idx = {d: [k for k, dd in enumerate(directions) if dd == d] for d in (+1, -1)}
+    best: tuple[float, list[Band]] | None = None
+    perms_h = list(permutations(bands_by_dir[+1])) or [()]
+    perms_c = list(permutations(bands_by_dir[-1])) or [()]
+    for ph in perms_h:
+        for pc in perms_c:
+            placed = dict(zip(idx[+1], ph, strict=True)) | dict(zip(idx[-1], pc, strict=True))
+            seq = [placed[k] for k in range(len(directions))]
+            total = 0.0
+            prev = 0.0
+            for d, b in zip(directions, seq, strict=True):
+                v_in, v_out = b.edge_speeds()
+                total += float(b.minutes().sum()) + turnaround_minutes(
+                    prev, d, v_in, params, limits
+                )
+                prev = v_out
+            if best is None or total < best[0]:
+                best = (total, seq)
+    assert best is not None  # at least one assignment is tried
+    return best[1]

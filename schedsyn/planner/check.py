@@ -1,0 +1,184 @@
+"""Stage 7: the plan and its independent check.
+
+A :class:`Plan` is judged only on its exported step table (whole minutes, 0.1 degC, what
+the operator types), re-simulated densely every 0.1 min by :func:`check_programme` and
+scored by :mod:`schedsyn.coverage` -- never on the optimiser's variables.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ..coverage import CoverageReport, coverage_report
+from ..errors import ParameterError
+from ..model import LinearThermalModel
+from ..params import Limits, ThermalParams
+from ..programme import Programme
+from ..simulate import simulate
+from .request import ExperimentSpec
+
+#: Sampling of the independent check, min.
+CHECK_DT_MIN = 0.1
+#: The level separation every plan also reports coverage at, degC/min.
+REPORT_DELTA_C_PER_MIN = 0.1
+#: Slack of the device-limit check, degC (floating point only).
+DEVICE_TOL_C = 1e-6
+
+
+@dataclass(frozen=True, slots=True)
+class Plan:
+    """A planned experiment, checked on its exported (rounded) step table.
+
+    ``coverage`` and ``coverage_0p1`` come from an independent dense re-simulation of
+    ``programme`` (what the operator types), never from the optimiser's variables; for a
+    robust plan they are the worst of its design scenarios. ``lp`` holds what the LP
+    solves did (:class:`~.lp.LpStats`): counts of optimal, inaccurate, infeasible and
+    failed solves.
+    """
+
+    spec: ExperimentSpec
+    params: ThermalParams
+    limits: Limits
+    programme: Programme
+    coverage: CoverageReport
+    coverage_0p1: CoverageReport
+    complete: bool
+    status: str
+    solve_s: float
+    margin_g_c_per_min: float
+    margin_t_c: float
+    lp: dict[str, Any]
+    problem_size: dict
+    scenarios: tuple[ThermalParams, ...]
+    violations: tuple[str, ...]
+    notes: tuple[str, ...] = field(default=())
+    t_min_c: float = float("nan")
+    t_max_c: float = float("nan")
+    box_check: dict | None = None
+
+    @property
+    def duration_min(self) -> float:
+        return self.programme.total_min
+
+    @property
+    def steps(self) -> int:
+        return self.programme.n_segments
+
+    @property
+    def n_lp(self) -> int:
+        """LP solves of this plan (search, fallbacks, polish)."""
+        return int(self.lp["lp_solves"])
+
+    def to_frame(self) -> pd.DataFrame:
+        """The step table."""
+        return self.programme.to_frame()
+
+    def to_summary_dict(self) -> dict:
+        return {
+            "experiment": self.spec.name,
+            "working_min_c": self.spec.working_lo_c,
+            "working_max_c": self.spec.working_hi_c,
+            "duration_min": self.duration_min,
+            "steps": self.steps,
+            "coverage": self.coverage.coverage,
+            "min_levels": self.coverage.min_levels,
+            "coverage_delta_0p1": self.coverage_0p1.coverage,
+            "complete": self.complete,
+            "margin_g_c_per_min": self.margin_g_c_per_min,
+            "margin_t_c": self.margin_t_c,
+            "solve_s": self.solve_s,
+        }
+
+    def to_json_dict(self) -> dict:
+        return {
+            "experiment": self.spec.name,
+            "tau_s": self.params.tau_s,
+            "dt0_c": self.params.dt0_c,
+            "spec": self.spec.to_dict(),
+            "limits": self.limits.to_dict(),
+            "robust_scenarios": [p.to_dict() for p in self.scenarios]
+            if len(self.scenarios) > 1
+            else [],
+            "status": self.status,
+            "complete": self.complete,
+            "coverage": self.coverage.coverage,
+            "coverage_delta_0p1": self.coverage_0p1.coverage,
+            "min_levels": self.coverage.min_levels,
+            "short_bins": [list(b) for b in self.coverage.short_bins()],
+            "duration_min": self.duration_min,
+            "steps": self.steps,
+            "device_min_c": self.t_min_c,
+            "device_max_c": self.t_max_c,
+            "margin_g_c_per_min": self.margin_g_c_per_min,
+            "margin_t_c": self.margin_t_c,
+            "solve_s": self.solve_s,
+            "lp_solves": self.n_lp,
+            "lp": self.lp,
+            "problem_size": self.problem_size,
+            "solver": "Clarabel (LP; HiGHS when Clarabel fails), whole-programme LPs via cvxpy",
+            "violations": list(self.violations),
+            "notes": list(self.notes),
+            "robust_box_check": self.box_check,
+        }
+
+
+def check_programme(
+    programme: Programme,
+    spec: ExperimentSpec,
+    limits: Limits,
+    scenarios: Sequence[ThermalParams],
+    model: LinearThermalModel | None = None,
+) -> tuple[CoverageReport, CoverageReport, list[str], float, float]:
+    """Independent check of a step table: dense simulation (0.1 min) for every scenario.
+
+    Returns the worst-scenario coverage at ``delta`` and at 0.1 degC/min, every limit the
+    programme breaks, and the device's min/max temperature. ``model`` replaces the
+    first-order lag of a single scenario (an augmented model).
+    """
+    if not scenarios:
+        raise ParameterError("check_programme needs at least one scenario")
+    grid = spec.grid
+    worst: CoverageReport | None = None
+    worst01: CoverageReport | None = None
+    problems = list(programme.violations(limits))
+    t_lo, t_hi = np.inf, -np.inf
+    for p in scenarios:
+        traj = simulate(
+            programme,
+            p,
+            model=model if len(scenarios) == 1 else None,
+            dt_min=CHECK_DT_MIN,
+            t0_c=limits.t_init_c,
+        )
+        rep = coverage_report(
+            traj.t_c, traj.g_c_per_min, grid, spec.levels_required, spec.delta_c_per_min
+        )
+        rep01 = coverage_report(
+            traj.t_c, traj.g_c_per_min, grid, spec.levels_required, REPORT_DELTA_C_PER_MIN
+        )
+        if (
+            worst is None
+            or rep.coverage < worst.coverage
+            or (rep.coverage == worst.coverage and rep.min_levels < worst.min_levels)
+        ):
+            worst = rep
+        if worst01 is None or rep01.coverage < worst01.coverage:
+            worst01 = rep01
+        t_lo, t_hi = min(t_lo, traj.t_c.min()), max(t_hi, traj.t_c.max())
+    if t_lo < limits.device_min_c - DEVICE_TOL_C or t_hi > limits.device_max_c + DEVICE_TOL_C:
+        where = (
+            ""
+            if len(scenarios) == 1
+            else f" (over the {len(scenarios)} design scenarios of the robust box)"
+        )
+        problems.append(
+            f"the device reaches {t_lo:.2f} .. {t_hi:.2f} °C{where}, outside its limits "
+            f"{limits.device_min_c:g} .. {limits.device_max_c:g} °C"
+        )
+    assert worst is not None and worst01 is not None  # scenarios is not empty
+    return worst, worst01, problems, float(t_lo), float(t_hi)

@@ -1,0 +1,81 @@
+"""Why a request falls short: which limit binds, in words with numbers."""
+
+from __future__ import annotations
+
+from ..params import Limits, ThermalParams
+from .bands import BAND_SAFETY_C_PER_MIN
+from .physics import TURN_ACCEL_FRACTION, turning_speed
+from .request import ExperimentSpec
+
+#: Gradient headroom (degC/min) above the levels' own spread under which a chamber limit
+#: is reported as binding at a working edge.
+HEADROOM_C_PER_MIN = 0.1
+
+
+def explain_shortfall(spec: ExperimentSpec, params: ThermalParams, limits: Limits) -> list[str]:
+    """Which limit makes the region's edges hard to cover, in words with numbers."""
+    notes = []
+    tau = params.tau_min
+    n_cool = spec.levels_required // 2
+    n_heat = spec.levels_required - n_cool
+    delta = spec.delta_c_per_min
+    # g = (Tk + dT0 - T)/tau with the chamber at its floor / ceiling
+    g_cool = (spec.working_lo_c - (limits.chamber_min_c + params.dt0_c)) / tau
+    if g_cool <= 0:
+        floor_t = limits.chamber_min_c + params.dt0_c
+        notes.append(
+            f"the chamber floor {limits.chamber_min_c:g} °C cannot bring the device below "
+            f"{floor_t:g} °C (floor + dT0), so the bins below it are unreachable; a floor "
+            f"of at most {spec.working_lo_c - spec.edge_margin_c - params.dt0_c - 1:g} °C "
+            "is needed"
+        )
+    elif g_cool < n_cool * delta + HEADROOM_C_PER_MIN:
+        notes.append(
+            f"at {spec.working_lo_c:g} °C the chamber floor {limits.chamber_min_c:g} °C "
+            f"allows cooling gradients of at most {g_cool:.3f} °C/min "
+            f"(g = (Tk_min + dT0 - T)/tau); {n_cool} cooling levels {delta:g} °C/min apart "
+            "need clearly more: lower the floor or the level count"
+        )
+    g_heat = (limits.chamber_max_c + params.dt0_c - spec.working_hi_c) / tau
+    if g_heat <= 0:
+        notes.append(
+            f"the chamber ceiling {limits.chamber_max_c:g} °C cannot bring the device above "
+            f"{limits.chamber_max_c + params.dt0_c:g} °C"
+        )
+    elif g_heat < n_heat * delta + HEADROOM_C_PER_MIN:
+        notes.append(
+            f"at {spec.working_hi_c:g} °C the chamber ceiling {limits.chamber_max_c:g} °C "
+            f"allows heating gradients of at most {g_heat:.3f} °C/min; {n_heat} heating "
+            "levels need clearly more: raise the ceiling or lower the level count"
+        )
+    # turning room between the working edges and the device limits
+    n_dir = max(n_cool, n_heat)
+    for edge, room, rate, word in (
+        (
+            spec.working_lo_c,
+            spec.working_lo_c - limits.device_min_c,
+            limits.rate_max_c_per_min,
+            "heating",
+        ),
+        (
+            spec.working_hi_c,
+            limits.device_max_c - spec.working_hi_c,
+            -limits.rate_min_c_per_min,
+            "cooling",
+        ),
+    ):
+        v_room = turning_speed(room, rate, tau, TURN_ACCEL_FRACTION)
+        if v_room < 2 * n_dir * (delta + BAND_SAFETY_C_PER_MIN):
+            notes.append(
+                f"at {edge:g} °C the device limit leaves {room:g} °C to turn round; with "
+                f"the chamber {word} at {rate:g} °C/min the passes there cannot be faster "
+                f"than about {v_room:.2f} °C/min, so {n_dir} levels per direction there "
+                "need slow, long passes: widen the device limits, lower the level count or "
+                "lengthen the experiment"
+            )
+    if spec.approx_lo_c < limits.device_min_c or spec.approx_hi_c > limits.device_max_c:
+        notes.append(
+            f"the approximation region [{spec.approx_lo_c:g}, {spec.approx_hi_c:g}] °C "
+            f"exceeds the device limits {limits.device_min_c:g} .. {limits.device_max_c:g} °C"
+        )
+    return notes

@@ -1,0 +1,488 @@
+"""Stage 4: the linear programmes -- constraint rows from the affine responses, and solving.
+
+Decision variables are the ramp rates ``u_j`` of fixed-length segments. By
+:func:`schedsyn.model.affine_response` the internal temperature ``T_i``, gradient ``g_i``
+and chamber ``Tk`` at every planner sample are affine in ``u`` (``x = A u + b``), so every
+requirement is a row of ``G @ [u, extra] <= h`` or ``E @ [u, extra] == f``, built in numpy
+(fast to assemble, easy to audit):
+
+* chamber within its limits at every segment end (Tk is piecewise linear);
+* device within its limits at every sample;
+* inside a sweep's window, the direction-signed gradient ``q = d g`` within the sweep's
+  band, one affine piece per stretch between the knots the sweep crosses at planned
+  samples (so ``lo(T_i)`` is affine in ``u`` too); beyond the edges at the window's ends.
+
+The search solves hundreds of small probes straight with Clarabel (cvxpy's compile step
+cost more than the solve), falling back to HiGHS when Clarabel fails numerically; the
+whole-programme LPs go through cvxpy. Every outcome is counted in :class:`LpStats`, so a
+solver failure is never mistaken for infeasibility.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import cvxpy as cp
+import numpy as np
+
+from ..errors import SolverFailedError
+from ..model import affine_response
+from ..params import Limits
+from .bands import Band
+from .request import ExperimentSpec, Scenario
+
+#: Planner samples every minute (segment boundaries are whole minutes).
+SAMPLE_MIN = 1.0
+#: A sweep crosses an inner knot at a planned sample within +- this plus half the
+#: distance its band's top speed covers in one sample, degC.
+KNOT_TOL_C = 0.25
+#: Robust plans: how far outside its band a scenario other than the reference (box
+#: centre) may pass, degC/min; the bands are spaced by twice this more than delta.
+ROBUST_SLACK_C_PER_MIN = 0.05
+
+#: Clarabel's answers, by what they mean for the planner.
+_CLARABEL_OK = {"Solved": "optimal", "AlmostSolved": "inaccurate"}
+_CLARABEL_INFEASIBLE = ("PrimalInfeasible", "AlmostPrimalInfeasible")
+#: How many solver-failure messages a plan keeps (the count is kept in full).
+MAX_FAILURE_MESSAGES = 5
+
+
+@dataclass(slots=True)
+class LpStats:
+    """What the LP solves of one plan did: counts by outcome and time spent.
+
+    ``optimal``/``inaccurate``: solved (an inaccurate answer is used: every plan is
+    checked by dense re-simulation of its exported table afterwards); ``infeasible``: the
+    solver proved the LP has no solution; ``failed``: every solver tried gave up
+    (numerical trouble, iteration limit) -- not evidence of infeasibility.
+    """
+
+    solves: int = 0
+    seconds: float = 0.0
+    optimal: int = 0
+    inaccurate: int = 0
+    infeasible: int = 0
+    failed: int = 0
+    fallbacks: int = 0
+    messages: list[str] = field(default_factory=list)
+
+    def record(self, outcome: str, seconds: float, message: str | None = None) -> None:
+        self.solves += 1
+        self.seconds += seconds
+        setattr(self, outcome, getattr(self, outcome) + 1)
+        if message and len(self.messages) < MAX_FAILURE_MESSAGES:
+            self.messages.append(message)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "lp_solves": self.solves,
+            "optimal": self.optimal,
+            "inaccurate": self.inaccurate,
+            "infeasible": self.infeasible,
+            "solver_failures": self.failed,
+            "highs_fallbacks": self.fallbacks,
+            "lp_seconds": round(self.seconds, 3),
+            "failure_messages": list(self.messages),
+        }
+
+
+class Responses:
+    """Affine responses of all scenarios at the planner samples of a full-length grid."""
+
+    def __init__(self, scenarios: Sequence[Scenario], n_seg: int, seg_min: float, limits: Limits):
+        self.seg_min = seg_min
+        self.scenarios = list(scenarios)
+        self.durations = np.full(n_seg, float(seg_min))
+        self.times = np.arange(0.0, n_seg * seg_min + 0.5 * SAMPLE_MIN, SAMPLE_MIN)
+        self.resp = [
+            affine_response(s.model, self.durations, self.times, limits.start_c, limits.t_init_c)
+            for s in scenarios
+        ]
+
+    def sample_of(self, j_boundary: int) -> int:
+        """Planner sample index at the boundary before segment ``j_boundary``."""
+        return int(round(j_boundary * self.seg_min / SAMPLE_MIN))
+
+
+@dataclass(slots=True)
+class Window:
+    """Sweep ``direction`` owns planner samples ``start_sample .. end_sample``.
+
+    ``cut_samples`` are the samples at which it crosses the band's inner knots, in travel
+    order (sample indices, not seconds: sample ``i`` is at ``i * SAMPLE_MIN`` minutes).
+    """
+
+    direction: int
+    band: Band
+    start_sample: int
+    end_sample: int
+    cut_samples: tuple[int, ...] = ()
+    #: robust plans: ``(start, end, cuts)`` samples for each scenario (the scenarios lag
+    #: one another, so each crosses the edges and knots at its own samples); None: shared
+    per_scenario: tuple[tuple[int, int, tuple[int, ...]], ...] | None = None
+    #: robust plans: knot tolerance (degC) of each scenario's cuts; a scenario that is
+    #: not the reference crosses a knot between two samples wherever it happens to
+    knot_tol_c: tuple[tuple[float, ...], ...] | None = None
+
+    def bounds_of(self, scenario: int) -> tuple[int, int, tuple[int, ...]]:
+        if self.per_scenario is None:
+            return self.start_sample, self.end_sample, self.cut_samples
+        return self.per_scenario[scenario]
+
+    def pieces(self, scenario: int = 0):
+        """``(first_sample, last_sample, piece_index, knot_at_last_or_None)`` in travel order."""
+        n_piece = len(self.band.knots_c) - 1
+        order = list(range(n_piece)) if self.direction > 0 else list(range(n_piece))[::-1]
+        start, end, cuts = self.bounds_of(scenario)
+        bounds = [start, *cuts, end]
+        out = []
+        for j, pi in enumerate(order):
+            knot = None
+            if j < n_piece - 1:
+                knot = self.band.knots_c[pi + 1] if self.direction > 0 else self.band.knots_c[pi]
+            out.append((bounds[j], bounds[j + 1], pi, knot))
+        return out
+
+
+class Context:
+    """Shared state of one synthesis: spec, limits, responses and the LP statistics.
+
+    ``device_margin_c`` tightens the device limits in the LPs (a re-polish uses it when
+    rounding the step table for the operator pushed the device a hair past a limit; see
+    :meth:`tightened`).
+    """
+
+    def __init__(
+        self,
+        spec: ExperimentSpec,
+        limits: Limits,
+        responses: Responses,
+        stats: LpStats,
+        device_margin_c: float = 0.0,
+    ):
+        self.spec, self.limits, self.responses, self.stats = spec, limits, responses, stats
+        self.device_margin_c = device_margin_c
+        ref = responses.scenarios[0].params
+        self.offsets_c = [sc.params.dt0_c - ref.dt0_c for sc in responses.scenarios]
+        self.size = {"variables": 0, "constraints": 0}
+
+    @property
+    def robust(self) -> bool:
+        return len(self.responses.resp) > 1
+
+    def tightened(self, device_margin_c: float) -> Context:
+        """The same synthesis with the device limits tightened by ``device_margin_c``."""
+        return Context(self.spec, self.limits, self.responses, self.stats, device_margin_c)
+
+    def solve_cvxpy(self, problem: cp.Problem) -> bool:
+        """Solve an LP with Clarabel, HiGHS if Clarabel fails; True when solved.
+
+        An ``optimal_inaccurate`` answer is accepted (and counted): every plan is verified
+        afterwards by dense re-simulation of its exported step table, so a slightly
+        inaccurate LP can never make a plan look better than it is.
+        """
+        tic = time.perf_counter()
+        status, message = None, None
+        for solver in (cp.CLARABEL, cp.HIGHS):
+            try:
+                with warnings.catch_warnings():
+                    warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+                    problem.solve(solver=solver)
+                status = problem.status
+            except cp.error.SolverError as exc:
+                status, message = None, f"{solver}: {exc}"
+            if status in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE, cp.INFEASIBLE):
+                break
+            if solver == cp.CLARABEL:
+                self.stats.fallbacks += 1
+        seconds = time.perf_counter() - tic
+        if status == cp.OPTIMAL:
+            self.stats.record("optimal", seconds)
+        elif status == cp.OPTIMAL_INACCURATE:
+            self.stats.record("inaccurate", seconds)
+        elif status in (cp.INFEASIBLE, cp.INFEASIBLE_INACCURATE):
+            self.stats.record("infeasible", seconds)
+        else:
+            self.stats.record("failed", seconds, message or f"LP status {status}")
+        return status in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
+
+
+class SubLP:
+    """An LP over the rates of segments ``[j0, j1)``, earlier rates fixed.
+
+    Columns: the ``j1 - j0`` free rates, then ``extra`` scalar variables (margins, an
+    epigraph variable). Rows are accumulated as ``G @ x <= h`` and ``E @ x == f``.
+    """
+
+    def __init__(
+        self,
+        ctx: Context,
+        u_fixed: np.ndarray,
+        j1: int,
+        extra: int = 0,
+        scenarios: Sequence[int] | None = None,
+    ):
+        r = ctx.responses
+        self.ctx = ctx
+        self.j0 = int(u_fixed.size)
+        self.n = j1 - self.j0
+        self.extra = extra
+        self.s_from = r.sample_of(self.j0)
+        self.s_to = r.sample_of(j1)
+        rows = slice(self.s_from, self.s_to + 1)
+        self.scen = []
+        self.scen_idx = list(range(len(r.resp))) if scenarios is None else list(scenarios)
+        for resp in (r.resp[i] for i in self.scen_idx):
+            at = resp.a_t[rows, self.j0 : j1]
+            ag = resp.a_g[rows, self.j0 : j1]
+            bt = resp.b_t[rows] + resp.a_t[rows, : self.j0] @ u_fixed
+            bg = resp.b_g[rows] + resp.a_g[rows, : self.j0] @ u_fixed
+            self.scen.append((at, bt, ag, bg))
+        seg = r.seg_min
+        self.tk0 = ctx.limits.start_c + seg * float(np.sum(u_fixed))
+        self.tk_mat = seg * np.tril(np.ones((self.n, self.n)))
+        self.g_rows: list[np.ndarray] = []
+        self.h_rows: list[np.ndarray] = []
+        self.e_rows: list[np.ndarray] = []
+        self.f_rows: list[np.ndarray] = []
+        self.last_size = {"variables": 0, "constraints": 0}
+
+    def _pad(self, m: np.ndarray, extra_cols: dict[int, float] | None = None) -> np.ndarray:
+        m = np.atleast_2d(m)
+        out = np.zeros((m.shape[0], self.n + self.extra))
+        out[:, : self.n] = m
+        for k, coef in (extra_cols or {}).items():
+            out[:, self.n + k] = coef
+        return out
+
+    def le(self, m, rhs, extra_cols=None) -> None:
+        """``m @ u + sum(extra) <= rhs``."""
+        rows = self._pad(m, extra_cols)
+        self.g_rows.append(rows)
+        self.h_rows.append(np.broadcast_to(np.asarray(rhs, dtype=float), rows.shape[:1]))
+
+    def ge(self, m, rhs, extra_cols=None) -> None:
+        """``m @ u - sum(extra) >= rhs`` written as ``-m @ u + extra <= -rhs``."""
+        self.le(-np.atleast_2d(m), -np.asarray(rhs, dtype=float), extra_cols)
+
+    def eq(self, m, rhs) -> None:
+        self.e_rows.append(self._pad(m))
+        self.f_rows.append(np.atleast_1d(np.asarray(rhs, dtype=float)))
+
+    # -- constraint families -------------------------------------------------------
+    def chamber(self) -> None:
+        """Chamber air within its limits at every segment end (Tk is piecewise linear)."""
+        lim = self.ctx.limits
+        self.le(self.tk_mat, lim.chamber_max_c - self.tk0)
+        self.ge(self.tk_mat, lim.chamber_min_c - self.tk0)
+
+    def chamber_end(self, value_c: float) -> None:
+        self.eq(self.tk_mat[-1], value_c - self.tk0)
+
+    def device(self) -> None:
+        """The device stays within its limits at every sample.
+
+        The approximation region is where the drift model is fitted, not a limit on the
+        device: measurements outside it are simply not used (paper), and turning round
+        outside it is often the fastest way to present a new gradient at the edge.
+        """
+        lim = self.ctx.limits
+        pad = self.ctx.device_margin_c
+        for at, bt, _, _ in self.scen:
+            self.le(at, lim.device_max_c - pad - bt)
+            self.ge(at, lim.device_min_c + pad - bt)
+
+    def window(self, win: Window, margin_g: int | None = None, margin_t: int | None = None) -> None:
+        """Band constraints inside the window and the edge conditions at its ends.
+
+        ``margin_g`` / ``margin_t``: indices of extra columns that tighten the band and
+        the edge conditions (maximised by the polish LP).
+        """
+        spec = self.ctx.spec
+        d, m = win.direction, spec.edge_margin_c
+        mg = {margin_g: 1.0} if margin_g is not None else None
+        mt = {margin_t: 1.0} if margin_t is not None else None
+        for si, (at, bt, ag, bg) in zip(self.scen_idx, self.scen, strict=True):
+            start, end, _ = win.bounds_of(si)
+            s0, s1 = start - self.s_from, end - self.s_from
+            pieces_done = 0
+            for a, b_, pi, knot in win.pieces(si):
+                w = slice(a - self.s_from, b_ - self.s_from + 1)
+                t_ref, lo0, lo1, hi0, hi1 = win.band.piece(pi)
+                # robust: a scenario's bands follow its own offset dT0 - dT0_ref (all its
+                # sweeps shift alike, so its bands stay disjoint at every temperature)
+                off = self.ctx.offsets_c[si]
+                t_ref += off
+                if si != 0 and self.ctx.robust:
+                    # robust: the other scenarios may stray ROBUST_SLACK outside the band
+                    # (the bands are 2 ROBUST_SLACK further apart, so still disjoint)
+                    lo0, hi0 = lo0 - ROBUST_SLACK_C_PER_MIN, hi0 + ROBUST_SLACK_C_PER_MIN
+                # q = d g >= lo0 + lo1 (T - t_ref) + margin
+                self.ge(d * ag[w] - lo1 * at[w], lo0 + lo1 * (bt[w] - t_ref) - d * bg[w], mg)
+                # q <= hi0 + hi1 (T - t_ref) - margin (robust: not for the fastest band,
+                # whose top bounds no other band; the scenarios spread most when fast)
+                if not (win.band.top and self.ctx.robust):
+                    self.le(d * ag[w] - hi1 * at[w], hi0 + hi1 * (bt[w] - t_ref) - d * bg[w], mg)
+                if knot is not None:  # cross the knot at the planned sample
+                    k = b_ - self.s_from
+                    # a fast sweep moves far in one sample: half a sample's travel more
+                    tol = KNOT_TOL_C + 0.5 * SAMPLE_MIN * float(win.band.bounds(knot)[1])
+                    if win.knot_tol_c is not None:
+                        tol = win.knot_tol_c[si][pieces_done]
+                    pieces_done += 1
+                    self.le(at[k], knot + off + tol - bt[k])
+                    self.ge(at[k], knot + off - tol - bt[k])
+            lo_edge, hi_edge = spec.working_lo_c - m, spec.working_hi_c + m
+            if d < 0:  # starts above the region, ends below it
+                self.ge(at[s0], hi_edge - bt[s0], mt)
+                self.le(at[s1], lo_edge - bt[s1], mt)
+            else:
+                self.le(at[s0], lo_edge - bt[s0], mt)
+                self.ge(at[s1], hi_edge - bt[s1], mt)
+
+    def exit_speed(self, win: Window, column: int) -> None:
+        """Extra column ``column`` >= d * g at the window end, for every scenario."""
+        for si, (_, _, ag, bg) in zip(self.scen_idx, self.scen, strict=True):
+            s1 = win.bounds_of(si)[1] - self.s_from
+            self.le(win.direction * ag[s1], -win.direction * bg[s1], {column: -1.0})
+
+    # -- solving ---------------------------------------------------------------------
+    def _matrices(self, l1_weight: float):
+        """``(q, A, b, n_eq)`` of ``min q x s.t. A[:n_eq] x = b[:n_eq], A[n_eq:] x <= b``.
+
+        Rate bounds are rows; with ``l1_weight > 0`` auxiliary columns ``t >= |rate|``
+        carry the weight. The matrix is small (hundreds of rows, tens of columns): built
+        dense (assembling it from sparse blocks cost more than the solve).
+        """
+        lim = self.ctx.limits
+        n, m = self.n, self.n + self.extra
+        n_t = n if l1_weight > 0 else 0
+        eq = np.vstack(self.e_rows) if self.e_rows else np.zeros((0, m))
+        g = np.vstack(self.g_rows)
+        n_eq, n_g = eq.shape[0], g.shape[0]
+        a = np.zeros((n_eq + n_g + 2 * n + 2 * n_t, m + n_t))
+        a[:n_eq, :m] = eq
+        a[n_eq : n_eq + n_g, :m] = g
+        r0 = n_eq + n_g
+        idx = np.arange(n)
+        a[r0 + idx, idx] = 1.0  # rate <= max
+        a[r0 + n + idx, idx] = -1.0  # -rate <= -min
+        b = np.concatenate(
+            (
+                np.concatenate(self.f_rows) if self.f_rows else np.zeros(0),
+                np.concatenate(self.h_rows),
+                np.full(n, lim.rate_max_c_per_min),
+                np.full(n, -lim.rate_min_c_per_min),
+                np.zeros(2 * n_t),
+            )
+        )
+        if n_t:  # |rate| <= t
+            r1 = r0 + 2 * n
+            a[r1 + idx, idx] = 1.0
+            a[r1 + idx, m + idx] = -1.0
+            a[r1 + n + idx, idx] = -1.0
+            a[r1 + n + idx, m + idx] = -1.0
+        return n_t, a, b, n_eq
+
+    def solve_direct(self, cost: np.ndarray, l1_weight: float = 0.0) -> np.ndarray | None:
+        """Minimise ``cost @ x + l1_weight * ||rates||_1``: Clarabel directly, HiGHS if it fails.
+
+        The search solves hundreds of these small LPs, so they skip the modelling layer
+        (``scripts/bench_plan.py`` times one probe both ways). Returns the optimal ``x``,
+        or None when the LP is infeasible -- or when both solvers failed, which is counted
+        apart in the plan's :class:`LpStats` (and raised when it leaves nothing to plan).
+        """
+        import clarabel
+        from scipy import optimize, sparse
+
+        m = self.n + self.extra
+        n_t, a, b, n_eq = self._matrices(l1_weight)
+        q = np.concatenate((np.asarray(cost, dtype=float), np.full(n_t, float(l1_weight))))
+        self.last_size = {"variables": int(m + n_t), "constraints": int(a.shape[0])}
+        a_sparse = sparse.csc_matrix(a)
+        cones = ([clarabel.ZeroConeT(n_eq)] if n_eq else []) + [
+            clarabel.NonnegativeConeT(a.shape[0] - n_eq)
+        ]
+        settings = clarabel.DefaultSettings()
+        settings.verbose = False
+        tic = time.perf_counter()
+        sol = clarabel.DefaultSolver(
+            sparse.csc_matrix((m + n_t, m + n_t)), q, a_sparse, b, cones, settings
+        ).solve()
+        status = str(sol.status)
+        if status in _CLARABEL_OK:
+            self.ctx.stats.record(_CLARABEL_OK[status], time.perf_counter() - tic)
+            return np.asarray(sol.x[:m], dtype=float)
+        if status in _CLARABEL_INFEASIBLE:
+            self.ctx.stats.record("infeasible", time.perf_counter() - tic)
+            return None
+        # numerical trouble: the same LP to HiGHS (free variables, rate bounds as rows)
+        self.ctx.stats.fallbacks += 1
+        res = optimize.linprog(
+            q,
+            A_ub=a[n_eq:],
+            b_ub=b[n_eq:],
+            A_eq=a[:n_eq] if n_eq else None,
+            b_eq=b[:n_eq] if n_eq else None,
+            bounds=(None, None),
+            method="highs",
+        )
+        seconds = time.perf_counter() - tic
+        if res.status == 0:
+            self.ctx.stats.record("optimal", seconds)
+            return np.asarray(res.x[:m], dtype=float)
+        if res.status == 2:
+            self.ctx.stats.record("infeasible", seconds)
+            return None
+        self.ctx.stats.record("failed", seconds, f"Clarabel {status}; HiGHS: {res.message}")
+        return None
+
+    def solve(
+        self,
+        objective: Callable[[cp.Variable], cp.Expression],
+        extra_bounds: Sequence[tuple[float | None, float | None]] = (),
+        extra_constraints: Callable[[cp.Variable], list] | None = None,
+    ) -> np.ndarray | None:
+        """Solve through cvxpy (the whole-programme LPs); None when not solved."""
+        lim = self.ctx.limits
+        x = cp.Variable(self.n + self.extra)
+        g = np.vstack(self.g_rows)
+        h = np.concatenate(self.h_rows)
+        cons = [
+            g @ x <= h,
+            x[: self.n] >= lim.rate_min_c_per_min,
+            x[: self.n] <= lim.rate_max_c_per_min,
+        ]
+        if self.e_rows:
+            cons.append(np.vstack(self.e_rows) @ x == np.concatenate(self.f_rows))
+        for k, (lo, hi) in enumerate(extra_bounds):
+            if lo is not None:
+                cons.append(x[self.n + k] >= lo)
+            if hi is not None:
+                cons.append(x[self.n + k] <= hi)
+        if extra_constraints is not None:
+            cons += extra_constraints(x)
+        prob = cp.Problem(cp.Minimize(objective(x)), cons)
+        ok = self.ctx.solve_cvxpy(prob)
+        self.last_size = {"variables": int(x.size), "constraints": int(h.size + 2 * self.n)}
+        if not ok or x.value is None:
+            return None
+        return np.asarray(x.value, dtype=float)
+
+
+def require_solvable(stats: LpStats, what: str) -> None:
+    """Raise :class:`SolverFailedError` when failed solves, not infeasibility, left nothing.
+
+    Called when a search found no structure: if the solvers failed on probes and never
+    once proved one infeasible, "infeasible" would be a guess.
+    """
+    if stats.failed and not stats.infeasible:
+        raise SolverFailedError(
+            f"{what}: the LP solvers failed on {stats.failed} of {stats.solves} problems "
+            f"and proved none infeasible ({'; '.join(stats.messages[:2])}); this is a "
+            "numerical failure, not evidence that the request is impossible"
+        )

@@ -1,0 +1,210 @@
+"""Stage 1: the request -- one experiment's regions and target, and the scenarios to meet.
+
+An :class:`ExperimentSpec` says which working region must be covered, how (levels,
+delta) and how the synthesis searches (segment length, objective, step limit). Together
+with the device model (:class:`~schedsyn.params.ThermalParams`) and the chamber
+(:class:`~schedsyn.params.Limits`) it is a request; :func:`check_request` refuses a
+request no programme can meet before any LP is solved.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..errors import ParameterError
+from ..grid import BinGrid
+from ..model import LinearThermalModel
+from ..params import Limits, ThermalParams
+
+OBJECTIVES = ("shortest", "margin")
+
+
+@dataclass(frozen=True, slots=True)
+class ExperimentSpec:
+    """One experiment: its working and approximation regions and the coverage target.
+
+    Parameters
+    ----------
+    name : str
+        Experiment name (used for output folders).
+    working_lo_c, working_hi_c : float
+        Working region, degC: every 1 degC bin in it must be covered.
+    approx_lo_c, approx_hi_c : float
+        Approximation region, degC: the device stays inside it from the first sweep on.
+    levels_required : int
+        Distinct gradient levels per bin (paper: 6), 2..12.
+    delta_c_per_min : float
+        Minimum difference between two levels, degC/min, in (0, 1].
+    segment_min : float
+        Length of one decision segment, whole minutes, 2..30 (5-15 typical).
+    objective : str
+        ``"shortest"`` (shortest programme reaching the target) or ``"margin"`` (largest
+        margin within ``duration_max_min``).
+    max_steps : int
+        Most steps the exported step table may have (after merging equal rates), >= 2.
+    edge_margin_c : float
+        Each sweep passes the working edges by at least this, degC, in (0, 10].
+    max_cool_c_per_min, max_heat_c_per_min : float
+        Fastest cooling / heating gradient the bands use, degC/min, in [0.1, 3]. Fast
+        sweeps cost long turnarounds and overshoot: the chamber cools at only 1 degC/min,
+        so a cooling gradient close to that takes long to build up.
+    """
+
+    name: str
+    working_lo_c: float
+    working_hi_c: float
+    approx_lo_c: float
+    approx_hi_c: float
+    levels_required: int = 6
+    delta_c_per_min: float = 0.05
+    segment_min: float = 5.0
+    objective: str = "shortest"
+    max_steps: int = 80
+    edge_margin_c: float = 0.5
+    max_cool_c_per_min: float = 0.85
+    max_heat_c_per_min: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name.strip():
+            raise ParameterError("an experiment needs a non-empty name")
+        for f in (
+            "working_lo_c",
+            "working_hi_c",
+            "approx_lo_c",
+            "approx_hi_c",
+            "delta_c_per_min",
+            "segment_min",
+            "edge_margin_c",
+            "max_cool_c_per_min",
+            "max_heat_c_per_min",
+        ):
+            v = getattr(self, f)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+                raise ParameterError(f"{self.name}: {f} must be a finite number, got {v!r}")
+        BinGrid(self.working_lo_c, self.working_hi_c)  # validates the working region
+        if not (self.approx_lo_c <= self.working_lo_c and self.working_hi_c <= self.approx_hi_c):
+            raise ParameterError(
+                f"{self.name}: the approximation region [{self.approx_lo_c:g}, "
+                f"{self.approx_hi_c:g}] °C must contain the working region "
+                f"[{self.working_lo_c:g}, {self.working_hi_c:g}] °C"
+            )
+        levels = self.levels_required
+        if isinstance(levels, bool) or int(levels) != levels or not 2 <= levels <= 12:
+            raise ParameterError(
+                f"{self.name}: levels_required must be a whole number in 2..12, got {levels!r}"
+            )
+        if not 0 < self.delta_c_per_min <= 1:
+            raise ParameterError(
+                f"{self.name}: delta_c_per_min must be in (0, 1] °C/min, got "
+                f"{self.delta_c_per_min!r}"
+            )
+        if self.segment_min != int(self.segment_min) or not 2 <= self.segment_min <= 30:
+            raise ParameterError(
+                f"{self.name}: segment_min must be a whole number of minutes in 2..30, got "
+                f"{self.segment_min!r}"
+            )
+        if self.objective not in OBJECTIVES:
+            raise ParameterError(
+                f"{self.name}: objective must be one of {OBJECTIVES}, got {self.objective!r}"
+            )
+        steps = self.max_steps
+        if isinstance(steps, bool) or int(steps) != steps or steps < 2:
+            raise ParameterError(f"{self.name}: max_steps must be a whole number >= 2")
+        if not 0 < self.edge_margin_c <= 10:
+            raise ParameterError(f"{self.name}: edge_margin_c must be in (0, 10] °C")
+        for f in ("max_cool_c_per_min", "max_heat_c_per_min"):
+            if not 0.1 <= getattr(self, f) <= 3:
+                raise ParameterError(f"{self.name}: {f} must be in 0.1..3 °C/min")
+
+    @property
+    def grid(self) -> BinGrid:
+        return BinGrid(self.working_lo_c, self.working_hi_c)
+
+    def to_dict(self) -> dict:
+        return {f: getattr(self, f) for f in self.__dataclass_fields__}
+
+
+def check_request(spec: ExperimentSpec, limits: Limits) -> None:
+    """Refuse, before any planning, a request that no programme can meet.
+
+    Every sweep passes the working edges by ``edge_margin_c``, so the device must be
+    allowed there: the working region plus the margin must lie inside the device limits.
+    (A chamber that cannot reach part of the region still gets the best partial plan,
+    with notes saying why; see :func:`explain_shortfall`.)
+    """
+    m = spec.edge_margin_c
+    lo, hi = spec.working_lo_c - m, spec.working_hi_c + m
+    name = spec.name
+    if lo < limits.device_min_c or hi > limits.device_max_c:
+        raise ParameterError(
+            f"{name}: the working region [{spec.working_lo_c:g}, {spec.working_hi_c:g}] °C "
+            f"plus the edge margin {m:g} °C needs the device at {lo:g} .. {hi:g} °C, outside "
+            f"its limits {limits.device_min_c:g} .. {limits.device_max_c:g} °C; move the "
+            "region inside the device limits or widen them (device_min_c, device_max_c)"
+        )
+
+
+# ----------------------------------------------------------------------------------
+# Scenarios: the nominal point, or the corners and centre of a robust box
+# ----------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class Scenario:
+    """One (model, dT0) the plan must satisfy."""
+
+    params: ThermalParams
+    model: LinearThermalModel
+
+
+def robust_scenarios(
+    params: ThermalParams,
+    tau_s_range: tuple[float, float] | None,
+    dt0_c_range: tuple[float, float] | None,
+    n_tau: int = 3,
+) -> list[ThermalParams]:
+    """Scenarios that cover a (tau, dT0) box.
+
+    T and g are affine in dT0 for fixed rates (dT0 only enters the free response), so a
+    band constraint that holds at both ends of the dT0 range holds in between: the two
+    dT0 extremes are exact. In tau the response is nonlinear, so ``n_tau`` values spread
+    over the range (both ends included) are used and the plan is verified afterwards on
+    a dense grid.
+    """
+    taus = (
+        [params.tau_s]
+        if tau_s_range is None
+        else list(np.linspace(tau_s_range[0], tau_s_range[1], n_tau))
+    )
+    dt0s = [params.dt0_c] if dt0_c_range is None else [dt0_c_range[0], dt0_c_range[1]]
+    for name, rng in (("tau_s", tau_s_range), ("dt0_c", dt0_c_range)):
+        if rng is not None and not rng[0] <= rng[1]:
+            raise ParameterError(f"robust {name} range must be LO:HI with LO <= HI, got {rng}")
+    return [replace(params, tau_s=float(t), dt0_c=float(d)) for t in taus for d in dt0s]
+
+
+# ----------------------------------------------------------------------------------
+# The sweep structure: alternating monotone sweeps, which way the first one goes
+# ----------------------------------------------------------------------------------
+def sweep_directions(spec: ExperimentSpec, first: int) -> list[int]:
+    """Directions (+1 heating, -1 cooling) of the ``levels_required`` alternating sweeps."""
+    return [first * (-1) ** k for k in range(spec.levels_required)]
+
+
+def first_directions(spec: ExperimentSpec, limits: Limits) -> list[int]:
+    """Which way the first sweep may go: towards the region, or either way from inside it."""
+    if spec.working_hi_c + spec.edge_margin_c <= limits.t_init_c:
+        return [-1]
+    if spec.working_lo_c - spec.edge_margin_c >= limits.t_init_c:
+        return [+1]
+    return [-1, +1]
+
+
+def planning_effort(spec: ExperimentSpec, limits: Limits) -> float:
+    """Rough relative cost of planning ``spec`` (for scheduling a campaign, longest first).
+
+    A region that contains the start temperature is searched starting both ways (twice
+    the structures), and wider regions need longer sweeps.
+    """
+    return len(first_directions(spec, limits)) * (spec.working_hi_c - spec.working_lo_c)

@@ -1,0 +1,179 @@
+"""Stage 8: robust plans -- one programme for every (tau, dT0) in a box.
+
+For fixed (tau, dT0), T and g are affine in the rates, so the constraints of several
+scenarios together stay linear: the box centre (the reference the sweeps are placed for),
+three tau values x both ends of the dT0 range (T and g are affine in dT0, so its ends
+bound it; :func:`~.request.robust_scenarios`). A robust plan is verified on a dense grid
+over the whole box (:func:`verify_robust`) and is complete only if coverage holds at every
+grid point. When no programme fits the box, :func:`search_robust` falls back to its inner
+half, its inner quarter, then the nominal point with the widest margins.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pandas as pd
+
+from ..model import FirstOrderLag
+from ..params import Limits, ThermalParams
+from ..programme import Programme
+from .check import REPORT_DELTA_C_PER_MIN, Plan
+from .lp import LpStats
+from .request import ExperimentSpec, robust_scenarios
+from .search import Progress, Search, synthesise
+
+Range = tuple[float, float] | None
+
+#: Shares of the box (each range about its centre) tried when the whole box does not fit.
+INNER_SHARES = ((0.5, "half"), (0.25, "quarter"))
+
+
+def box_scenarios(params: ThermalParams, tau_s: Range, dt0_c: Range) -> list[ThermalParams]:
+    """The reference scenario (the box centre) followed by the scenarios of the box."""
+    centre = replace(
+        params,
+        tau_s=float(np.mean(tau_s)) if tau_s else params.tau_s,
+        dt0_c=float(np.mean(dt0_c)) if dt0_c else params.dt0_c,
+    )
+    return [centre, *robust_scenarios(params, tau_s, dt0_c)]
+
+
+def _inner(rng: Range, share: float) -> Range:
+    if rng is None:
+        return None
+    mid, half = 0.5 * (rng[0] + rng[1]), 0.5 * share * (rng[1] - rng[0])
+    return (mid - half, mid + half)
+
+
+def search_robust(
+    spec: ExperimentSpec,
+    params: ThermalParams,
+    limits: Limits,
+    tau_s: Range,
+    dt0_c: Range,
+    progress: Progress,
+    stats: LpStats,
+) -> tuple[Search, list[str]]:
+    """Search a programme for the whole box, else the fallbacks; notes say which was used."""
+    params_list = box_scenarios(params, tau_s, dt0_c)
+    models = [FirstOrderLag(p) for p in params_list]
+    search = synthesise(spec, params_list, limits, models, progress, stats)
+    if search.best is not None:
+        return search, []
+    for share, word in INNER_SHARES:
+        in_tau, in_dt0 = _inner(tau_s, share), _inner(dt0_c, share)
+        if progress:
+            progress(f"no programme fits the robust box; trying its inner {word}")
+        inner_list = [params_list[0], *robust_scenarios(params, in_tau, in_dt0)]
+        search = synthesise(
+            spec, inner_list, limits, [FirstOrderLag(p) for p in inner_list], progress, stats
+        )
+        if search.best is not None:
+            box = " x ".join(
+                f"{name} {r[0]:g}..{r[1]:g} {unit}"
+                for name, r, unit in (("tau", in_tau, "s"), ("dT0", in_dt0, "°C"))
+                if r is not None
+            )
+            return search, [
+                "no single programme meeting the target for every scenario of the robust "
+                f"box was found; planned robustly for its inner {word} ({box})"
+            ]
+    spec_margin = replace(spec, objective="margin")
+    search = synthesise(spec_margin, [params], limits, [FirstOrderLag(params)], progress, stats)
+    return search, [
+        "no single programme meeting the target for every scenario of the robust box (or "
+        "its inner half or quarter) was found; planned at the nominal point with the "
+        "widest margins that fit"
+    ]
+
+
+def verify_robust(
+    programme: Programme,
+    spec: ExperimentSpec,
+    params: ThermalParams,
+    tau_range: Range,
+    dt0_range: Range,
+    limits: Limits,
+) -> dict:
+    """Dense check of a robust plan over its whole box (9 x 7 grid, ends included)."""
+    from ..sweep import verify_box
+
+    res = verify_box(
+        programme,
+        (spec.working_lo_c, spec.working_hi_c),
+        tau_range if tau_range is not None else (params.tau_s, params.tau_s),
+        dt0_range if dt0_range is not None else (params.dt0_c, params.dt0_c),
+        levels_required=spec.levels_required,
+        deltas_c_per_min=(spec.delta_c_per_min, REPORT_DELTA_C_PER_MIN),
+        t0_c=limits.t_init_c,
+    )
+    return {
+        "holds": res.holds(),
+        "full_share": res.full_share,
+        "worst": res.worst(),
+        "min_levels": int(res.min_levels_grid.min()),
+        "covered_box": res.covered_box(),
+        "grid_points": int(np.prod(res.shape)),
+    }
+
+
+def box_note(box_check: dict) -> str:
+    """Where coverage fails in the box and which part of it it holds on, in words."""
+    part = box_check["covered_box"]
+    worst = box_check["worst"]
+    held = (
+        f"it holds for tau {part['tau_s_range'][0]:g}..{part['tau_s_range'][1]:g} s "
+        f"x dT0 {part['dt0_c_range'][0]:g}..{part['dt0_c_range'][1]:g} °C"
+        if part
+        else "no grid point is fully covered"
+    )
+    return (
+        "coverage does not hold everywhere in the robust box (worst point tau "
+        f"{worst['tau_s']:g} s, dT0 {worst['dt0_c']:g} °C: {worst['coverage']:.0%}); {held}"
+    )
+
+
+def robustness_price(
+    nominal: Plan,
+    robust: Plan,
+    tau_s_range: Range,
+    dt0_c_range: Range,
+) -> pd.DataFrame:
+    """The price of robustness: a nominal and a robust plan side by side.
+
+    Both plans are checked on the same dense grid over the box (:func:`verify_robust`,
+    at least 9 x 7 points); one row per plan with its duration, steps, coverage at
+    delta and at 0.1 degC/min (worst design scenario), and over the box the worst
+    coverage, the fewest levels and the share of grid points fully covered. The extra
+    duration of the robust plan is in ``extra_min``.
+    """
+    rows = []
+    for name, plan in (("nominal", nominal), ("robust", robust)):
+        box = plan.box_check  # a robust plan was checked on this box's grid already
+        taus = [p.tau_s for p in plan.scenarios]
+        dt0s = [p.dt0_c for p in plan.scenarios]
+        same_box = tau_s_range in (None, (min(taus), max(taus))) and dt0_c_range in (
+            None,
+            (min(dt0s), max(dt0s)),
+        )
+        if box is None or not same_box:
+            box = verify_robust(
+                plan.programme, plan.spec, nominal.params, tau_s_range, dt0_c_range, plan.limits
+            )
+        rows.append(
+            {
+                "plan": name,
+                "duration_min": plan.duration_min,
+                "extra_min": plan.duration_min - nominal.duration_min,
+                "steps": plan.steps,
+                "coverage": plan.coverage.coverage,
+                "coverage_delta_0p1": plan.coverage_0p1.coverage,
+                "box_worst_coverage": box["worst"]["coverage"],
+                "box_min_levels": box["min_levels"],
+                "box_full_share": box["full_share"],
+                "complete_over_box": bool(box["holds"]),
+            }
+        )
+    return pd.DataFrame(rows)

@@ -1,0 +1,445 @@
+"""Stage 5: the search -- where each sweep's window lies in time.
+
+The combinatorial part of the synthesis: for a sequence of sweep directions and bands,
+place the sweeps one after another (:func:`greedy`), each as early and as short as the
+small LP over its segments allows (:func:`place_sweep`); try a few band designs
+(``CANDIDATES``) and keep the shortest structure that fits the duration limit
+(:func:`synthesise`). When none fits, :func:`subregions` finds the widest parts of the
+region that do, and :func:`truncate` cuts an over-long structure at the limit.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..errors import SolverFailedError
+from ..model import LinearThermalModel
+from ..params import Limits, ThermalParams
+from .bands import (
+    BAND_SAFETY_C_PER_MIN,
+    DESIGNS,
+    Band,
+    band_feasibility,
+    make_bands,
+    order_bands,
+)
+from .lp import (
+    KNOT_TOL_C,
+    ROBUST_SLACK_C_PER_MIN,
+    SAMPLE_MIN,
+    Context,
+    LpStats,
+    Responses,
+    SubLP,
+    Window,
+)
+from .request import ExperimentSpec, Scenario, first_directions, sweep_directions
+
+Progress = Callable[[str], None] | None
+
+#: Longest transition (turnaround) searched before a sweep, min.
+MAX_TRANSITION_MIN = 150.0
+#: Speeds a sweep's window is first tried at, as fractions of its band (top first).
+WINDOW_FRACTIONS = (1.0, 0.75, 0.5, 0.25)
+#: Weight of |rate| in a probe's objective (among equally slow exits, the calmest rates).
+PROBE_L1_WEIGHT = 1e-4
+#: Robust plans: segments simulated past a sweep's planned end to find where the lagging
+#: scenarios leave the region (the last rate is held).
+SCENARIO_LOOKAHEAD_SEG = 6
+#: Structures tried by the search: edge caps (cooling at lo, cooling at hi, heating at
+#: lo, heating at hi) as fractions of ``max_cool_c_per_min`` / ``max_heat_c_per_min``, and
+#: whether the band tops are lowered to what the sweep dynamics can follow, and the band
+#: design (``DESIGNS``: how the turning room near the device limits is modelled). Heating ->
+#: cooling turnarounds happen at the upper edge and are slow (the chamber cools at only
+#: 1 degC/min), so sweeps are slower there; cooling -> heating turnarounds at the lower
+#: edge are quick (3 degC/min). The list was tuned on the paper's four regions (see
+#: docs/planner.md); every candidate yields a valid plan or none.
+CANDIDATES = (
+    ((1.0, 0.7, 1.0, 0.9), True, "sqrt"),
+    ((1.0, 0.7, 1.0, 0.9), False, "sqrt"),
+    ((1.0, 0.7, 1.4, 0.9), False, "sqrt"),
+    ((0.7, 0.7, 1.0, 0.9), True, "sqrt"),
+    # exact turning room and more knots: faster passes near a device limit (W4's hot
+    # edge has 2 degC of room below +62 degC and a chamber that cools at 1 degC/min)
+    ((1.0, 0.7, 1.0, 0.9), True, "exact"),
+    ((1.0, 1.0, 1.0, 1.0), True, "exact"),
+)
+#: The greedy may run past the duration limit by this factor; such a structure is only
+#: used (cut at the limit) when nothing fits, to give the best reachable coverage.
+OVERRUN_FACTOR = 1.3
+#: Extra band separations (degC/min) the ``margin`` objective tries, widest first.
+MARGIN_SEPARATIONS = (0.04, 0.02, 0.0)
+#: Sub-regions tried when the full region does not fit: bins cut from one side, and
+#: shares of the bins for regions far too wide for the time.
+SUBREGION_CUTS = (2, 4, 7)
+SUBREGION_CUTS_BOTH = (4, 7)
+SUBREGION_WIDE_SHARES = (0.3, 0.45)
+
+
+@dataclass(slots=True)
+class Structure:
+    """Sweep windows and the rates that realise them (``n_seg`` segments)."""
+
+    windows: list[Window]
+    n_seg: int
+    u: np.ndarray
+
+
+def place_sweep(
+    ctx: Context, u_fixed: np.ndarray, d: int, band: Band, max_seg: int
+) -> tuple[np.ndarray, Window] | None:
+    """Shortest transition + window for one sweep.
+
+    The window may start at any planner sample after the fixed segments; its knot
+    crossings are planned at the band's top speed first, then slower
+    (``WINDOW_FRACTIONS``). The transition is scanned in segment steps (feasibility is not
+    monotone enough for bisection over the whole range), then refined to the minute.
+    """
+    spec, r = ctx.spec, ctx.responses
+    seg = spec.segment_min
+    s_start = r.sample_of(u_fixed.size)
+    s_max = r.sample_of(max_seg)
+    # piece durations (samples) in travel order, from the band's top speed down
+    options = []
+    for fraction in WINDOW_FRACTIONS:
+        minutes = band.minutes(fraction)
+        if d < 0:
+            minutes = minutes[::-1]
+        # round the planned knot times, not each piece (rounded pieces drift)
+        at = np.round(np.cumsum(minutes) / SAMPLE_MIN)
+        options.append(np.maximum(1, np.diff(np.concatenate(([0.0], at)))).astype(int))
+    d_fast = int(options[0].sum())
+
+    def solve_window(win: Window, j1: int, scenarios: list[int] | None) -> np.ndarray | None:
+        lp = SubLP(ctx, u_fixed, j1, extra=1, scenarios=scenarios)
+        lp.chamber()
+        lp.device()
+        lp.window(win)
+        lp.exit_speed(win, 0)
+        # leave the window slowly: the next turnaround is then shorter
+        cost = np.zeros(lp.n + 1)
+        cost[-1] = 1.0
+        sol = lp.solve_direct(cost, l1_weight=PROBE_L1_WEIGHT)
+        return None if sol is None else sol[:-1]
+
+    def attempt(x: int) -> tuple[np.ndarray, Window] | None:
+        for steps in options:
+            s0 = s_start + x
+            bounds = s0 + np.concatenate(([0], np.cumsum(steps)))
+            s1 = int(bounds[-1])
+            if s1 > s_max:
+                return None
+            j1 = min(int(math.ceil(s1 * SAMPLE_MIN / seg - 1e-9)), max_seg)
+            win = Window(d, band, s0, s1, tuple(int(c) for c in bounds[1:-1]))
+            if not ctx.robust:
+                sol = solve_window(win, j1, None)
+                if sol is not None:
+                    return sol, win
+                continue
+            # robust: place the sweep for the reference scenario (the box centre), read
+            # off where every scenario then crosses the edges and knots, and solve for
+            # all scenarios at once with those per-scenario windows
+            sol = solve_window(win, j1, [0])
+            if sol is None:
+                continue
+            found = scenario_windows(ctx, u_fixed, sol, win, max_seg)
+            if found is None:
+                continue
+            win_all, j1_all = found
+            sol_all = solve_window(win_all, j1_all, None)
+            if sol_all is not None:
+                return sol_all, win_all
+        return None
+
+    hi_x = min(s_max - s_start - d_fast, int(MAX_TRANSITION_MIN / SAMPLE_MIN))
+    if hi_x < 0:
+        return None
+    step = max(1, int(round(seg / SAMPLE_MIN)))
+    prev, found = -1, None
+    for x in range(0, hi_x + 1, step):
+        res = attempt(x)
+        if res is not None:
+            found = (x, res)
+            break
+        prev = x
+    if found is None:
+        return None
+    lo_x, hi_ok = prev, found[0]
+    while hi_ok - lo_x > 1:
+        mid = (lo_x + hi_ok) // 2
+        res = attempt(mid)
+        if res is not None:
+            found, hi_ok = (mid, res), mid
+        else:
+            lo_x = mid
+    return found[1]
+
+
+def scenario_windows(
+    ctx: Context, u_fixed: np.ndarray, u_new: np.ndarray, win: Window, max_seg: int
+) -> tuple[Window, int] | None:
+    """Per-scenario windows of a sweep placed for the reference scenario.
+
+    Every scenario is simulated (affine responses) under the reference solution; its
+    window starts at the last sample before it passes the starting edge, crosses each
+    inner knot at the sample nearest to it and ends at the first sample beyond the far
+    edge. Returns the window and the number of segments it needs, or None when some
+    scenario does not make the sweep in the look-ahead.
+    """
+    r, spec = ctx.responses, ctx.spec
+    j_end = min(u_fixed.size + u_new.size + SCENARIO_LOOKAHEAD_SEG, max_seg)
+    pad = j_end - u_fixed.size - u_new.size
+    u = np.concatenate((u_fixed, u_new, np.full(max(pad, 0), u_new[-1] if u_new.size else 0.0)))
+    u = u[:j_end]
+    s_from = r.sample_of(u_fixed.size)
+    s_to = r.sample_of(j_end)
+    d, m = win.direction, spec.edge_margin_c
+    e_start = spec.working_hi_c + m if d < 0 else spec.working_lo_c - m
+    e_end = spec.working_lo_c - m if d < 0 else spec.working_hi_c + m
+    knots = [k for _, _, _, k in win.pieces() if k is not None]
+    per, tol_all = [], []
+    for resp, off in zip(r.resp, ctx.offsets_c, strict=True):
+        t = resp.a_t[s_from : s_to + 1, :j_end] @ u + resp.b_t[s_from : s_to + 1]
+        q = d * t  # increases along the sweep
+
+        def first_past(level, after, q=q):
+            idx = np.flatnonzero(q[after:] >= d * level)
+            return None if idx.size == 0 else int(after + idx[0])
+
+        c0 = first_past(e_start, 0)
+        if c0 is None or c0 == 0:
+            return None  # never reaches the region, or already inside it at the start
+        cuts, tols, after = [], [], c0
+        for k in knots:
+            k = k + off
+            c = first_past(k, after)
+            if c is None:
+                return None
+            if c - 1 > after and abs(t[c - 1] - k) < abs(t[c] - k):
+                c -= 1
+            cuts.append(c)
+            tols.append(KNOT_TOL_C + abs(float(t[c]) - k))
+            after = c + 1
+        c1 = first_past(e_end, after)
+        if c1 is None:
+            return None
+        per.append((s_from + c0 - 1, s_from + c1, tuple(s_from + c for c in cuts)))
+        tol_all.append(tuple(tols))
+    j_need = max(int(math.ceil(p[1] * SAMPLE_MIN / r.seg_min - 1e-9)) for p in per)
+    if j_need > max_seg:
+        return None
+    ref = per[0]
+    return replace(
+        win,
+        start_sample=ref[0],
+        end_sample=ref[1],
+        cut_samples=ref[2],
+        per_scenario=tuple(per),
+        knot_tol_c=tuple(tol_all),
+    ), j_need
+
+
+def return_to_end(ctx: Context, u_fixed: np.ndarray, max_seg: int) -> np.ndarray | None:
+    """The fewest segments after ``u_fixed`` that bring the chamber to its end temperature."""
+    j0 = u_fixed.size
+    for n_r in range(1, max_seg - j0 + 1):
+        lp = SubLP(ctx, u_fixed, j0 + n_r)
+        lp.chamber()
+        lp.device()
+        lp.chamber_end(ctx.limits.end_c)
+        x = lp.solve_direct(np.zeros(lp.n), l1_weight=1.0)
+        if x is not None:
+            return np.concatenate((u_fixed, x))
+    return None
+
+
+def greedy(
+    ctx: Context, directions: list[int], sweep_bands: list[Band], max_seg: int, progress: Progress
+) -> tuple[Structure | None, str]:
+    """Place the sweeps one after another, each as early and as short as feasible."""
+    limits = ctx.limits
+    seg = ctx.spec.segment_min
+    u_fixed = np.zeros(0)
+    windows: list[Window] = []
+    for k, (d, band) in enumerate(zip(directions, sweep_bands, strict=True)):
+        res = place_sweep(ctx, u_fixed, d, band, max_seg)
+        if res is None:
+            where = "cooling" if d < 0 else "heating"
+            return None, (
+                f"sweep {k + 1} of {len(directions)} ({where}, gradient band {band.rank}) "
+                f"does not fit within {max_seg * seg:g} min"
+            )
+        u_new, win = res
+        u_fixed = np.concatenate(
+            (u_fixed, np.clip(u_new, limits.rate_min_c_per_min, limits.rate_max_c_per_min))
+        )
+        windows.append(win)
+        if progress:
+            progress(f"sweep {k + 1}/{len(directions)} placed, ends at {u_fixed.size * seg:g} min")
+    u_all = return_to_end(ctx, u_fixed, max_seg)
+    if u_all is None:
+        return None, (
+            f"no time is left within {max_seg * seg:g} min to bring the chamber back "
+            f"to {limits.end_c:g} °C after the last sweep"
+        )
+    return Structure(windows, u_all.size, u_all), ""
+
+
+@dataclass(slots=True)
+class Search:
+    """Result of :func:`synthesise`: the best structure that fits, or the reasons why not."""
+
+    best: tuple[Structure, float] | None  # (structure, band separation) within the limit
+    overrun: Structure | None  # shortest structure that does not fit
+    ctx: Context
+    reasons: list[str]
+
+
+def synthesise(
+    spec: ExperimentSpec,
+    params_list: list[ThermalParams],
+    limits: Limits,
+    models: Sequence[LinearThermalModel],
+    progress: Progress,
+    stats: LpStats,
+    max_candidates: int | None = None,
+) -> Search:
+    """Search structures (first direction, band separation, edge caps).
+
+    For each candidate: bands -> greedy placement of the sweeps. ``shortest`` keeps the
+    shortest structure that fits the duration limit; ``margin`` the one with the widest
+    band separation that fits.
+    """
+    seg = spec.segment_min
+    max_seg = int(limits.duration_max_min // seg)
+    ext_seg = int(math.ceil(max_seg * OVERRUN_FACTOR))
+    scenarios = [Scenario(p, m) for p, m in zip(params_list, models, strict=True)]
+    ctx = Context(spec, limits, Responses(scenarios, ext_seg, seg, limits), stats)
+    search = Search(None, None, ctx, [])
+    base_sep = spec.delta_c_per_min + BAND_SAFETY_C_PER_MIN
+    if len(params_list) > 1:
+        base_sep += 2 * ROBUST_SLACK_C_PER_MIN
+    seps = (
+        [base_sep] if spec.objective == "shortest" else [base_sep + x for x in MARGIN_SEPARATIONS]
+    )
+    for sep in seps:
+        for first in first_directions(spec, limits):
+            directions = sweep_directions(spec, first)
+            n_by_dir = {d: directions.count(d) for d in (+1, -1)}
+            for caps, dynamic, design in CANDIDATES[:max_candidates]:
+                cap_by_dir = {
+                    -1: (caps[0] * spec.max_cool_c_per_min, caps[1] * spec.max_cool_c_per_min),
+                    +1: (caps[2] * spec.max_heat_c_per_min, caps[3] * spec.max_heat_c_per_min),
+                }
+                # robust plans use the same bands: each scenario gets its own windows
+                # and a slack (see scenario_windows and SubLP.window)
+                bands = {
+                    d: make_bands(
+                        spec,
+                        n_by_dir[d],
+                        d,
+                        sep,
+                        params_list,
+                        limits,
+                        caps=cap_by_dir[d],
+                        dynamic=dynamic,
+                        design=DESIGNS[design],
+                    )
+                    if n_by_dir[d]
+                    else []
+                    for d in (+1, -1)
+                }
+                narrow = [d for d in (+1, -1) if bands[d] and band_feasibility(bands[d]) <= 0]
+                if narrow:
+                    search.reasons.append(
+                        f"the {'heating' if narrow[0] > 0 else 'cooling'} gradients the chamber "
+                        f"allows near the region's edges cannot hold {n_by_dir[narrow[0]]} "
+                        f"levels {sep:.3f} °C/min apart"
+                    )
+                    continue
+                order = order_bands(directions, bands, params_list[0], limits)
+                # only a shorter structure can improve on what was found: prune
+                limit = ext_seg
+                if search.best is not None:
+                    limit = search.best[0].n_seg - 1
+                elif search.overrun is not None:
+                    limit = min(limit, search.overrun.n_seg - 1)
+                structure, why = greedy(ctx, directions, order, limit, progress)
+                if structure is None:
+                    search.reasons.append(why)
+                    continue
+                minutes = structure.n_seg * seg
+                if structure.n_seg > max_seg:
+                    search.reasons.append(
+                        f"the sweeps need {minutes:g} min, more than the limit "
+                        f"{limits.duration_max_min:g} min"
+                    )
+                    if search.overrun is None or structure.n_seg < search.overrun.n_seg:
+                        search.overrun = structure
+                    continue
+                if search.best is None or structure.n_seg < search.best[0].n_seg:
+                    search.best = (structure, sep)
+                if progress:
+                    progress(f"structure found: {minutes:g} min")
+        if search.best is not None:
+            break  # margin: the widest separation that fits
+    return search
+
+
+def truncate(ctx: Context, structure: Structure, max_seg: int) -> Structure:
+    """Cut an over-long structure so that it returns to the end temperature in time."""
+    for n_r in range(1, max_seg):
+        cut = max_seg - n_r
+        u_fixed = structure.u[:cut]
+        lp = SubLP(ctx, u_fixed, max_seg)
+        lp.chamber()
+        lp.device()
+        lp.chamber_end(ctx.limits.end_c)
+        x = lp.solve_direct(np.zeros(lp.n), l1_weight=1.0)
+        if x is not None:
+            end = ctx.responses.sample_of(cut)
+            windows = [w for w in structure.windows if w.end_sample <= end]
+            return Structure(windows, max_seg, np.concatenate((u_fixed, x)))
+    raise SolverFailedError("could not bring the chamber back to its end temperature")
+
+
+def subregions(
+    spec: ExperimentSpec,
+    params_list: list[ThermalParams],
+    limits: Limits,
+    models: Sequence[LinearThermalModel],
+    progress: Progress,
+    stats: LpStats,
+    stop: Callable[[], bool] | None = None,
+) -> Iterator[tuple[ExperimentSpec, Search]]:
+    """The widest sub-regions (whole bins cut from the low, the high or both edges) for
+    which a structure fits the duration limit: at most one per side, yielded as found.
+
+    ``stop()`` is asked before each further side: the caller says when an option already
+    covers the full region (sweeps designed for a narrower region often still cover the
+    whole one: they pass the edges with margin), so the remaining searches are skipped.
+    """
+    n = spec.grid.n_bins
+    for side in ("low", "high", "both"):
+        wide = tuple(round(share * n) for share in SUBREGION_WIDE_SHARES)
+        cuts = SUBREGION_CUTS if side != "both" else SUBREGION_CUTS_BOTH
+        for cut in sorted(set(cuts) | {c for c in wide if c > max(SUBREGION_CUTS)}):
+            if cut >= n - 1:
+                break
+            a = {"low": cut, "high": 0, "both": cut // 2}[side]
+            b = cut - a
+            sub = replace(
+                spec, working_lo_c=spec.working_lo_c + a, working_hi_c=spec.working_hi_c - b
+            )
+            search = synthesise(sub, params_list, limits, models, None, stats, max_candidates=1)
+            if search.best is not None:
+                if progress:
+                    progress(f"sub-region [{sub.working_lo_c:g}, {sub.working_hi_c:g}] fits")
+                yield sub, search
+                if stop is not None and stop():
+                    return
+                break
