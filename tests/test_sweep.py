@@ -234,14 +234,25 @@ def test_backends_agree(programme):
 def dask_address():
     """A 2-worker Dask cluster on 127.0.0.1 (threads, real TCP), for this module only."""
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(
-        n_workers=2,
-        threads_per_worker=1,
-        processes=False,
-        protocol="tcp://",
-        host="127.0.0.1",
-        dashboard_address=None,
-    ) as cluster:
+    import dask
+
+    # a loaded machine (CI shares its cores) can take longer than dask's default 30 s to
+    # start even an in-process cluster; the test is about results, not start-up speed
+    timeouts = {
+        "distributed.comm.timeouts.connect": "180s",
+        "distributed.comm.timeouts.tcp": "180s",
+    }
+    with (
+        dask.config.set(timeouts),
+        distributed.LocalCluster(
+            n_workers=2,
+            threads_per_worker=1,
+            processes=False,
+            protocol="tcp://",
+            host="127.0.0.1",
+            dashboard_address=":0",  # any free port: None means the default 8787 here
+        ) as cluster,
+    ):
         yield cluster.scheduler_address
 
 
