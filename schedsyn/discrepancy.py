@@ -427,6 +427,23 @@ def fit_base(data: _Data, start: CandidateFit | None = None) -> CandidateFit:
     return _fit("none", [x0], lo, hi, data)
 
 
+def fit_base_log(log, settings: DiagnoseSettings | None = None) -> tuple[CandidateFit, float]:
+    """The base fit ``(tau_s, dt0_c, t0_c)`` of a whole log, and its residuals' lag-1
+    autocorrelation (for widening the white-residual standard errors).
+
+    The same fit :func:`diagnose` starts from (internal temperature predicted from the
+    setpoint programme, block means), without the candidate effects.
+    """
+    settings = DiagnoseSettings() if settings is None else settings
+    data, _ = _prepare(log, settings)
+    base = fit_base(data)
+    r_t, _ = _residuals(base.model, base.t0_c, data)
+    x = r_t - r_t.mean()
+    denom = float(x @ x)
+    rho = float(x[:-1] @ x[1:]) / denom if denom > 0 and x.size > 2 else 0.0
+    return base, rho
+
+
 def _peak_periods(
     t_min: np.ndarray, r: np.ndarray, p_lo_s: float, p_hi_s: float, n_peaks: int = 3
 ) -> list[float]:
