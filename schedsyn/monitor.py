@@ -50,7 +50,7 @@ from .compare import resample_run
 from .coverage import CoverageReport, coverage_report, distinct_levels, passes
 from .effects import ModelSpec
 from .errors import LogFormatError, ParameterError, SchedsynError
-from .estimate import GradientEstimate, estimate_gradient
+from .estimate import estimate_gradient
 from .grid import BinGrid
 from .logs import MeasuredLog, log_from_frame
 from .params import Limits, ThermalParams
