@@ -59,6 +59,8 @@ from .simulate import dense_times
 
 #: Step of the coverage metric's dense grid, min (as for plans).
 DENSE_MIN = 0.1
+#: An effect is material when it moves the predicted device temperature by more than this.
+MATERIAL_C = 0.2
 
 
 # --------------------------------------------------------------------------------------
@@ -448,6 +450,65 @@ def predict_from_state(
     return pred.t_c[1:] + d * e, pred.g_c_per_min[1:] - d / tau_min * e
 
 
+@dataclass(frozen=True, slots=True)
+class EffectCheck:
+    """The effect the diagnosis found on the log up to M, and whether it is material."""
+
+    effect: str
+    parameters: dict[str, float]
+    max_shift_c: float
+    material: bool
+    model: ModelSpec
+    t0_c: float
+    warnings: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "effect": self.effect,
+            "parameters": dict(self.parameters),
+            "max_shift_over_rest_c": self.max_shift_c,
+            "material": self.material,
+            "material_threshold_c": MATERIAL_C,
+            "warnings": list(self.warnings),
+        }
+
+
+def check_effect(
+    log: MeasuredLog,
+    plan: PlanRecord,
+    now_min: float,
+    base: ModelSpec,
+    base_t0_c: float,
+    t_now_c: float,
+    material_c: float = MATERIAL_C,
+) -> EffectCheck:
+    """Diagnose the log; the effect is material if, started from ``T(now) = t_now_c``,
+    its model and the base fit predict device temperatures more than ``material_c``
+    apart somewhere over the rest of the plan."""
+    from .discrepancy import diagnose
+
+    d = diagnose(log)
+    if d.effect == "none":
+        return EffectCheck("none", {}, 0.0, False, base, base_t0_c, tuple(d.warnings))
+    t0 = next(c.t0_c for c in d.candidates if c.effect == d.effect)
+    times = np.arange(now_min, plan.programme.total_min + 1e-9, 0.5)
+    if times.size:
+        t_eff, _ = predict_from_state(d.model, t0, plan.programme, now_min, t_now_c, times)
+        t_base, _ = predict_from_state(base, base_t0_c, plan.programme, now_min, t_now_c, times)
+        shift = float(np.max(np.abs(t_eff - t_base)))
+    else:
+        shift = 0.0
+    return EffectCheck(
+        d.effect,
+        {k: float(v) for k, v in d.parameters.items()},
+        shift,
+        shift > material_c,
+        d.model,
+        t0,
+        tuple(d.warnings),
+    )
+
+
 # --------------------------------------------------------------------------------------
 # the report
 # --------------------------------------------------------------------------------------
@@ -467,6 +528,7 @@ class MonitorReport:
     elapsed_min: float
     plan_total_min: float
     identified: Identified
+    effect: EffectCheck
     so_far: CoverageReport
     pass_in_progress: OpenPass | None
     predicted: CoverageReport
@@ -534,6 +596,10 @@ class MonitorReport:
             "plan_total_min": self.plan_total_min,
             "remaining_min": self.remaining_min,
             "identified": self.identified.to_dict(),
+            "effect": self.effect.to_dict(),
+            "prediction_model": (
+                self.effect.model if self.effect.material else self.identified.model
+            ).to_json_dict(),
             "plan_model": {"tau_s": p.params.tau_s, "dt0_c": p.params.dt0_c},
             "state_now": {
                 "t_c": self.t_now_c,
@@ -574,6 +640,14 @@ class MonitorReport:
             "notes": list(self.notes),
         }
 
+    def _effect_line(self) -> str:
+        e = self.effect
+        if e.effect == "none":
+            return "effect beyond tau and dT0: none found"
+        pars = ", ".join(f"{k} {v:.4g}" for k, v in e.parameters.items())
+        use = "used for the prediction" if e.material else "not material, not used"
+        return f"effect: {e.effect} ({pars}); moves T by up to {e.max_shift_c:.2f} °C: {use}"
+
     def summary(self) -> str:
         i = self.identified
         p = self.plan
@@ -583,6 +657,7 @@ class MonitorReport:
             f"identified from the log: tau {i.tau_s:.0f} ± {i.tau_std_s:.0f} s, dT0 "
             f"{i.dt0_c:.2f} ± {i.dt0_std_c:.2f} °C (plan: {p.params.tau_s:g} s, "
             f"{p.params.dt0_c:g} °C)",
+            self._effect_line(),
             f"measured - planned T: now {self.gap_now_c:+.2f} °C, RMS {self.gap_rms_c:.2f} °C, "
             f"max {self.gap_max_abs_c:.2f} °C",
             f"so far: {int(self.so_far.covered.sum())}/{p.grid.n_bins} bins with "
@@ -604,7 +679,11 @@ class MonitorReport:
 
 
 def monitor_run(
-    log: MeasuredLog, plan: PlanRecord, settings: MonitorSettings | None = None
+    log: MeasuredLog,
+    plan: PlanRecord,
+    settings: MonitorSettings | None = None,
+    *,
+    find_effect: bool = True,
 ) -> MonitorReport:
     """Coverage so far, identified model and predicted final coverage of a run in progress.
 
@@ -617,6 +696,9 @@ def monitor_run(
         From :func:`read_plan_dir`.
     settings : MonitorSettings, optional
         Tolerances of the belongs-to-the-plan checks.
+    find_effect : bool
+        Also diagnose an effect beyond tau and dT0 (:func:`check_effect`); a material one
+        is used for the prediction.
 
     Raises
     ------
@@ -645,10 +727,13 @@ def monitor_run(
     # the rest: the plan's dense grid after the last resampled point
     full = dense_times(total, DENSE_MIN)
     rest = full[full > float(run.time_min[-1]) + 1e-9]
+    if find_effect:
+        effect = check_effect(fit_log, plan, now, ident.model, ident.t0_c, t_now)
+    else:
+        effect = EffectCheck("none", {}, 0.0, False, ident.model, ident.t0_c)
+    model, t0 = (effect.model, effect.t0_c) if effect.material else (ident.model, ident.t0_c)
     if rest.size:
-        t_rest, g_rest = predict_from_state(
-            ident.model, ident.t0_c, plan.programme, now, t_now, rest
-        )
+        t_rest, g_rest = predict_from_state(model, t0, plan.programme, now, t_now, rest)
     else:
         t_rest = g_rest = np.zeros(0)
     t_all = np.concatenate((run.time_min, rest))
@@ -708,6 +793,7 @@ def monitor_run(
         elapsed_min=now,
         plan_total_min=total,
         identified=ident,
+        effect=effect,
         so_far=so_far,
         pass_in_progress=open_pass,
         predicted=predicted,
@@ -740,12 +826,14 @@ def json_safe(obj: Any) -> Any:
 
 
 __all__ = [
+    "EffectCheck",
     "Identified",
     "MonitorReport",
     "MonitorSettings",
     "OpenPass",
     "PlanRecord",
     "check_log_belongs",
+    "check_effect",
     "closed_passes",
     "identify",
     "json_safe",

@@ -56,7 +56,8 @@ def write_plan_dir(path, programme=None, tau_s=2400.0, dt0_c=3.0):
     return path
 
 
-def run_log(until_min, truth=ThermalParams(2400.0, 3.0), seed=0, noise_c=0.005, **kw):
+def run_log(until_min, truth=None, seed=0, noise_c=0.005, **kw):
+    truth = ThermalParams(2400.0, 3.0) if truth is None else truth
     frame = synth_log(plan_programme(), truth, sample_s=10.0, noise_c=noise_c, seed=seed, **kw)
     frame = frame[frame["time_s"] <= until_min * 60.0]
     return frame.drop(columns=["t_true_c", "g_true_c_per_min"]).reset_index(drop=True)
