@@ -9,10 +9,11 @@ module prepares the request (:func:`prepare_replan`) and writes the result
 What :func:`prepare_replan` establishes, in order:
 
 1. **Inputs.** ``M`` lies inside the log and inside the plan; the log has data at ``M``
-   (no sampling gap or run of missing readings around it); the log belongs to the plan
-   (:func:`schedsyn.monitor.check_log_belongs`). Each failure is one line naming which.
+   (no sampling gap or run of missing readings around it); the log up to ``M`` belongs to
+   the plan (:func:`schedsyn.monitor.check_log_belongs`). Each failure is one line.
 2. **The steps as executed up to M**: the plan's programme cut at ``M``
-   (:func:`cut_programme`), checked against the logged ``tk_set_c`` up to ``M``.
+   (:func:`cut_programme`); the logged ``tk_set_c`` up to ``M`` must follow it (rows after
+   ``M`` may already follow a new programme and are not used).
 3. **The state at M**: the chamber setpoint, and the device temperature and gradient
    from the Kalman smoother of the log up to ``M`` (the smoother's last point is the
    filter's, so nothing after ``M`` is used), carried to ``M`` from the last sample by
@@ -213,18 +214,18 @@ def _check_at(log: MeasuredLog, plan: PlanRecord, at_min: float) -> None:
     src = log.source
     if not (isinstance(at_min, int | float) and math.isfinite(at_min) and at_min > 0):
         raise ParameterError(f"--at-min must be a time > 0 min into the run, got {at_min!r}")
+    total = plan.programme.total_min
+    if at_min >= total:
+        raise ParameterError(
+            f"--at-min {at_min:g} is at or beyond the end of the plan {plan.path} "
+            f"({total:g} min): nothing is left to re-plan"
+        )
     t_min = log.time_min
     step_min = log.report.median_step_s / 60.0
     if at_min > float(t_min[-1]) + step_min:
         raise ParameterError(
             f"--at-min {at_min:g} is beyond the end of the log {src} ({t_min[-1]:.1f} min); "
             "re-plan at a time the log has reached"
-        )
-    total = plan.programme.total_min
-    if at_min >= total:
-        raise ParameterError(
-            f"--at-min {at_min:g} is at or beyond the end of the plan {plan.path} "
-            f"({total:g} min): nothing is left to re-plan"
         )
     at_s = at_min * 60.0
     for a, b in log.gaps:
@@ -245,25 +246,6 @@ def _cut_log(log: MeasuredLog, at_min: float) -> MeasuredLog:
     frame = log.to_frame()
     frame = frame[frame["time_s"] <= at_min * 60.0 + 1e-9]
     return log_from_frame(frame.reset_index(drop=True), source=log.source)
-
-
-def check_prefix(
-    log: MeasuredLog, prefix: Programme, tol_c: float
-) -> float:  # returns the largest gap
-    """Largest gap between the logged setpoint (up to M) and the executed steps, degC."""
-    if log.tk_set_c is None:
-        return float("nan")
-    ok = np.isfinite(log.tk_set_c)
-    t = log.time_min[ok]
-    gap = np.abs(log.tk_set_c[ok] - prefix.chamber_at(t))
-    worst = float(gap.max()) if gap.size else 0.0
-    if worst > tol_c:
-        k = int(np.argmax(gap))
-        raise LogFormatError(
-            f"{log.source}: the logged setpoint differs from the plan's steps by {worst:.2f} °C "
-            f"at {t[k]:.1f} min: the chamber did not run this plan up to --at-min"
-        )
-    return worst
 
 
 def prepare_replan(
@@ -300,10 +282,10 @@ def prepare_replan(
     """
     settings = MonitorSettings() if settings is None else settings
     _check_at(log, plan, at_min)
-    check_log_belongs(log, plan, settings)
     cut = _cut_log(log, at_min)
+    # the log up to M must be a run of the plan: its setpoint follows the executed steps
+    check_log_belongs(cut, plan, settings)
     prefix = cut_programme(plan.programme, at_min)
-    check_prefix(cut, prefix, settings.setpoint_tol_c)
     notes: list[str] = []
     if log.tk_set_c is None:
         notes.append("the log has no tk_set_c: the plan's programme is taken as the setpoint")

@@ -30,9 +30,9 @@ LEVELS, DELTA = 3, 0.05
 
 
 def plan_programme() -> Programme:
-    """20 -> -25 -> 25 -> -20 -> 20 degC at mixed rates: the region is crossed five times."""
+    """20 -> -25 -> 30 -> -15 -> 20 degC at mixed rates: the region is crossed four times."""
     d = [45.0, 40.0, 30.0, 50.0, 60.0, 60.0, 45.0, 50.0, 60.0]
-    u = [-1.0, 0.0, 1.0, 0.5, 0.0, -0.75, 0.0, 0.8, 0.0]
+    u = [-1.0, 0.0, 1.0, 0.5, 0.0, -0.75, 0.0, 0.7, 0.0]
     return Programme(np.array(d), np.array(u))
 
 
