@@ -1008,8 +1008,9 @@ def lag_ambiguity(
     """The lag-type candidates that fit nearly as well as a chosen lag-type effect.
 
     Nearly equal: within ``ambiguity_bic`` of the chosen one's BIC, or a root sum of
-    squared residuals (every channel fitted) within ``lag_ambiguity_rel`` of it. Returns all of them, the chosen one first, each with
-    what would tell it apart from the others; empty if none is close.
+    squared residuals (every channel fitted) within ``lag_ambiguity_rel`` of it. Returns
+    all of them, the chosen one first, each with what would tell it apart from the
+    others; empty if none is close.
     """
     if chosen not in LAG_EFFECTS or chosen not in fits:
         return ()
