@@ -279,18 +279,21 @@ def check_log_belongs(
         gap = np.abs(log.tk_set_c[ok] - plan.programme.chamber_at(t_min[ok]))
         if gap.size and float(gap.max()) > s.setpoint_tol_c:
             k = int(np.argmax(gap))
-            tk = float(log.tk_set_c[ok][k])
+            logged = float(log.tk_set_c[ok][k])
             at = float(t_min[ok][k])
+            planned = float(plan.programme.chamber_at(np.array([at]))[0])
             raise LogFormatError(
-                f"{src}: the logged setpoint tk_set_c = {tk:.2f} °C at {at:.1f} min differs "
-                f"from the plan's programme ({plan.programme.chamber_at(at):.2f} °C) by "
+                f"{src}: the logged setpoint tk_set_c = {logged:.2f} °C at {at:.1f} min differs "
+                f"from the plan's programme ({planned:.2f} °C) by "
                 f"{gap[k]:.2f} °C > {s.setpoint_tol_c:g} °C: the log does not belong to "
                 f"{plan.path} (another programme or start time)"
             )
     edges = np.concatenate(([0.0], np.cumsum(plan.programme.durations_min)))
     upto = float(min(t_min[-1], total))
     inside = edges[edges < upto]
-    tk = np.concatenate((plan.programme.chamber_at(inside), plan.programme.chamber_at([upto])))
+    tk = np.concatenate(
+        (plan.programme.chamber_at(inside), plan.programme.chamber_at(np.array([upto])))
+    )
     lo = min(float(tk.min()), plan.limits.t_init_c) - s.envelope_c
     hi = max(float(tk.max()), plan.limits.t_init_c) + s.envelope_c
     y = log.t_int_c[finite]
@@ -606,7 +609,7 @@ class MonitorReport:
                 "t_std_c": self.t_now_std_c,
                 "g_c_per_min": self.g_now_c_per_min,
                 "g_std_c_per_min": self.g_now_std_c_per_min,
-                "tk_set_c": float(p.programme.chamber_at([self.elapsed_min])[0]),
+                "tk_set_c": float(p.programme.chamber_at(np.array([self.elapsed_min]))[0]),
             },
             "gap_measured_minus_planned_c": {
                 "rms": self.gap_rms_c,

@@ -89,7 +89,9 @@ def rest_of_programme(programme: Programme, at_min: float) -> Programme:
     k = int(np.searchsorted(ends, at_min + 1e-9, side="right"))
     d = programme.durations_min[k:].copy()
     d[0] = ends[k] - at_min
-    return Programme(d, programme.rates_c_per_min[k:], float(programme.chamber_at([at_min])[0]))
+    return Programme(
+        d, programme.rates_c_per_min[k:], float(programme.chamber_at(np.array([at_min]))[0])
+    )
 
 
 def join_programmes(prefix: Programme, rest: Programme) -> Programme:
@@ -298,7 +300,7 @@ def prepare_replan(
     # carried to M along the gradient: T(M) = T_k + g_k dt; var = P11 + dt^2 P22 (+ cov, neglected)
     state = ReplanState(
         at_min=float(at_min),
-        tk_set_c=float(plan.programme.chamber_at([at_min])[0]),
+        tk_set_c=float(plan.programme.chamber_at(np.array([at_min]))[0]),
         t_c=float(est.t_est_c[k] + est.g_est_c_per_min[k] * dt),
         t_std_c=float(math.hypot(est.t_std_c[k], dt * est.g_std_c_per_min[k])),
         g_c_per_min=float(est.g_est_c_per_min[k]),
