@@ -59,6 +59,10 @@ class DiagnoseSettings:
         ... and lower the RMS gap (fit data) by at least this fraction.
     ambiguity_bic : float
         Other candidates within this BIC of the winner are reported as not told apart.
+    lag_ambiguity_rel : float
+        Lag-type candidates (dead time, second time constant, chamber lag) whose RMS gap
+        is within this fraction of the chosen lag-type effect's are listed as ambiguous
+        with it (nearly equal fits; BIC differences grow with the log length).
     holdout_fraction : float
         Last fraction of the log kept out of the held-out fit, in (0, 0.9).
     max_tries : int
@@ -74,6 +78,7 @@ class DiagnoseSettings:
     bic_margin: float = 15.0
     min_rel_improvement: float = 0.02
     ambiguity_bic: float = 10.0
+    lag_ambiguity_rel: float = 0.05
     holdout_fraction: float = 0.3
     max_tries: int = 3
     setpoint_tol_c: float = 0.05
@@ -88,7 +93,13 @@ class DiagnoseSettings:
             raise ParameterError(
                 f"holdout_fraction must be in (0, 0.9), got {self.holdout_fraction!r}"
             )
-        for name in ("bic_margin", "min_rel_improvement", "ambiguity_bic", "setpoint_tol_c"):
+        for name in (
+            "bic_margin",
+            "min_rel_improvement",
+            "ambiguity_bic",
+            "lag_ambiguity_rel",
+            "setpoint_tol_c",
+        ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise ParameterError(f"{name} must be >= 0, got {v!r}")
@@ -427,6 +438,23 @@ def fit_base(data: _Data, start: CandidateFit | None = None) -> CandidateFit:
     return _fit("none", [x0], lo, hi, data)
 
 
+def fit_base_log(log, settings: DiagnoseSettings | None = None) -> tuple[CandidateFit, float]:
+    """The base fit ``(tau_s, dt0_c, t0_c)`` of a whole log, and its residuals' lag-1
+    autocorrelation (for widening the white-residual standard errors).
+
+    The same fit :func:`diagnose` starts from (internal temperature predicted from the
+    setpoint programme, block means), without the candidate effects.
+    """
+    settings = DiagnoseSettings() if settings is None else settings
+    data, _ = _prepare(log, settings)
+    base = fit_base(data)
+    r_t, _ = _residuals(base.model, base.t0_c, data)
+    x = r_t - r_t.mean()
+    denom = float(x @ x)
+    rho = float(x[:-1] @ x[1:]) / denom if denom > 0 and x.size > 2 else 0.0
+    return base, rho
+
+
 def _peak_periods(
     t_min: np.ndarray, r: np.ndarray, p_lo_s: float, p_hi_s: float, n_peaks: int = 3
 ) -> list[float]:
@@ -712,6 +740,318 @@ def _json_num(v: float) -> float | None:
 
 
 # --------------------------------------------------------------------------------------
+# what the chamber-air channel shows, and lag-type effects that fit nearly equally
+# --------------------------------------------------------------------------------------
+#: Effects that delay the device's response to the setpoint (told apart by air or a step).
+LAG_EFFECTS = ("dead_time", "second_time_constant", "chamber_lag")
+
+
+def sensor_noise_c(values_c: np.ndarray) -> float:
+    """Robust white-noise sigma of a smooth signal's readings, degC.
+
+    Second differences remove the signal's slope (curvature is negligible at logging
+    rates): ``std(y[k+1] - 2 y[k] + y[k-1]) = sqrt(6) sigma``, with sigma from the MAD.
+    """
+    y = np.asarray(values_c, dtype=float)
+    y = y[np.isfinite(y)]
+    if y.size < 5:
+        return float("nan")
+    d2 = y[2:] - 2.0 * y[1:-1] + y[:-2]
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6.0))
+
+
+@dataclass(frozen=True, slots=True)
+class AirFinding:
+    """An effect seen in the chamber air channel, and what it does to the device.
+
+    ``device_shift_c`` is the largest change of the device temperature the effect causes
+    over the log (base model with and without it); ``below_noise`` when that is smaller
+    than the internal sensor's noise ``noise_c`` (sigma). ``text`` says it in one line.
+    """
+
+    effect: str
+    parameters: Mapping[str, float]
+    air_rms_c: float
+    device_shift_c: float
+    noise_c: float
+    below_noise: bool
+    text: str
+
+    def to_dict(self) -> dict:
+        return {
+            "effect": self.effect,
+            "parameters": {k: float(v) for k, v in self.parameters.items()},
+            "air_rms_c": self.air_rms_c,
+            "device_shift_c": self.device_shift_c,
+            "sensor_noise_c": _json_num(self.noise_c),
+            "below_noise": self.below_noise,
+            "text": self.text,
+        }
+
+
+def _device_shift(
+    spec: ModelSpec, base: CandidateFit, data: _Data, grid_min: float | None = None
+) -> float:
+    plain = ModelSpec(spec.tau_s, spec.dt0_c)
+    t = data.time_min
+    a = spec.predict(data.programme, t, t0_c=base.t0_c, grid_min=grid_min).t_c
+    b = plain.predict(data.programme, t, t0_c=base.t0_c, grid_min=grid_min).t_c
+    return float(np.max(np.abs(a - b))) if t.size else 0.0
+
+
+def _uniform_periodogram(t_s: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Periodogram of ``x`` interpolated to a uniform grid (4x zero padding): f (Hz), power."""
+    h = float(np.median(np.diff(t_s)))
+    grid = np.arange(t_s[0], t_s[-1], h)
+    xi = np.interp(grid, t_s, x)
+    n = 4 * grid.size
+    return np.fft.rfftfreq(n, d=h), np.abs(np.fft.rfft(xi - xi.mean(), n=n)) ** 2, h
+
+
+def _air_cycling(t_s: np.ndarray, a: np.ndarray) -> tuple[float, float, float, float] | None:
+    """``(amplitude, period_s, phase_rad, t-stat)`` of the strongest sinusoid in ``a``.
+
+    Periodogram peak (uniform grid, parabolic refinement), then amplitude and phase by
+    linear least squares; significant when ``A > 6 sigma sqrt(2/N)`` (sigma the residual
+    std after removing it) and it explains at least 10 % of the variance.
+    """
+    if a.size < 50:
+        return None
+    f, p, h = _uniform_periodogram(t_s, a)
+    span = t_s[-1] - t_s[0]
+    ok = (f >= 4.0 / span) & (f <= 1.0 / (2.5 * h))
+    if ok.sum() < 3:
+        return None
+    idx = np.flatnonzero(ok)
+    k = int(idx[np.argmax(p[idx])])
+    if 0 < k < f.size - 1:  # parabolic interpolation of the peak (log power)
+        y0, y1, y2 = np.log(p[k - 1 : k + 2] + 1e-300)
+        den = y0 - 2 * y1 + y2
+        shift = 0.5 * (y0 - y2) / den if den != 0 else 0.0
+        freq = f[k] + float(np.clip(shift, -0.5, 0.5)) * (f[1] - f[0])
+    else:
+        freq = f[k]
+    w = 2.0 * np.pi * freq
+    cols = np.column_stack((np.ones_like(t_s), np.sin(w * t_s), np.cos(w * t_s)))
+    coef, *_ = np.linalg.lstsq(cols, a, rcond=None)
+    resid = a - cols @ coef
+    amp = math.hypot(coef[1], coef[2])
+    sigma = float(np.std(resid))
+    var_a = float(np.var(a))
+    tstat = amp / (sigma * math.sqrt(2.0 / a.size)) if sigma > 0 else math.inf
+    share = 1.0 - float(np.var(resid)) / var_a if var_a > 0 else 0.0
+    if tstat < 6.0 or share < 0.1:
+        return None
+    # a sin(wt) + b cos(wt) = A sin(wt + phi)
+    return amp, 1.0 / freq, math.atan2(coef[2], coef[1]), tstat
+
+
+def air_channel_findings(
+    log, data: _Data, base: CandidateFit, fits: Mapping[str, CandidateFit], noise_c: float
+) -> tuple[AirFinding, ...]:
+    """Effects the chamber air (``tk_air_c``) shows against the setpoint, at full rate.
+
+    The air residual ``a = tk_air_c - tk_set_c`` is examined directly (so cycling faster
+    than the fit's blocks is not missed): a first-order chamber lag ``a = -tau_c dS/dt``
+    (least squares on the setpoint slope), then the strongest sinusoid in what is left
+    (:func:`_air_cycling`). The fitted air-channel candidates (chamber lag, rate limit,
+    cycling) that halve the air gap are added when not found directly. Each finding
+    says what the effect does to the device (:func:`_device_shift`) against ``noise_c``.
+    """
+    t_s = np.asarray(log.time_s, dtype=float)
+    air = np.asarray(log.tk_air_c, dtype=float)
+    sp = np.asarray(log.tk_set_c, dtype=float)
+    ok = np.isfinite(air) & np.isfinite(sp)
+    t_s, air, sp = t_s[ok], air[ok], sp[ok]
+    if t_s.size < 50:
+        return ()
+    t_min = (t_s - t_s[0]) / 60.0
+    a = air - sp
+    air_noise = sensor_noise_c(air)
+    out: list[AirFinding] = []
+
+    def sentence(lead: str, shift: float) -> tuple[str, bool]:
+        below = bool(math.isfinite(noise_c) and shift < noise_c)
+        if below:
+            tail = (
+                f"attenuated below the sensor noise (±{shift:.2g} °C at the device, noise "
+                f"{noise_c:.2g} °C)"
+            )
+        else:
+            tail = f"moves the device by up to {shift:.2g} °C (sensor noise {noise_c:.2g} °C)"
+        return f"{lead}, {tail}", below
+
+    # chamber lag: A = S - tau_c dS/dt for ramps slower than 1/tau_c
+    slope = np.gradient(sp, t_s)  # degC/s
+    x = np.column_stack((np.ones_like(slope), -slope))
+    coef, *_ = np.linalg.lstsq(x, a, rcond=None)
+    res = a - x @ coef
+    s_x = float(np.sqrt(np.sum((slope - slope.mean()) ** 2)))
+    sigma = float(np.std(res))
+    tau_c = float(coef[1])
+    t_lag = tau_c * s_x / sigma if sigma > 0 and s_x > 0 else 0.0
+    share = 1.0 - float(np.var(res)) / float(np.var(a)) if np.var(a) > 0 else 0.0
+    a_rest = a
+    if tau_c > 1.0 and t_lag > 6.0 and share > 0.1:
+        spec = ModelSpec(
+            base.model.tau_s, base.model.dt0_c, "chamber_lag", {"tau_chamber_s": tau_c}
+        )
+        shift = _device_shift(spec, base, data)
+        rate = float(np.max(np.abs(slope))) * 60.0
+        text, below = sentence(
+            f"air lags the setpoint by about {tau_c:.0f} s (first-order; a {rate:.2g} °C/min "
+            f"ramp runs {rate * tau_c / 60.0:.2g} °C behind)",
+            shift,
+        )
+        out.append(
+            AirFinding(
+                "chamber_lag",
+                {"tau_chamber_s": tau_c},
+                float(np.std(a - res)),
+                shift,
+                noise_c,
+                below,
+                text,
+            )
+        )
+        a_rest = res
+    cyc = _air_cycling(t_s - t_s[0], a_rest)
+    if cyc is not None:
+        amp, period, phase, _ = cyc
+        # the air model's phase is relative to the programme's start (t in min from it)
+        params = {"amplitude_c": amp, "period_s": period, "phase_rad": phase}
+        spec = ModelSpec(base.model.tau_s, base.model.dt0_c, "chamber_cycling", params)
+        shift = _device_shift(spec, base, data, grid_min=min(period / 20.0, 10.0) / 60.0)
+        text, below = sentence(
+            f"air cycles ±{amp:.2g} °C every {period:.0f} s around the setpoint", shift
+        )
+        out.append(
+            AirFinding("chamber_cycling", params, amp / math.sqrt(2.0), shift, noise_c, below, text)
+        )
+    found = {f.effect for f in out}
+    base_air = base.rms_air_c
+    for name in ("chamber_lag", "chamber_rate_limit", "chamber_cycling"):
+        fit = fits.get(name)
+        if (
+            name in found
+            or fit is None
+            or fit.rms_air_c is None
+            or base_air is None
+            or not (base_air > 3.0 * air_noise and fit.rms_air_c <= 0.5 * base_air)
+        ):
+            continue
+        params = dict(fit.model.parameters)
+        shift = _device_shift(
+            ModelSpec(base.model.tau_s, base.model.dt0_c, name, params), base, data
+        )
+        desc = ", ".join(f"{k} {v:.4g}" for k, v in params.items() if v < NOT_BINDING_C_PER_MIN)
+        text, below = sentence(
+            f"air shows {name} ({desc}; air gap {base_air:.2g} -> {fit.rms_air_c:.2g} °C)", shift
+        )
+        out.append(AirFinding(name, params, base_air, shift, noise_c, below, text))
+    del t_min
+    return tuple(out)
+
+
+#: How to tell two lag-type effects apart (keys: sorted pairs).
+_TELL_APART = {
+    ("chamber_lag", "second_time_constant"): (
+        "log the chamber air (tk_air_c): a chamber lag shows in the air, a second thermal "
+        "mass between air and sensor does not"
+    ),
+    ("dead_time", "second_time_constant"): (
+        "a setpoint step (or a fast ramp reversal) sampled every few seconds: a dead time "
+        "gives no response at all for its delay, a second time constant a smooth S-shaped "
+        "start"
+    ),
+    ("chamber_lag", "dead_time"): (
+        "log the chamber air (tk_air_c), or a setpoint step sampled every few seconds: a "
+        "dead time gives no response for its delay, a lag an S-shaped start"
+    ),
+}
+
+
+@dataclass(frozen=True, slots=True)
+class AmbiguousFit:
+    """One of the lag-type effects that fit nearly equally: its fit and how to decide."""
+
+    effect: str
+    parameters: Mapping[str, float]
+    tau_s: float
+    dt0_c: float
+    rms_c: float
+    delta_bic: float
+    tell_apart: tuple[str, ...]
+
+    def to_dict(self) -> dict:
+        return {
+            "effect": self.effect,
+            "parameters": {k: float(v) for k, v in self.parameters.items()},
+            "tau_s": self.tau_s,
+            "dt0_c": self.dt0_c,
+            "rms_c": self.rms_c,
+            "delta_bic_vs_chosen": self.delta_bic,
+            "tell_apart": list(self.tell_apart),
+        }
+
+    def line(self) -> str:
+        pars = ", ".join(f"{k} {v:.4g}" for k, v in self.parameters.items())
+        return (
+            f"{self.effect} ({pars}; tau {self.tau_s:.0f} s): RMS {self.rms_c:.4f} °C, "
+            f"BIC {self.delta_bic:+.1f}" + (f"; {self.tell_apart[0]}" if self.tell_apart else "")
+        )
+
+
+def lag_ambiguity(
+    chosen: str, fits: Mapping[str, CandidateFit], settings: DiagnoseSettings
+) -> tuple[AmbiguousFit, ...]:
+    """The lag-type candidates that fit nearly as well as a chosen lag-type effect.
+
+    Nearly equal: within ``ambiguity_bic`` of the chosen one's BIC, or a root sum of
+    squared residuals (every channel fitted) within ``lag_ambiguity_rel`` of it. Returns
+    all of them, the chosen one first, each with what would tell it apart from the
+    others; empty if none is close.
+    """
+    if chosen not in LAG_EFFECTS or chosen not in fits:
+        return ()
+    best = fits[chosen]
+    close = [
+        n
+        for n in LAG_EFFECTS
+        if n != chosen
+        and n in fits
+        and (
+            fits[n].score - best.score < settings.ambiguity_bic
+            # the whole fit (both channels where the air is logged), not the device alone
+            or math.sqrt(fits[n].sse / max(best.sse, 1e-300)) <= 1.0 + settings.lag_ambiguity_rel
+        )
+    ]
+    if not close:
+        return ()
+    group = [chosen, *close]
+    out = []
+    for n in group:
+        f = fits[n]
+        tips = tuple(
+            _TELL_APART[tuple(sorted((n, m)))]  # type: ignore[index]
+            for m in group
+            if m != n and tuple(sorted((n, m))) in _TELL_APART
+        )
+        out.append(
+            AmbiguousFit(
+                n,
+                dict(f.model.parameters),
+                float(f.values["tau_s"]),
+                float(f.values["dt0_c"]),
+                float(f.rms_c),
+                float(f.score - best.score),
+                tips,
+            )
+        )
+    return tuple(out)
+
+
+# --------------------------------------------------------------------------------------
 # the result
 # --------------------------------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
@@ -750,6 +1090,8 @@ class Diagnosis:
     after_c: np.ndarray = field(repr=False)
     before_g_c_per_min: np.ndarray = field(repr=False)
     after_g_c_per_min: np.ndarray = field(repr=False)
+    air_findings: tuple[AirFinding, ...] = ()
+    lag_ambiguity: tuple[AmbiguousFit, ...] = ()
 
     @property
     def main_parameter(self) -> tuple[str, float] | None:
@@ -793,6 +1135,8 @@ class Diagnosis:
                 "rms_after_c": self.holdout_rms_after_c,
             },
             "ambiguous_with": list(self.ambiguous_with),
+            "lag_ambiguity": [a.to_dict() for a in self.lag_ambiguity],
+            "seen_in_air": [f.to_dict() for f in self.air_findings],
             "warnings": list(self.warnings),
             "residuals": {
                 "rms_heating_c": self.residuals_before.rms_heating_c,
@@ -815,7 +1159,12 @@ class Diagnosis:
         }
 
     def summary(self) -> str:
-        lines = [f"effect: {self.effect}"]
+        head = f"effect: {self.effect}"
+        if self.effect == "none" and self.air_findings:
+            head += " for the device; seen in the chamber air: " + "; ".join(
+                f.text for f in self.air_findings
+            )
+        lines = [head]
         for k, v in self.parameters.items():
             lines.append(f"  {k} = {v:.4g} +- {self.stderr.get(k, float('nan')):.2g}")
         lines.append(
@@ -829,6 +1178,11 @@ class Diagnosis:
         lines.append("before: " + self.residuals_before.summary())
         if self.effect != "none":
             lines.append("after:  " + self.residuals_after.summary())
+        if self.effect != "none":
+            lines.extend(f"seen in the chamber air: {f.text}" for f in self.air_findings)
+        if self.lag_ambiguity:
+            lines.append("lag-type effects that fit nearly equally:")
+            lines.extend(f"  {a.line()}" for a in self.lag_ambiguity)
         lines.extend(f"warning: {w}" for w in self.warnings)
         return "\n".join(lines)
 
@@ -935,6 +1289,20 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
                     f"(BIC {c.score - fits[chosen].score:+.1f});"
                     " the log does not tell them apart reliably"
                 )
+    lag_group = lag_ambiguity(chosen, fits, settings)
+    for a in lag_group[1:]:
+        if a.effect not in ambiguous:
+            ambiguous.append(a.effect)
+    if lag_group:
+        warnings.append(
+            "lag-type effects fit nearly equally ("
+            + ", ".join(a.effect for a in lag_group)
+            + "); to tell them apart: "
+            + "; ".join(dict.fromkeys(t for a in lag_group for t in a.tell_apart))
+        )
+    air_found: tuple[AirFinding, ...] = ()
+    if has_air:
+        air_found = air_channel_findings(log, data, base, fits, sensor_noise_c(log.t_int_c))
     chosen_fit = fits[chosen] if chosen != "none" else base
     if chosen == "chamber_cycling":
         share = _setpoint_share(data.programme, chosen_fit.model.parameters["period_s"])
@@ -990,6 +1358,8 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
         after_c=p_after.t_c,
         before_g_c_per_min=p_before.g_c_per_min,
         after_g_c_per_min=p_after.g_c_per_min,
+        air_findings=air_found,
+        lag_ambiguity=lag_group,
     )
 
 

@@ -9,7 +9,10 @@ from realistic ranges (or none), on one of three 9-hour programmes, diagnosed bl
 Writes DIR/cases.csv (one row per log), DIR/confusion.csv, DIR/summary.csv and prints
 the tables. A case is "correct" if the named effect is the truth, or if the truth is
 listed in `ambiguous_with` because the channels present cannot tell them apart
-(chamber_lag vs second_time_constant without the air channel).
+(chamber_lag vs second_time_constant without the air channel, or lag-type effects that
+fit nearly equally). ``named_strictly`` counts only the named effect; ``lag_ambiguous``
+the logs where lag-type effects were listed as nearly equal; ``seen_in_air`` the logs
+where the chamber-air channel showed an effect (reported with its device impact).
 """
 
 from __future__ import annotations
@@ -70,6 +73,9 @@ def run_case(args):
         "found": d.effect,
         "ambiguous_with": ",".join(d.ambiguous_with),
         "correct": correct,
+        "named_strictly": d.effect == effect,
+        "lag_ambiguity": ",".join(a.effect for a in d.lag_ambiguity),
+        "seen_in_air": ",".join(f.effect for f in d.air_findings),
         "main_rel_error": err,
         "rms_before_c": d.rms_before_c,
         "rms_after_c": d.rms_after_c,
@@ -112,6 +118,9 @@ def main() -> None:
         .agg(
             n=("correct", "size"),
             correct=("correct", "sum"),
+            named_strictly=("named_strictly", "sum"),
+            lag_ambiguous=("lag_ambiguity", lambda s: int((s != "").sum())),
+            seen_in_air=("seen_in_air", lambda s: int((s != "").sum())),
             main_err_median=("main_rel_error", "median"),
             main_err_max=("main_rel_error", "max"),
             within_25pct=("main_rel_error", lambda s: int((s <= 0.25).sum())),

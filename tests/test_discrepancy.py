@@ -221,3 +221,75 @@ def test_real_tclab_sine_run_finds_a_second_lag():
     assert 5.0 < d.parameters["tau2_s"] < 60.0
     assert d.rms_after_c < 0.5 * d.rms_before_c
     assert d.holdout_rms_after_c < 0.6 * d.holdout_rms_before_c
+
+
+# --------------------------------------------------------------------------------------
+# the chamber-air channel and lag-type ambiguity (issue 14, item 4)
+# --------------------------------------------------------------------------------------
+def _effect_frame(prog_name, effect, params, *, air, noise_c=0.02, seed=1):
+    truth = ModelSpec(2400.0, 3.0, effect, params)
+    prog = blind_programmes()[prog_name]
+    return synth_effect_log(prog, truth, sample_s=10.0, noise_c=noise_c, seed=seed, with_air=air)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_air_cycling_too_fast_for_the_device_is_reported_as_seen_not_none(seed):
+    amp, period = 1.2, 40.0
+    params = {"amplitude_c": amp, "period_s": period, "phase_rad": 0.3}
+    d = diagnose_frame(_effect_frame("cold", "chamber_cycling", params, air=True, seed=seed))
+    assert d.effect == "none"  # nothing the device feels ...
+    (f,) = [f for f in d.air_findings if f.effect == "chamber_cycling"]  # ... but seen
+    assert f.parameters["amplitude_c"] == pytest.approx(amp, rel=0.05)
+    assert f.parameters["period_s"] == pytest.approx(period, rel=0.01)
+    # first-order attenuation at the device: A / sqrt(1 + (2 pi tau / P)^2)
+    theory = amp / math.hypot(1.0, 2.0 * math.pi * 2400.0 / period)
+    assert 0.5 * theory < f.device_shift_c < 2.0 * theory
+    assert f.below_noise and "attenuated below the sensor noise" in d.summary()
+    assert "±1.2 °C every 40 s" in f.text
+    seen = d.to_json_dict()["seen_in_air"]
+    assert seen and seen[0]["effect"] == "chamber_cycling"
+
+
+def test_material_air_cycling_is_not_called_below_the_noise():
+    params = {"amplitude_c": 2.0, "period_s": 1200.0, "phase_rad": 0.3}
+    d = diagnose_frame(_effect_frame("cold", "chamber_cycling", params, air=True))
+    (f,) = [f for f in d.air_findings if f.effect == "chamber_cycling"]
+    assert not f.below_noise and f.device_shift_c > 0.1
+    assert f.parameters["period_s"] == pytest.approx(1200.0, rel=0.02)
+
+
+def test_air_lag_is_measured_from_the_air_channel():
+    d = diagnose_frame(_effect_frame("cold", "chamber_lag", {"tau_chamber_s": 20.0}, air=True))
+    (f,) = [f for f in d.air_findings if f.effect == "chamber_lag"]
+    assert f.parameters["tau_chamber_s"] == pytest.approx(20.0, rel=0.15)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_clean_air_shows_nothing(seed):
+    d = diagnose_frame(_effect_frame("cold", "none", {}, air=True, seed=seed))
+    assert d.air_findings == ()
+
+
+def test_nearly_equal_lag_type_effects_are_all_listed_with_fits_and_how_to_tell():
+    d = diagnose_frame(
+        _effect_frame("warm", "dead_time", {"delay_s": 40.0}, air=False, noise_c=0.03)
+    )
+    names = [a.effect for a in d.lag_ambiguity]
+    assert set(names) == {"dead_time", "second_time_constant", "chamber_lag"}
+    assert names[0] == d.effect
+    assert {"dead_time", "second_time_constant", "chamber_lag"} - {d.effect} <= set(
+        d.ambiguous_with
+    )
+    for a in d.lag_ambiguity:
+        (v,) = a.parameters.values()
+        assert v == pytest.approx(40.0, rel=0.2)  # every one fitted, with its number
+        assert a.tell_apart
+    tips = " ".join(t for a in d.lag_ambiguity for t in a.tell_apart)
+    assert "tk_air_c" in tips and "step" in tips
+    assert d.to_json_dict()["lag_ambiguity"][0]["effect"] == d.effect
+
+
+def test_lag_type_effects_told_apart_are_not_called_ambiguous():
+    d = diagnose_frame(_effect_frame("cold", "dead_time", {"delay_s": 120.0}, air=False))
+    assert d.effect == "dead_time"
+    assert d.lag_ambiguity == () and "second_time_constant" not in d.ambiguous_with

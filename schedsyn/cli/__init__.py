@@ -14,7 +14,16 @@ import sys
 from ..errors import SchedsynError
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ("simulate", "sweep", "estimate", "compare", "diagnose", "plan", "campaign")
+COMMANDS = (
+    "simulate",
+    "sweep",
+    "estimate",
+    "compare",
+    "diagnose",
+    "monitor",
+    "plan",
+    "campaign",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

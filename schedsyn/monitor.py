@@ -1,0 +1,848 @@
+"""Watch a run in progress against its plan: coverage so far, the model it shows, the rest.
+
+A plan directory (``schedsyn plan``/``campaign``/``replan`` output) holds ``steps.csv``
+(the chamber programme) and ``plan.json`` (``spec``: region and coverage target;
+``limits``; ``tau_s``, ``dt0_c``). Given the log of the run so far,
+:func:`monitor_run` reports:
+
+* the elapsed time and the plan's time left;
+* per 1 degC bin, the passes and distinct gradient levels measured so far, from the
+  kinematic Kalman smoother's ``(T, g)`` resampled to the coverage metric's 0.1 min grid
+  (:func:`schedsyn.compare.resample_run`; sampling gaps never count as a pass);
+* ``tau_s`` and ``dt0_c`` identified from the log so far (the base fit of
+  :mod:`schedsyn.discrepancy`; the first transit is a step test), with standard errors
+  widened for correlated residuals by ``sqrt((1 + rho)/(1 - rho))`` (``rho`` the lag-1
+  autocorrelation of the fit's residuals);
+* the gap between the measured and the planned internal temperature;
+* the coverage the run reaches if the plan goes on unchanged, predicted with the
+  identified model from the smoother's state at the end of the log.
+
+**A pass still in progress at the end of the log** (the smoothed T is inside a bin at the
+last sample) is not counted in the passes *so far*: its mean gradient is not known yet.
+It is reported on its own (``pass_in_progress``: bin, time it entered, mean gradient so
+far). In the prediction, the measured and the predicted samples form one series on one
+0.1 min grid, so the pass straddling "now" is one pass whose gradient is the mean over
+its measured and predicted samples, exactly as the coverage metric would count it at the
+end of the run.
+
+**Prediction from the estimated state.** The identified first-order model is simulated
+from the start (its fitted ``T0``) and its free response is corrected so that it starts
+from the smoother's ``T_now``::
+
+    T(t) = T_model(t) + d e^{-(t - t_now)/tau},   g(t) = g_model(t) - (d/tau) e^{-(t - t_now)/tau}
+    d = T_est(t_now) - T_model(t_now)
+
+(exact for the first-order lag, whose only state is T).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .compare import resample_run
+from .coverage import CoverageReport, coverage_report, distinct_levels, passes
+from .effects import ModelSpec
+from .errors import LogFormatError, ParameterError, SchedsynError
+from .estimate import estimate_gradient
+from .grid import BinGrid
+from .logs import MeasuredLog, log_from_frame
+from .params import Limits, ThermalParams
+from .programme import Programme, read_steps
+from .simulate import dense_times
+
+#: Step of the coverage metric's dense grid, min (as for plans).
+DENSE_MIN = 0.1
+#: An effect is material when it moves the predicted device temperature by more than this.
+MATERIAL_C = 0.2
+
+
+# --------------------------------------------------------------------------------------
+# the plan directory
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class PlanRecord:
+    """A plan as read back from its directory (``steps.csv`` + ``plan.json``).
+
+    Attributes
+    ----------
+    path : Path
+        The directory.
+    programme : Programme
+        The chamber programme of ``steps.csv``.
+    name : str
+        Experiment name.
+    working_lo_c, working_hi_c, approx_lo_c, approx_hi_c : float
+        Working and approximation regions, degC.
+    levels_required : int
+        Distinct gradient levels every bin needs.
+    delta_c_per_min : float
+        Minimum difference between two levels, degC/min.
+    limits : Limits
+        The plan's limits.
+    params : ThermalParams
+        The model the plan was made for (``tau_s``, ``dt0_c``).
+    model : ModelSpec
+        The same with the effect ``plan.json`` names under ``model`` (``none`` if absent).
+    raw : dict
+        ``plan.json`` as read (for writing a derived plan directory).
+    """
+
+    path: Path
+    programme: Programme
+    name: str
+    working_lo_c: float
+    working_hi_c: float
+    approx_lo_c: float
+    approx_hi_c: float
+    levels_required: int
+    delta_c_per_min: float
+    limits: Limits
+    params: ThermalParams
+    model: ModelSpec
+    raw: dict = field(repr=False)
+
+    @property
+    def grid(self) -> BinGrid:
+        return BinGrid(self.working_lo_c, self.working_hi_c)
+
+    @property
+    def spec_dict(self) -> dict:
+        return dict(self.raw["spec"])
+
+
+def _plan_value(d: dict, key: str, where: str) -> float:
+    if key not in d:
+        raise ParameterError(f"{where}: missing key {key!r}; write plan.json with `schedsyn plan`")
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        raise ParameterError(f"{where}: {key} must be a finite number, got {v!r}")
+    return float(v)
+
+
+def read_plan_dir(path: Path | str) -> PlanRecord:
+    """Read and validate a plan directory (``steps.csv`` and ``plan.json``).
+
+    Raises
+    ------
+    ParameterError
+        The directory, a file or a key is missing or malformed (one line naming it).
+    StepTableError
+        ``steps.csv`` breaks the plan's own limits.
+    """
+    path = Path(path)
+    if not path.is_dir():
+        raise ParameterError(
+            f"plan directory {path} does not exist; give the folder `schedsyn plan --out` wrote"
+        )
+    steps, meta = path / "steps.csv", path / "plan.json"
+    for f in (steps, meta):
+        if not f.is_file():
+            raise ParameterError(
+                f"plan directory {path} has no {f.name}; a plan directory holds steps.csv and "
+                "plan.json (as `schedsyn plan --out DIR` writes them)"
+            )
+    try:
+        raw = json.loads(meta.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ParameterError(f"{meta} is not valid JSON ({exc})") from None
+    if not isinstance(raw, dict) or not isinstance(raw.get("spec"), dict):
+        raise ParameterError(f"{meta}: expected an object with a 'spec' object (region, levels)")
+    spec = raw["spec"]
+    where = f"{meta} spec"
+    lo, hi = _plan_value(spec, "working_lo_c", where), _plan_value(spec, "working_hi_c", where)
+    alo = float(spec.get("approx_lo_c", lo))
+    ahi = float(spec.get("approx_hi_c", hi))
+    levels = _plan_value(spec, "levels_required", where)
+    if levels != int(levels) or levels < 1:
+        raise ParameterError(f"{where}: levels_required must be a whole number >= 1, got {levels}")
+    delta = _plan_value(spec, "delta_c_per_min", where)
+    if delta <= 0:
+        raise ParameterError(f"{where}: delta_c_per_min must be > 0 °C/min, got {delta}")
+    lim_raw = raw.get("limits", {})
+    if not isinstance(lim_raw, dict):
+        raise ParameterError(f"{meta}: 'limits' must be an object")
+    try:
+        limits = Limits(**{k: v for k, v in lim_raw.items() if k in Limits.__dataclass_fields__})
+        params = ThermalParams(
+            _plan_value(raw, "tau_s", str(meta)), _plan_value(raw, "dt0_c", str(meta))
+        )
+        model = (
+            ModelSpec.from_json_dict(raw["model"])
+            if isinstance(raw.get("model"), dict)
+            else ModelSpec(params.tau_s, params.dt0_c)
+        )
+        BinGrid(lo, hi)
+    except SchedsynError as exc:
+        raise ParameterError(f"{meta}: {exc}") from None
+    programme = read_steps(steps, limits)
+    return PlanRecord(
+        path=path,
+        programme=programme,
+        name=str(spec.get("name", raw.get("experiment", path.name))),
+        working_lo_c=lo,
+        working_hi_c=hi,
+        approx_lo_c=alo,
+        approx_hi_c=ahi,
+        levels_required=int(levels),
+        delta_c_per_min=delta,
+        limits=limits,
+        params=params,
+        model=model,
+        raw=raw,
+    )
+
+
+# --------------------------------------------------------------------------------------
+# does the log belong to the plan?
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class MonitorSettings:
+    """Tolerances of :func:`check_log_belongs` and the estimator.
+
+    Parameters
+    ----------
+    setpoint_tol_c : float
+        Largest gap between the logged ``tk_set_c`` and the plan's programme, degC (the
+        controller types 0.1 degC; its setpoint log may be coarser).
+    start_tol_min : float
+        The log's first row must lie within this of the programme's start, min.
+    end_tol_min : float
+        The log may run this much past the plan's end, min.
+    envelope_c : float
+        The measured internal temperature must stay within the chamber's range so far,
+        widened by this, degC (a device lags its chamber plus a self-heating offset of a
+        few degC; a log far outside is from another run).
+    start_temp_tol_c : float
+        The first reading must lie within this of the plan's ``t_init_c``, degC.
+    """
+
+    setpoint_tol_c: float = 0.3
+    start_tol_min: float = 10.0
+    end_tol_min: float = 5.0
+    envelope_c: float = 10.0
+    start_temp_tol_c: float = 5.0
+
+    def __post_init__(self) -> None:
+        for name in (
+            "setpoint_tol_c",
+            "start_tol_min",
+            "end_tol_min",
+            "envelope_c",
+            "start_temp_tol_c",
+        ):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+                raise ParameterError(f"{name} must be > 0, got {v!r}")
+
+
+def check_log_belongs(
+    log: MeasuredLog, plan: PlanRecord, settings: MonitorSettings | None = None
+) -> None:
+    """Raise :class:`LogFormatError` (one line) if ``log`` is not a run of ``plan``.
+
+    Checks, in order: the log starts at the programme's start (``time_s`` counts from it)
+    and does not run past its end; the first reading is near the plan's start
+    temperature; the logged setpoint follows the programme; the measured temperature stays
+    within the chamber's range so far (a region the plan never visits means another run).
+    """
+    s = MonitorSettings() if settings is None else settings
+    src = log.source
+    t_min = log.time_min
+    total = plan.programme.total_min
+    if abs(t_min[0]) > s.start_tol_min:
+        raise LogFormatError(
+            f"{src}: the log starts at time_s = {log.time_s[0]:g} s, but time_s counts from "
+            f"the start of the plan's programme (0 s); this log belongs to another start time "
+            f"(shift time_s so the programme starts at 0)"
+        )
+    if t_min[-1] > total + s.end_tol_min:
+        raise LogFormatError(
+            f"{src}: the log runs to {t_min[-1]:.1f} min, past the end of the plan "
+            f"{plan.path} ({total:g} min); it does not belong to this plan"
+        )
+    finite = np.flatnonzero(np.isfinite(log.t_int_c))
+    first = float(log.t_int_c[finite[0]])
+    if abs(first - plan.limits.t_init_c) > s.start_temp_tol_c:
+        raise LogFormatError(
+            f"{src}: the first reading t_int_c = {first:.2f} °C is far from the plan's start "
+            f"temperature {plan.limits.t_init_c:g} °C; the log does not belong to this plan"
+        )
+    if log.tk_set_c is not None:
+        ok = np.isfinite(log.tk_set_c)
+        gap = np.abs(log.tk_set_c[ok] - plan.programme.chamber_at(t_min[ok]))
+        if gap.size and float(gap.max()) > s.setpoint_tol_c:
+            k = int(np.argmax(gap))
+            logged = float(log.tk_set_c[ok][k])
+            at = float(t_min[ok][k])
+            planned = float(plan.programme.chamber_at(np.array([at]))[0])
+            raise LogFormatError(
+                f"{src}: the logged setpoint tk_set_c = {logged:.2f} °C at {at:.1f} min differs "
+                f"from the plan's programme ({planned:.2f} °C) by "
+                f"{gap[k]:.2f} °C > {s.setpoint_tol_c:g} °C: the log does not belong to "
+                f"{plan.path} (another programme or start time)"
+            )
+    edges = np.concatenate(([0.0], np.cumsum(plan.programme.durations_min)))
+    upto = float(min(t_min[-1], total))
+    inside = edges[edges < upto]
+    tk = np.concatenate(
+        (plan.programme.chamber_at(inside), plan.programme.chamber_at(np.array([upto])))
+    )
+    lo = min(float(tk.min()), plan.limits.t_init_c) - s.envelope_c
+    hi = max(float(tk.max()), plan.limits.t_init_c) + s.envelope_c
+    y = log.t_int_c[finite]
+    bad = np.flatnonzero((y < lo) | (y > hi))
+    if bad.size:
+        k = int(finite[bad[0]])
+        raise LogFormatError(
+            f"{src}: t_int_c = {log.t_int_c[k]:.2f} °C at {t_min[k]:.1f} min lies outside "
+            f"{lo:.1f} .. {hi:.1f} °C, where the plan's chamber has been so far (±"
+            f"{s.envelope_c:g} °C): the log visits a region the plan never visits"
+        )
+
+
+def with_plan_setpoint(log: MeasuredLog, plan: PlanRecord) -> MeasuredLog:
+    """``log`` with ``tk_set_c`` taken from the plan's programme where it is not logged."""
+    if log.tk_set_c is not None and np.isfinite(log.tk_set_c).all():
+        return log
+    frame = log.to_frame()
+    sp = plan.programme.chamber_at(log.time_min)
+    if log.tk_set_c is not None:
+        sp = np.where(np.isfinite(log.tk_set_c), log.tk_set_c, sp)
+    frame["tk_set_c"] = sp
+    return log_from_frame(frame, source=log.source)
+
+
+# --------------------------------------------------------------------------------------
+# identification and pass bookkeeping
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class Identified:
+    """``tau_s``, ``dt0_c`` and ``t0_c`` fitted to a log, with standard errors.
+
+    The standard errors are the fit's (Jacobian, white residuals) times
+    ``inflation = sqrt((1 + rho)/(1 - rho))`` for the residuals' lag-1 autocorrelation.
+    ``rms_c`` is the RMS gap of the fitted model on the fit data (block means), degC.
+    """
+
+    tau_s: float
+    tau_std_s: float
+    dt0_c: float
+    dt0_std_c: float
+    t0_c: float
+    t0_std_c: float
+    rms_c: float
+    lag1_autocorr: float
+    inflation: float
+    span_min: float
+
+    @property
+    def model(self) -> ModelSpec:
+        return ModelSpec(self.tau_s, self.dt0_c)
+
+    def to_dict(self) -> dict[str, float]:
+        return {
+            "tau_s": self.tau_s,
+            "tau_std_s": self.tau_std_s,
+            "dt0_c": self.dt0_c,
+            "dt0_std_c": self.dt0_std_c,
+            "t0_c": self.t0_c,
+            "t0_std_c": self.t0_std_c,
+            "rms_c": self.rms_c,
+            "residual_lag1_autocorr": self.lag1_autocorr,
+            "stderr_inflation": self.inflation,
+            "span_min": self.span_min,
+        }
+
+
+def identify(log: MeasuredLog) -> Identified:
+    """Fit ``tau_s``, ``dt0_c``, ``t0_c`` to the log so far (needs ``tk_set_c``)."""
+    from .discrepancy import fit_base_log
+
+    fit, rho = fit_base_log(log)
+    rho_c = float(np.clip(rho, -0.9, 0.98))
+    infl = math.sqrt((1.0 + rho_c) / (1.0 - rho_c)) if rho_c > 0 else 1.0
+    se = fit.stderr
+    return Identified(
+        tau_s=float(fit.values["tau_s"]),
+        tau_std_s=float(se["tau_s"]) * infl,
+        dt0_c=float(fit.values["dt0_c"]),
+        dt0_std_c=float(se["dt0_c"]) * infl,
+        t0_c=float(fit.values["t0_c"]),
+        t0_std_c=float(se["t0_c"]) * infl,
+        rms_c=float(fit.rms_c),
+        lag1_autocorr=float(rho),
+        inflation=infl,
+        span_min=float(log.time_min[-1] - log.time_min[0]),
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class OpenPass:
+    """A pass still in progress at the end of a series: bin, entry time, gradient so far."""
+
+    bin_index: int
+    bin_lo_c: float
+    start_min: float
+    mean_g_so_far_c_per_min: float
+
+    def to_dict(self) -> dict[str, float]:
+        return {
+            "bin_lo_c": self.bin_lo_c,
+            "bin_hi_c": self.bin_lo_c + 1.0,
+            "entered_min": self.start_min,
+            "mean_gradient_so_far_c_per_min": self.mean_g_so_far_c_per_min,
+        }
+
+
+def closed_passes(
+    time_min: np.ndarray, t_c: np.ndarray, g_c_per_min: np.ndarray, grid: BinGrid
+) -> tuple[tuple[np.ndarray, ...], OpenPass | None]:
+    """Per bin, the mean gradients of the passes that have ended; and the open one.
+
+    A pass is open when its run of samples reaches the last sample of the series (the
+    device is still inside that bin "now"). Passes are those of
+    :func:`schedsyn.coverage.passes`.
+    """
+    kb, mg, first, last = passes(t_c, g_c_per_min, grid)
+    open_pass = None
+    t_last = np.flatnonzero(np.isfinite(t_c))
+    end = int(t_last[-1]) if t_last.size else -1
+    if kb.size and int(last[-1]) == end and end == t_c.size - 1:
+        open_pass = OpenPass(
+            int(kb[-1]), float(grid.lower_c[kb[-1]]), float(time_min[first[-1]]), float(mg[-1])
+        )
+        kb, mg = kb[:-1], mg[:-1]
+    grads = tuple(np.sort(mg[kb == i]) for i in range(grid.n_bins))
+    return grads, open_pass
+
+
+def report_from_gradients(
+    grid: BinGrid, grads: tuple[np.ndarray, ...], levels_required: int, delta_c_per_min: float
+) -> CoverageReport:
+    """A :class:`CoverageReport` from per-bin pass gradients (the metric's own counting)."""
+    counts = np.array([g.size for g in grads], dtype=np.int64)
+    levels = np.array([distinct_levels(g, delta_c_per_min) for g in grads], dtype=np.int64)
+    return CoverageReport(grid, levels_required, delta_c_per_min, counts, levels, grads)
+
+
+def predict_from_state(
+    model: ModelSpec,
+    t0_c: float,
+    programme: Programme,
+    now_min: float,
+    t_now_c: float,
+    times_min: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """T and g at ``times_min`` (>= now) from the model, started at ``T(now) = t_now_c``.
+
+    ``T = T_model + d e^{-(t-now)/tau}``, ``g = g_model - d/tau e^{-(t-now)/tau}``,
+    ``d = t_now_c - T_model(now)`` (see the module docstring).
+    """
+    t = np.asarray(times_min, dtype=float)
+    pred = model.predict(programme, np.concatenate(([now_min], t)), t0_c=t0_c)
+    d = t_now_c - float(pred.t_c[0])
+    tau_min = model.tau_s / 60.0
+    e = np.exp(-(t - now_min) / tau_min)
+    return pred.t_c[1:] + d * e, pred.g_c_per_min[1:] - d / tau_min * e
+
+
+@dataclass(frozen=True, slots=True)
+class EffectCheck:
+    """The effect the diagnosis found on the log up to M, and whether it is material."""
+
+    effect: str
+    parameters: dict[str, float]
+    max_shift_c: float
+    material: bool
+    model: ModelSpec
+    t0_c: float
+    warnings: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "effect": self.effect,
+            "parameters": dict(self.parameters),
+            "max_shift_over_rest_c": self.max_shift_c,
+            "material": self.material,
+            "material_threshold_c": MATERIAL_C,
+            "warnings": list(self.warnings),
+        }
+
+
+def check_effect(
+    log: MeasuredLog,
+    plan: PlanRecord,
+    now_min: float,
+    base: ModelSpec,
+    base_t0_c: float,
+    t_now_c: float,
+    material_c: float = MATERIAL_C,
+) -> EffectCheck:
+    """Diagnose the log; the effect is material if, started from ``T(now) = t_now_c``,
+    its model and the base fit predict device temperatures more than ``material_c``
+    apart somewhere over the rest of the plan."""
+    from .discrepancy import diagnose
+
+    d = diagnose(log)
+    if d.effect == "none":
+        return EffectCheck("none", {}, 0.0, False, base, base_t0_c, tuple(d.warnings))
+    t0 = next(c.t0_c for c in d.candidates if c.effect == d.effect)
+    times = np.arange(now_min, plan.programme.total_min + 1e-9, 0.5)
+    if times.size:
+        t_eff, _ = predict_from_state(d.model, t0, plan.programme, now_min, t_now_c, times)
+        t_base, _ = predict_from_state(base, base_t0_c, plan.programme, now_min, t_now_c, times)
+        shift = float(np.max(np.abs(t_eff - t_base)))
+    else:
+        shift = 0.0
+    return EffectCheck(
+        d.effect,
+        {k: float(v) for k, v in d.parameters.items()},
+        shift,
+        shift > material_c,
+        d.model,
+        t0,
+        tuple(d.warnings),
+    )
+
+
+# --------------------------------------------------------------------------------------
+# the report
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class MonitorReport:
+    """What :func:`monitor_run` found (see the module docstring).
+
+    Coverage reports: ``so_far`` (passes ended by the end of the log), ``predicted``
+    (measured so far joined with the identified model's prediction of the rest of the
+    plan, unchanged), ``planned`` (the plan on its own model). ``series`` is one row per
+    log row (measured, smoothed, planned T; smoothed g and its std); ``dense`` the
+    combined measured-then-predicted 0.1 min series the prediction was counted on.
+    """
+
+    plan: PlanRecord
+    log_source: str
+    elapsed_min: float
+    plan_total_min: float
+    identified: Identified
+    effect: EffectCheck
+    so_far: CoverageReport
+    pass_in_progress: OpenPass | None
+    predicted: CoverageReport
+    planned: CoverageReport
+    gap_rms_c: float
+    gap_max_abs_c: float
+    gap_now_c: float
+    t_now_c: float
+    t_now_std_c: float
+    g_now_c_per_min: float
+    g_now_std_c_per_min: float
+    predicted_device_min_c: float
+    predicted_device_max_c: float
+    notes: tuple[str, ...]
+    series: pd.DataFrame = field(repr=False)
+    dense: pd.DataFrame = field(repr=False)
+    planned_dense: pd.DataFrame = field(repr=False)
+
+    @property
+    def remaining_min(self) -> float:
+        return max(self.plan_total_min - self.elapsed_min, 0.0)
+
+    def to_frame(self) -> pd.DataFrame:
+        """Per-bin status: planned, so far, in progress, predicted; and a one-word status."""
+        lo = self.plan.grid.lower_c
+        req = self.plan.levels_required
+        open_bin = -1 if self.pass_in_progress is None else self.pass_in_progress.bin_index
+        status = np.where(
+            self.so_far.levels >= req,
+            "covered",
+            np.where(self.predicted.levels >= req, "on track", "short"),
+        )
+        return pd.DataFrame(
+            {
+                "bin_lo_c": lo,
+                "bin_hi_c": lo + self.plan.grid.bin_c,
+                "planned_levels": self.planned.levels,
+                "passes_so_far": self.so_far.pass_counts,
+                "levels_so_far": self.so_far.levels,
+                "pass_in_progress": np.arange(lo.size) == open_bin,
+                "predicted_passes": self.predicted.pass_counts,
+                "predicted_levels": self.predicted.levels,
+                "predicted_missing_levels": np.maximum(req - self.predicted.levels, 0),
+                "status": status,
+                "gradients_so_far_c_per_min": [
+                    " ".join(f"{x:.4f}" for x in g) for g in self.so_far.gradients
+                ],
+            }
+        )
+
+    def to_json_dict(self) -> dict[str, Any]:
+        p = self.plan
+        short = [
+            {"bin_lo_c": a, "bin_hi_c": b, "levels": n, "missing": p.levels_required - n}
+            for a, b, n in self.predicted.short_bins()
+        ]
+        return {
+            "plan": str(p.path),
+            "experiment": p.name,
+            "log": self.log_source,
+            "region_c": [p.working_lo_c, p.working_hi_c],
+            "levels_required": p.levels_required,
+            "delta_c_per_min": p.delta_c_per_min,
+            "elapsed_min": self.elapsed_min,
+            "plan_total_min": self.plan_total_min,
+            "remaining_min": self.remaining_min,
+            "identified": self.identified.to_dict(),
+            "effect": self.effect.to_dict(),
+            "prediction_model": (
+                self.effect.model if self.effect.material else self.identified.model
+            ).to_json_dict(),
+            "plan_model": {"tau_s": p.params.tau_s, "dt0_c": p.params.dt0_c},
+            "state_now": {
+                "t_c": self.t_now_c,
+                "t_std_c": self.t_now_std_c,
+                "g_c_per_min": self.g_now_c_per_min,
+                "g_std_c_per_min": self.g_now_std_c_per_min,
+                "tk_set_c": float(p.programme.chamber_at(np.array([self.elapsed_min]))[0]),
+            },
+            "gap_measured_minus_planned_c": {
+                "rms": self.gap_rms_c,
+                "max_abs": self.gap_max_abs_c,
+                "now": self.gap_now_c,
+            },
+            "so_far": {
+                "bins_covered": int(self.so_far.covered.sum()),
+                "coverage": self.so_far.coverage,
+                "min_levels": self.so_far.min_levels,
+            },
+            "pass_in_progress": None
+            if self.pass_in_progress is None
+            else self.pass_in_progress.to_dict(),
+            "pass_in_progress_rule": (
+                "a pass still inside its bin at the end of the log is not counted so far; "
+                "the prediction joins its measured and predicted samples into one pass"
+            ),
+            "predicted_if_unchanged": {
+                "coverage": self.predicted.coverage,
+                "complete": self.predicted.complete,
+                "min_levels": self.predicted.min_levels,
+                "short_bins": short,
+                "device_min_c": self.predicted_device_min_c,
+                "device_max_c": self.predicted_device_max_c,
+            },
+            "planned": {
+                "coverage": self.planned.coverage,
+                "min_levels": self.planned.min_levels,
+            },
+            "notes": list(self.notes),
+        }
+
+    def _effect_line(self) -> str:
+        e = self.effect
+        if e.effect == "none":
+            return "effect beyond tau and dT0: none found"
+        pars = ", ".join(f"{k} {v:.4g}" for k, v in e.parameters.items())
+        use = "used for the prediction" if e.material else "not material, not used"
+        return f"effect: {e.effect} ({pars}); moves T by up to {e.max_shift_c:.2f} °C: {use}"
+
+    def summary(self) -> str:
+        i = self.identified
+        p = self.plan
+        lines = [
+            f"{p.name}: {self.elapsed_min:.0f} of {self.plan_total_min:g} min elapsed "
+            f"({self.remaining_min:.0f} min left)",
+            f"identified from the log: tau {i.tau_s:.0f} ± {i.tau_std_s:.0f} s, dT0 "
+            f"{i.dt0_c:.2f} ± {i.dt0_std_c:.2f} °C (plan: {p.params.tau_s:g} s, "
+            f"{p.params.dt0_c:g} °C)",
+            self._effect_line(),
+            f"measured - planned T: now {self.gap_now_c:+.2f} °C, RMS {self.gap_rms_c:.2f} °C, "
+            f"max {self.gap_max_abs_c:.2f} °C",
+            f"so far: {int(self.so_far.covered.sum())}/{p.grid.n_bins} bins with "
+            f">= {p.levels_required} levels",
+        ]
+        if self.pass_in_progress is not None:
+            op = self.pass_in_progress
+            lines.append(
+                f"pass in progress: bin [{op.bin_lo_c:g}, {op.bin_lo_c + 1:g}) °C since "
+                f"{op.start_min:.1f} min (not counted yet)"
+            )
+        lines.append(
+            "if the plan goes on unchanged: "
+            + self.predicted.summary().replace("degC", "°C")
+            + f"; planned {self.planned.coverage:.0%}"
+        )
+        lines.extend(f"note: {n}" for n in self.notes)
+        return "\n".join(lines)
+
+
+def monitor_run(
+    log: MeasuredLog,
+    plan: PlanRecord,
+    settings: MonitorSettings | None = None,
+    *,
+    find_effect: bool = True,
+) -> MonitorReport:
+    """Coverage so far, identified model and predicted final coverage of a run in progress.
+
+    Parameters
+    ----------
+    log : MeasuredLog
+        The log so far (``time_s`` from the programme's start; ``tk_set_c`` optional:
+        taken from the plan where missing).
+    plan : PlanRecord
+        From :func:`read_plan_dir`.
+    settings : MonitorSettings, optional
+        Tolerances of the belongs-to-the-plan checks.
+    find_effect : bool
+        Also diagnose an effect beyond tau and dT0 (:func:`check_effect`); a material one
+        is used for the prediction.
+
+    Raises
+    ------
+    LogFormatError
+        The log does not belong to the plan (see :func:`check_log_belongs`) or is too
+        short to identify the model.
+    """
+    settings = MonitorSettings() if settings is None else settings
+    check_log_belongs(log, plan, settings)
+    notes: list[str] = []
+    if log.tk_set_c is None:
+        notes.append("the log has no tk_set_c: the plan's programme is taken as the setpoint")
+    fit_log = with_plan_setpoint(log, plan)
+    ident = identify(fit_log)
+    est = estimate_gradient(log)
+    grid = plan.grid
+    req, delta = plan.levels_required, plan.delta_c_per_min
+    run = resample_run(log, est, DENSE_MIN)
+    grads, open_pass = closed_passes(run.time_min, run.t_c, run.g_c_per_min, grid)
+    so_far = report_from_gradients(grid, grads, req, delta)
+    now = float(log.time_min[-1])
+    total = plan.programme.total_min
+    ok = np.flatnonzero(np.isfinite(est.t_est_c))
+    k_now = int(ok[-1])
+    t_now = float(est.t_est_c[k_now])
+    # the rest: the plan's dense grid after the last resampled point
+    full = dense_times(total, DENSE_MIN)
+    rest = full[full > float(run.time_min[-1]) + 1e-9]
+    if find_effect:
+        effect = check_effect(fit_log, plan, now, ident.model, ident.t0_c, t_now)
+    else:
+        effect = EffectCheck("none", {}, 0.0, False, ident.model, ident.t0_c)
+    model, t0 = (effect.model, effect.t0_c) if effect.material else (ident.model, ident.t0_c)
+    if rest.size:
+        t_rest, g_rest = predict_from_state(model, t0, plan.programme, now, t_now, rest)
+    else:
+        t_rest = g_rest = np.zeros(0)
+    t_all = np.concatenate((run.time_min, rest))
+    temp_all = np.concatenate((run.t_c, t_rest))
+    g_all = np.concatenate((run.g_c_per_min, g_rest))
+    predicted = coverage_report(temp_all, g_all, grid, req, delta)
+    planned_pred = plan.model.predict(plan.programme, full, t0_c=plan.limits.t_init_c)
+    planned = coverage_report(planned_pred.t_c, planned_pred.g_c_per_min, grid, req, delta)
+    at_log = plan.model.predict(plan.programme, log.time_min, t0_c=plan.limits.t_init_c)
+    gap = log.t_int_c - at_log.t_c
+    gap_est_now = t_now - float(at_log.t_c[k_now])
+    dev_lo = float(np.nanmin(temp_all))
+    dev_hi = float(np.nanmax(temp_all))
+    if rest.size and (
+        t_rest.min() < plan.limits.device_min_c or t_rest.max() > plan.limits.device_max_c
+    ):
+        notes.append(
+            f"with the identified model the device would reach {t_rest.min():.1f} .. "
+            f"{t_rest.max():.1f} °C, outside its limits {plan.limits.device_min_c:g} .. "
+            f"{plan.limits.device_max_c:g} °C"
+        )
+    if ident.span_min < 0.75 * ident.tau_s / 60.0:
+        notes.append(
+            f"the log spans {ident.span_min:.0f} min, less than 3/4 of the identified tau: "
+            "tau and dT0 are still poorly separated"
+        )
+    series = pd.DataFrame(
+        {
+            "time_s": log.time_s,
+            "t_meas_c": log.t_int_c,
+            "t_est_c": est.t_est_c,
+            "t_planned_c": at_log.t_c,
+            "gap_c": gap,
+            "g_est_c_per_min": est.g_est_c_per_min,
+            "g_std_c_per_min": est.g_std_c_per_min,
+        }
+    )
+    dense = pd.DataFrame(
+        {
+            "time_min": t_all,
+            "t_c": temp_all,
+            "g_c_per_min": g_all,
+            "predicted": t_all > float(run.time_min[-1]) + 1e-9,
+        }
+    )
+    planned_dense = pd.DataFrame(
+        {
+            "time_min": full,
+            "tk_c": plan.programme.chamber_at(full),
+            "t_c": planned_pred.t_c,
+            "g_c_per_min": planned_pred.g_c_per_min,
+        }
+    )
+    return MonitorReport(
+        plan=plan,
+        log_source=log.source,
+        elapsed_min=now,
+        plan_total_min=total,
+        identified=ident,
+        effect=effect,
+        so_far=so_far,
+        pass_in_progress=open_pass,
+        predicted=predicted,
+        planned=planned,
+        gap_rms_c=float(np.sqrt(np.nanmean(gap**2))),
+        gap_max_abs_c=float(np.nanmax(np.abs(gap))),
+        gap_now_c=gap_est_now,
+        t_now_c=t_now,
+        t_now_std_c=float(est.t_std_c[k_now]),
+        g_now_c_per_min=float(est.g_est_c_per_min[k_now]),
+        g_now_std_c_per_min=float(est.g_std_c_per_min[k_now]),
+        predicted_device_min_c=dev_lo,
+        predicted_device_max_c=dev_hi,
+        notes=tuple(notes),
+        series=series,
+        dense=dense,
+        planned_dense=planned_dense,
+    )
+
+
+def json_safe(obj: Any) -> Any:
+    """NaN/inf to None, recursively (JSON has no NaN)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [json_safe(v) for v in obj]
+    return obj
+
+
+__all__ = [
+    "EffectCheck",
+    "Identified",
+    "MonitorReport",
+    "MonitorSettings",
+    "OpenPass",
+    "PlanRecord",
+    "check_log_belongs",
+    "check_effect",
+    "closed_passes",
+    "identify",
+    "json_safe",
+    "monitor_run",
+    "predict_from_state",
+    "read_plan_dir",
+    "report_from_gradients",
+    "with_plan_setpoint",
+]

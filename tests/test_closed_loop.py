@@ -1,0 +1,125 @@
+"""The closed-loop harness: true devices, their logs, re-planning times, true coverage.
+
+Truth is checked against scipy's solve_ivp and a pass count written here; the loop's
+mechanics with a re-planner that keeps the plan (the closed loop proper needs the
+planner's continuation and comes with it).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from test_monitor import LEVELS, REGION, own_passes, plan_programme
+
+from schedsyn.closed_loop import (
+    EFFECT_STRENGTHS,
+    effect_shift_c,
+    grid_devices,
+    replan_times,
+    run_log,
+    run_loop,
+    true_device,
+    true_plan,
+)
+from schedsyn.coverage import distinct_levels
+from schedsyn.effects import EFFECTS
+from schedsyn.errors import ParameterError
+from schedsyn.grid import BinGrid
+from schedsyn.programme import Programme
+
+GRID = BinGrid(*REGION)
+DELTA = 0.05
+
+
+def test_open_loop_coverage_is_that_of_the_true_device_by_an_ode_and_own_count():
+    prog = plan_programme()
+    dev = true_device(2900.0, 1.0)
+    res = run_loop(dev, prog, GRID, LEVELS, DELTA)
+    tau = dev.tau_s / 60.0
+    t = np.arange(0.0, prog.total_min + 1e-9, 0.1)
+    sol = solve_ivp(
+        lambda s, y: [(prog.chamber_at([s])[0] + dev.dt0_c - y[0]) / tau],
+        (0.0, prog.total_min),
+        [20.0],
+        t_eval=t,
+        rtol=1e-10,
+        atol=1e-10,
+        max_step=0.5,
+    )
+    g = (prog.chamber_at(t) + dev.dt0_c - sol.y[0]) / tau
+    found = own_passes(sol.y[0], g, *REGION)
+    for b in range(GRID.n_bins):
+        mine = np.array([gg for k, gg, _ in found if k == b])
+        assert res.coverage.pass_counts[b] == mine.size
+        assert res.coverage.levels[b] == distinct_levels(mine, DELTA)
+    assert res.replans_at_min == ()
+
+
+def test_replan_times_first_hour_then_every_90_min():
+    assert replan_times(535.0) == [60.0, 150.0, 240.0, 330.0, 420.0, 510.0]
+    assert replan_times(150.0) == [60.0]
+    with pytest.raises(ParameterError):
+        replan_times(500.0, every_min=0.0)
+
+
+def test_a_replanner_gets_the_log_cut_at_each_time_and_keeping_the_plan_is_open_loop():
+    prog = plan_programme()
+    dev = true_device(2400.0, 3.0, "dead_time")
+    calls = []
+
+    def keep(log, programme, at_min):
+        calls.append((at_min, float(log["time_s"].max()), programme.total_min))
+        return programme
+
+    closed = run_loop(dev, prog, GRID, LEVELS, DELTA, replanner=keep)
+    open_ = run_loop(dev, prog, GRID, LEVELS, DELTA)
+    assert [c[0] for c in calls] == replan_times(prog.total_min)
+    for at, last_s, _ in calls:
+        assert at * 60.0 - 10.0 < last_s <= at * 60.0
+    np.testing.assert_array_equal(closed.coverage.levels, open_.coverage.levels)
+    assert closed.replans_at_min == tuple(replan_times(prog.total_min))
+
+
+def test_a_replanner_that_rewrites_the_past_is_refused():
+    prog = plan_programme()
+
+    def rewrite(log, programme, at_min):
+        return Programme(np.array([programme.total_min]), np.array([0.0]))
+
+    with pytest.raises(ParameterError, match="already executed"):
+        run_loop(true_device(2400.0, 3.0), prog, GRID, LEVELS, DELTA, replanner=rewrite)
+
+
+@pytest.mark.parametrize("effect", list(EFFECT_STRENGTHS))
+def test_grid_effects_are_material_and_logged_like_a_real_run(effect):
+    prog = plan_programme()
+    dev = true_device(2400.0, 3.0, effect)
+    assert effect_shift_c(dev, prog) > 0.2  # "a strength that moves T by more than 0.2 degC"
+    log = run_log(dev, prog, seed=3)
+    assert ("tk_air_c" in log) == EFFECTS[effect].uses_air
+    assert np.allclose(log["t_int_c"] / 0.01, np.round(log["t_int_c"] / 0.01), atol=1e-6)
+    assert np.allclose(log["tk_set_c"], prog.chamber_at(log["time_s"] / 60.0))
+
+
+def test_grid_devices_cover_the_tau_dt0_grid_and_each_effect_once():
+    devs = grid_devices([1800.0, 2400.0, 3000.0], [0.0, 3.0, 6.0], ["none", "dead_time"])
+    assert len(devs) == 10
+    assert {(d.tau_s, d.dt0_c) for d in devs if d.effect == "none"} == {
+        (t, d) for t in (1800.0, 2400.0, 3000.0) for d in (0.0, 3.0, 6.0)
+    }
+    (dt,) = [d for d in devs if d.effect == "dead_time"]
+    assert (dt.tau_s, dt.dt0_c) == (2400.0, 3.0)
+
+
+@pytest.mark.filterwarnings("ignore:Solution may be inaccurate:UserWarning")
+def test_a_plan_for_the_true_device_is_complete_on_it():
+    from schedsyn import ExperimentSpec
+
+    spec = ExperimentSpec("s", -10.0, 0.0, -20.0, 10.0, levels_required=2)
+    dev = true_device(2400.0, 3.0, "second_time_constant")
+    plan, res = true_plan(spec, dev)
+    assert plan.complete and res.complete
+    # the same plan on the device without the second time constant is judged on that one
+    other = run_loop(true_device(2400.0, 3.0), plan.programme, spec.grid, 2, spec.delta_c_per_min)
+    assert other.effect_shift_c == 0.0 and res.effect_shift_c > 0.2
