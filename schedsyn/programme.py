@@ -147,14 +147,15 @@ class Programme:
                 keep_u.append(float(ui))
         return Programme(np.array(keep_d), np.array(keep_u), self.start_c)
 
-    def rounded(self, limits: Limits) -> Programme:
+    def rounded(self, limits: Limits, exact_start: bool = False) -> Programme:
         """What an operator types: whole minutes, boundary temperatures to 0.1 degC.
 
         Boundary times are rounded cumulatively (the total keeps its rounded length);
         boundary temperatures are rounded to 0.1 degC and, where rounding would push a
         rate past a chamber limit, moved by 0.1 degC steps back inside. Rates are then
         recomputed from the rounded temperatures, so table and simulation agree exactly,
-        and equal-rate neighbours are merged.
+        and equal-rate neighbours are merged. ``exact_start`` keeps the start temperature
+        as it is (a programme that continues a run from the chamber's current setpoint).
         """
         t_edges = np.round(np.concatenate(([0.0], np.cumsum(self.durations_min))))
         tk_target = self.boundary_temps_c
@@ -166,7 +167,7 @@ class Programme:
             )
         dur = np.diff(t_edges)
         tk = np.empty_like(tk_target)
-        tk[0] = round(float(tk_target[0]), 1)
+        tk[0] = float(tk_target[0]) if exact_start else round(float(tk_target[0]), 1)
         lo, hi = limits.rate_min_c_per_min, limits.rate_max_c_per_min
         for i in range(dur.size):
             want = round(float(tk_target[i + 1]), 1)

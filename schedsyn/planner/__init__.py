@@ -46,6 +46,7 @@ from .lp import LpStats
 from .physics import turning_speed
 from .request import (
     OBJECTIVES,
+    Continuation,
     ExperimentSpec,
     Scenario,
     check_request,
@@ -60,6 +61,7 @@ __all__ = [
     "OBJECTIVES",
     "Band",
     "BandDesign",
+    "Continuation",
     "ExperimentSpec",
     "LpStats",
     "Plan",

@@ -60,6 +60,8 @@ class Plan:
     t_min_c: float = float("nan")
     t_max_c: float = float("nan")
     box_check: dict | None = None
+    #: a continuation: the minute from which the rest of the run was planned
+    continued_from_min: float | None = None
 
     @property
     def duration_min(self) -> float:
@@ -124,6 +126,7 @@ class Plan:
             "violations": list(self.violations),
             "notes": list(self.notes),
             "robust_box_check": self.box_check,
+            "continued_from_min": self.continued_from_min,
         }
 
 

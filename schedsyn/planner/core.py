@@ -18,10 +18,11 @@ from ..model import FirstOrderLag, LinearThermalModel
 from ..params import Limits, ThermalParams
 from ..programme import Programme
 from .check import Plan, check_programme
+from .continuation import plan_continuation
 from .explain import explain_shortfall
 from .lp import Context, LpStats, require_solvable
 from .polish import polish
-from .request import ExperimentSpec, check_request
+from .request import Continuation, ExperimentSpec, check_request
 from .robust import box_note, box_scenarios, search_robust, verify_robust
 from .search import Search, subregions, synthesise, truncate
 
@@ -136,6 +137,7 @@ def plan_experiment(
     robust_dt0_c: tuple[float, float] | None = None,
     progress: Callable[[str], None] | None = None,
     require_complete: bool = False,
+    continuation: Continuation | None = None,
 ) -> Plan:
     """Synthesise a chamber programme for ``spec`` (see :mod:`schedsyn.planner`).
 
@@ -156,6 +158,10 @@ def plan_experiment(
         Receives short progress messages.
     require_complete : bool
         Raise :class:`InfeasiblePlanError` instead of returning an incomplete plan.
+    continuation : Continuation, optional
+        Plan only the rest of a run in progress: its executed steps stay, the levels
+        measured so far count (see :mod:`.continuation`). The plan's programme is the
+        whole run; its coverage joins the measured passes and the new ones.
 
     Returns
     -------
@@ -185,6 +191,10 @@ def plan_experiment(
         )
     stats = LpStats()
     notes: list[str] = []
+    if continuation is not None:
+        if robust:
+            raise ParameterError("a continuation is planned with one model, not a robust box")
+        return _plan_continued(spec, params, limits, model, continuation, progress, stats, tic)
     if robust:
         params_list = box_scenarios(params, robust_tau_s, robust_dt0_c)
         search, notes = search_robust(
@@ -276,3 +286,62 @@ def plan_experiment(
             best_coverage=cov.coverage,
         )
     return plan
+
+
+def _plan_continued(
+    spec: ExperimentSpec,
+    params: ThermalParams,
+    limits: Limits,
+    model: LinearThermalModel | None,
+    continuation: Continuation,
+    progress: Callable[[str], None] | None,
+    stats: LpStats,
+    tic: float,
+) -> Plan:
+    """:func:`plan_experiment` for the rest of a run (see :mod:`.continuation`)."""
+    continuation.check_grid(spec)
+    if continuation.at_min >= limits.duration_max_min:
+        raise ParameterError(
+            f"{spec.name}: the run has lasted {continuation.at_min:g} min, the limit is "
+            f"{limits.duration_max_min:g} min: nothing is left to plan"
+        )
+    model = model if model is not None else FirstOrderLag(params)
+    programme, mg, mt, search, notes, check = plan_continuation(
+        spec, params, limits, model, continuation, progress, stats
+    )
+    cov, cov01, problems, t_lo, t_hi = check
+    if programme.n_segments > spec.max_steps:
+        problems.append(
+            f"the step table has {programme.n_segments} steps, more than "
+            f"max_steps = {spec.max_steps}"
+        )
+    complete = cov.complete and not problems
+    if not cov.complete:
+        short = cov.short_bins()
+        notes.append(
+            f"{len(short)} of {spec.grid.n_bins} bins have fewer than {spec.levels_required} "
+            f"distinct levels (measured and planned): "
+            + ", ".join(f"[{a:g},{b:g}) {n}" for a, b, n in short[:10])
+        )
+    status = "complete" if complete else ("incomplete" if not problems else "limits violated")
+    return Plan(
+        spec=spec,
+        params=params,
+        limits=limits,
+        programme=programme,
+        coverage=cov,
+        coverage_0p1=cov01,
+        complete=complete,
+        status=status,
+        solve_s=time.perf_counter() - tic,
+        margin_g_c_per_min=mg,
+        margin_t_c=mt,
+        lp=stats.to_dict(),
+        problem_size=search.ctx.size if search is not None else {},
+        scenarios=(params,),
+        violations=tuple(problems),
+        notes=tuple(notes),
+        t_min_c=t_lo,
+        t_max_c=t_hi,
+        continued_from_min=continuation.at_min,
+    )

@@ -33,7 +33,7 @@ from ..errors import SolverFailedError
 from ..model import affine_response
 from ..params import Limits
 from .bands import Band
-from .request import ExperimentSpec, Scenario
+from .request import Continuation, ExperimentSpec, Scenario
 
 #: Planner samples every minute (segment boundaries are whole minutes).
 SAMPLE_MIN = 1.0
@@ -91,21 +91,65 @@ class LpStats:
 
 
 class Responses:
-    """Affine responses of all scenarios at the planner samples of a full-length grid."""
+    """Affine responses of all scenarios at the planner samples of the whole segment grid.
 
-    def __init__(self, scenarios: Sequence[Scenario], n_seg: int, seg_min: float, limits: Limits):
+    The grid is ``n_seg`` segments of ``seg_min`` from t = 0, or, continuing a run, the
+    executed steps (fixed, any lengths) followed by segments of ``seg_min``; samples every
+    ``SAMPLE_MIN`` minute from t = 0. A continuation's ``start_correction_c`` (measured
+    minus modelled T at the end of the executed steps, ``M``) is added to the free response
+    from ``M`` on as ``c exp(-(t - M)/tau)`` (and ``-c/tau exp(..)`` to g): the decay of an
+    initial offset through the first-order lag (``tau`` of each scenario; for augmented
+    models that is their first-order equivalent).
+    """
+
+    def __init__(
+        self,
+        scenarios: Sequence[Scenario],
+        n_seg: int,
+        seg_min: float,
+        limits: Limits,
+        continuation: Continuation | None = None,
+    ):
         self.seg_min = seg_min
         self.scenarios = list(scenarios)
-        self.durations = np.full(n_seg, float(seg_min))
-        self.times = np.arange(0.0, n_seg * seg_min + 0.5 * SAMPLE_MIN, SAMPLE_MIN)
+        prefix = continuation.prefix if continuation is not None else None
+        fixed = prefix.durations_min if prefix is not None else np.zeros(0)
+        #: segments of the executed steps (their rates are fixed)
+        self.n_fixed = int(fixed.size)
+        self.fixed_rates = prefix.rates_c_per_min if prefix is not None else np.zeros(0)
+        self.durations = np.concatenate((fixed, np.full(n_seg - fixed.size, float(seg_min))))
+        self.edges_min = np.concatenate(([0.0], np.cumsum(self.durations)))
+        self.times = np.arange(0.0, self.edges_min[-1] + 0.5 * SAMPLE_MIN, SAMPLE_MIN)
+        t0 = limits.t_init_c
+        if continuation is not None and continuation.t0_c is not None:
+            t0 = continuation.t0_c
         self.resp = [
-            affine_response(s.model, self.durations, self.times, limits.start_c, limits.t_init_c)
+            affine_response(s.model, self.durations, self.times, limits.start_c, t0)
             for s in scenarios
         ]
+        if continuation is not None and continuation.start_correction_c:
+            at = continuation.at_min
+            for sc, resp in zip(scenarios, self.resp, strict=True):
+                tau = sc.params.tau_min
+                decay = np.where(
+                    self.times >= at, np.exp(-np.maximum(self.times - at, 0.0) / tau), 0.0
+                )
+                c = continuation.start_correction_c
+                resp.b_t[:] = resp.b_t + c * decay
+                resp.b_g[:] = resp.b_g - c / tau * decay
 
     def sample_of(self, j_boundary: int) -> int:
         """Planner sample index at the boundary before segment ``j_boundary``."""
-        return int(round(j_boundary * self.seg_min / SAMPLE_MIN))
+        return int(round(self.edges_min[j_boundary] / SAMPLE_MIN))
+
+    def segments_to(self, sample: int) -> int:
+        """Fewest segments from t = 0 that reach planner sample ``sample``."""
+        return int(np.searchsorted(self.edges_min, sample * SAMPLE_MIN - 1e-9, side="left"))
+
+    def max_segments(self, duration_max_min: float) -> int:
+        """Segments of the grid that fit in ``duration_max_min`` from t = 0."""
+        fixed_end = self.edges_min[self.n_fixed]
+        return self.n_fixed + int((duration_max_min - fixed_end + 1e-9) // self.seg_min)
 
 
 @dataclass(slots=True)
@@ -242,9 +286,10 @@ class SubLP:
             bt = resp.b_t[rows] + resp.a_t[rows, : self.j0] @ u_fixed
             bg = resp.b_g[rows] + resp.a_g[rows, : self.j0] @ u_fixed
             self.scen.append((at, bt, ag, bg))
-        seg = r.seg_min
-        self.tk0 = ctx.limits.start_c + seg * float(np.sum(u_fixed))
-        self.tk_mat = seg * np.tril(np.ones((self.n, self.n)))
+        # Tk at the segment ends: start + sum of duration x rate (the free segments' part
+        # is tk_mat @ u)
+        self.tk0 = ctx.limits.start_c + float(r.durations[: self.j0] @ u_fixed)
+        self.tk_mat = np.tril(np.ones((self.n, self.n))) * r.durations[self.j0 : j1][None, :]
         self.g_rows: list[np.ndarray] = []
         self.h_rows: list[np.ndarray] = []
         self.e_rows: list[np.ndarray] = []

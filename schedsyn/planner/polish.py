@@ -26,8 +26,11 @@ MARGIN_KEEP = 0.8
 
 
 def whole_lp(ctx: Context, windows: Sequence[Window], n_seg: int, extra: int = 0) -> SubLP:
-    """The LP over the whole programme with the given sweep windows (margins optional)."""
-    lp = SubLP(ctx, np.zeros(0), n_seg, extra=extra)
+    """The LP over the whole programme with the given sweep windows (margins optional).
+
+    A continuation's executed steps are fixed: only the segments after them are free.
+    """
+    lp = SubLP(ctx, ctx.responses.fixed_rates, n_seg, extra=extra)
     lp.chamber()
     lp.chamber_end(ctx.limits.end_c)
     lp.device()
@@ -64,4 +67,4 @@ def polish(ctx: Context, structure: Structure) -> tuple[np.ndarray, float, float
     )
     if x2 is not None:
         x = x2
-    return x[:n], float(x[-2]), float(x[-1])
+    return np.concatenate((ctx.responses.fixed_rates, x[:n])), float(x[-2]), float(x[-1])

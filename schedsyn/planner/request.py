@@ -18,6 +18,7 @@ from ..errors import ParameterError
 from ..grid import BinGrid
 from ..model import LinearThermalModel
 from ..params import Limits, ThermalParams
+from ..programme import Programme
 
 OBJECTIVES = ("shortest", "margin")
 
@@ -148,6 +149,67 @@ def check_request(spec: ExperimentSpec, limits: Limits) -> None:
 
 
 # ----------------------------------------------------------------------------------
+# Continuing a run: what has been executed and measured so far
+# ----------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class Continuation:
+    """A run in progress: plan only the rest of it, counting what was measured.
+
+    Parameters
+    ----------
+    prefix : Programme
+        The steps executed so far, from the start of the run (its ``start_c`` is the
+        chamber at t = 0); it must last a whole number of minutes, ``M``. The planner keeps
+        it unchanged and plans new segments from ``M``, so the model's state at ``M``
+        follows exactly from the executed chamber path.
+    existing_gradients : sequence of arrays
+        Per 1 degC bin of the working region, the mean gradients (degC/min) of the passes
+        measured so far (a pass still open at ``M`` left out). New passes count only where
+        they are ``delta`` apart from the levels already there.
+    start_correction_c : float
+        Measured minus modelled internal temperature at ``M``, degC; it decays with the
+        model's time constant over the rest of the run.
+    t0_c : float, optional
+        The model's internal temperature at t = 0 (default: ``limits.t_init_c``).
+    """
+
+    prefix: Programme
+    existing_gradients: tuple[np.ndarray, ...]
+    start_correction_c: float = 0.0
+    t0_c: float | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.prefix, Programme):
+            raise ParameterError("a continuation's prefix must be a Programme")
+        total = self.prefix.total_min
+        if abs(total - round(total)) > 1e-6 or total <= 0:
+            raise ParameterError(
+                f"the executed steps last {total:g} min; a continuation starts at a whole "
+                "minute > 0 (cut the run at a whole minute)"
+            )
+        grads = tuple(np.asarray(g, dtype=float).ravel() for g in self.existing_gradients)
+        if any(not np.all(np.isfinite(g)) for g in grads):
+            raise ParameterError("existing gradients must be finite numbers (°C/min)")
+        object.__setattr__(self, "existing_gradients", grads)
+        for name in ("start_correction_c", "t0_c"):
+            v = getattr(self, name)
+            if v is not None and (isinstance(v, bool) or not math.isfinite(float(v))):
+                raise ParameterError(f"{name} must be a finite number, got {v!r}")
+
+    @property
+    def at_min(self) -> float:
+        """Minute from which the rest is planned (the end of the executed steps)."""
+        return float(round(self.prefix.total_min))
+
+    def check_grid(self, spec: ExperimentSpec) -> None:
+        if len(self.existing_gradients) != spec.grid.n_bins:
+            raise ParameterError(
+                f"{spec.name}: existing_gradients has {len(self.existing_gradients)} entries, "
+                f"one per 1 °C bin of the working region is needed ({spec.grid.n_bins})"
+            )
+
+
+# ----------------------------------------------------------------------------------
 # Scenarios: the nominal point, or the corners and centre of a robust box
 # ----------------------------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
@@ -187,16 +249,24 @@ def robust_scenarios(
 # ----------------------------------------------------------------------------------
 # The sweep structure: alternating monotone sweeps, which way the first one goes
 # ----------------------------------------------------------------------------------
-def sweep_directions(spec: ExperimentSpec, first: int) -> list[int]:
-    """Directions (+1 heating, -1 cooling) of the ``levels_required`` alternating sweeps."""
-    return [first * (-1) ** k for k in range(spec.levels_required)]
+def sweep_directions(spec: ExperimentSpec, first: int, n_sweeps: int | None = None) -> list[int]:
+    """Directions (+1 heating, -1 cooling) of ``n_sweeps`` (default ``levels_required``)
+    alternating sweeps."""
+    n = spec.levels_required if n_sweeps is None else n_sweeps
+    return [first * (-1) ** k for k in range(n)]
 
 
-def first_directions(spec: ExperimentSpec, limits: Limits) -> list[int]:
-    """Which way the first sweep may go: towards the region, or either way from inside it."""
-    if spec.working_hi_c + spec.edge_margin_c <= limits.t_init_c:
+def first_directions(
+    spec: ExperimentSpec, limits: Limits, start_t_c: float | None = None
+) -> list[int]:
+    """Which way the first sweep may go: towards the region, or either way from inside it.
+
+    ``start_t_c``: the device temperature where the sweeps start (default: at t = 0).
+    """
+    t = limits.t_init_c if start_t_c is None else start_t_c
+    if spec.working_hi_c + spec.edge_margin_c <= t:
         return [-1]
-    if spec.working_lo_c - spec.edge_margin_c >= limits.t_init_c:
+    if spec.working_lo_c - spec.edge_margin_c >= t:
         return [+1]
     return [-1, +1]
 

@@ -37,7 +37,7 @@ from .lp import (
     SubLP,
     Window,
 )
-from .request import ExperimentSpec, Scenario, first_directions, sweep_directions
+from .request import Continuation, ExperimentSpec, Scenario, first_directions, sweep_directions
 
 Progress = Callable[[str], None] | None
 
@@ -133,7 +133,7 @@ def place_sweep(
             s1 = int(bounds[-1])
             if s1 > s_max:
                 return None
-            j1 = min(int(math.ceil(s1 * SAMPLE_MIN / seg - 1e-9)), max_seg)
+            j1 = min(r.segments_to(s1), max_seg)
             win = Window(d, band, s0, s1, tuple(int(c) for c in bounds[1:-1]))
             if not ctx.robust:
                 sol = solve_window(win, j1, None)
@@ -229,7 +229,7 @@ def scenario_windows(
             return None
         per.append((s_from + c0 - 1, s_from + c1, tuple(s_from + c for c in cuts)))
         tol_all.append(tuple(tols))
-    j_need = max(int(math.ceil(p[1] * SAMPLE_MIN / r.seg_min - 1e-9)) for p in per)
+    j_need = max(r.segments_to(p[1]) for p in per)
     if j_need > max_seg:
         return None
     ref = per[0]
@@ -262,8 +262,7 @@ def greedy(
 ) -> tuple[Structure | None, str]:
     """Place the sweeps one after another, each as early and as short as feasible."""
     limits = ctx.limits
-    seg = ctx.spec.segment_min
-    u_fixed = np.zeros(0)
+    u_fixed = ctx.responses.fixed_rates.copy()
     windows: list[Window] = []
     for k, (d, band) in enumerate(zip(directions, sweep_bands, strict=True)):
         res = place_sweep(ctx, u_fixed, d, band, max_seg)
@@ -271,7 +270,7 @@ def greedy(
             where = "cooling" if d < 0 else "heating"
             return None, (
                 f"sweep {k + 1} of {len(directions)} ({where}, gradient band {band.rank}) "
-                f"does not fit within {max_seg * seg:g} min"
+                f"does not fit within {ctx.responses.edges_min[max_seg]:g} min"
             )
         u_new, win = res
         u_fixed = np.concatenate(
@@ -279,12 +278,13 @@ def greedy(
         )
         windows.append(win)
         if progress:
-            progress(f"sweep {k + 1}/{len(directions)} placed, ends at {u_fixed.size * seg:g} min")
+            end_min = ctx.responses.edges_min[u_fixed.size]
+            progress(f"sweep {k + 1}/{len(directions)} placed, ends at {end_min:g} min")
     u_all = return_to_end(ctx, u_fixed, max_seg)
     if u_all is None:
         return None, (
-            f"no time is left within {max_seg * seg:g} min to bring the chamber back "
-            f"to {limits.end_c:g} °C after the last sweep"
+            f"no time is left within {ctx.responses.edges_min[max_seg]:g} min to bring the "
+            f"chamber back to {limits.end_c:g} °C after the last sweep"
         )
     return Structure(windows, u_all.size, u_all), ""
 
@@ -307,19 +307,30 @@ def synthesise(
     progress: Progress,
     stats: LpStats,
     max_candidates: int | None = None,
+    continuation: Continuation | None = None,
+    n_sweeps: int | None = None,
 ) -> Search:
     """Search structures (first direction, band separation, edge caps).
 
     For each candidate: bands -> greedy placement of the sweeps. ``shortest`` keeps the
     shortest structure that fits the duration limit; ``margin`` the one with the widest
-    band separation that fits.
+    band separation that fits. ``n_sweeps`` (default ``levels_required``) sweeps are
+    placed; with a ``continuation``, after its executed steps.
     """
     seg = spec.segment_min
-    max_seg = int(limits.duration_max_min // seg)
-    ext_seg = int(math.ceil(max_seg * OVERRUN_FACTOR))
+    n_fixed = 0 if continuation is None else continuation.prefix.n_segments
+    fixed_min = 0.0 if continuation is None else continuation.at_min
+    max_new = int((limits.duration_max_min - fixed_min + 1e-9) // seg)
+    max_seg = n_fixed + max_new
+    ext_seg = n_fixed + int(math.ceil(max_new * OVERRUN_FACTOR))
     scenarios = [Scenario(p, m) for p, m in zip(params_list, models, strict=True)]
-    ctx = Context(spec, limits, Responses(scenarios, ext_seg, seg, limits), stats)
+    responses = Responses(scenarios, ext_seg, seg, limits, continuation)
+    ctx = Context(spec, limits, responses, stats)
     search = Search(None, None, ctx, [])
+    start_t = None
+    if continuation is not None:  # where the device is when the new steps begin
+        ref, at = responses.resp[0], responses.sample_of(n_fixed)
+        start_t = float(ref.a_t[at, :n_fixed] @ responses.fixed_rates + ref.b_t[at])
     base_sep = spec.delta_c_per_min + BAND_SAFETY_C_PER_MIN
     if len(params_list) > 1:
         base_sep += 2 * ROBUST_SLACK_C_PER_MIN
@@ -327,8 +338,8 @@ def synthesise(
         [base_sep] if spec.objective == "shortest" else [base_sep + x for x in MARGIN_SEPARATIONS]
     )
     for sep in seps:
-        for first in first_directions(spec, limits):
-            directions = sweep_directions(spec, first)
+        for first in first_directions(spec, limits, start_t):
+            directions = sweep_directions(spec, first, n_sweeps)
             n_by_dir = {d: directions.count(d) for d in (+1, -1)}
             for caps, dynamic, design in CANDIDATES[:max_candidates]:
                 cap_by_dir = {
@@ -372,7 +383,7 @@ def synthesise(
                 if structure is None:
                     search.reasons.append(why)
                     continue
-                minutes = structure.n_seg * seg
+                minutes = responses.edges_min[structure.n_seg]
                 if structure.n_seg > max_seg:
                     search.reasons.append(
                         f"the sweeps need {minutes:g} min, more than the limit "
@@ -392,7 +403,7 @@ def synthesise(
 
 def truncate(ctx: Context, structure: Structure, max_seg: int) -> Structure:
     """Cut an over-long structure so that it returns to the end temperature in time."""
-    for n_r in range(1, max_seg):
+    for n_r in range(1, max_seg - ctx.responses.n_fixed):
         cut = max_seg - n_r
         u_fixed = structure.u[:cut]
         lp = SubLP(ctx, u_fixed, max_seg)

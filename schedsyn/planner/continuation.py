@@ -1,0 +1,160 @@
+"""Continuing a run: plan the rest of it from minute M, counting the levels measured so far.
+
+The executed steps stay as they were: they are the first, fixed segments of the planner's
+grid, so the model's state at ``M`` follows exactly from the chamber path the run actually
+took (plus the measured offset, :class:`~.request.Continuation`). The rest is planned with
+as few new sweeps as the bins still need: ``K`` = the most levels any bin is missing, one
+more if the new passes land within ``delta`` of levels already measured. A continuation is
+judged like a plan, on its rounded step table re-simulated densely -- from ``M`` on, with
+the measured passes' gradients counted beside the new ones.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from ..coverage import CoverageReport, distinct_levels, passes
+from ..errors import InfeasiblePlanError
+from ..model import LinearThermalModel, affine_response
+from ..params import Limits, ThermalParams
+from ..programme import Programme
+from ..simulate import dense_times
+from .check import CHECK_DT_MIN, DEVICE_TOL_C, REPORT_DELTA_C_PER_MIN
+from .lp import LpStats
+from .polish import polish
+from .request import Continuation, ExperimentSpec
+from .search import Search, synthesise, truncate
+
+
+def continuation_programme(
+    u: np.ndarray, durations_min: np.ndarray, continuation: Continuation, limits: Limits
+) -> Programme:
+    """The whole run as the operator types it: the executed steps unchanged, then the new
+    steps merged and rounded (whole minutes, 0.1 degC) from the chamber's setpoint at ``M``."""
+    prefix = continuation.prefix
+    n_fixed = prefix.n_segments
+    new = Programme(durations_min[n_fixed:], u[n_fixed:], prefix.end_c)
+    new = new.merged(rate_tol_c_per_min=1e-6).rounded(limits, exact_start=True)
+    return Programme(
+        np.concatenate((prefix.durations_min, new.durations_min)),
+        np.concatenate((prefix.rates_c_per_min, new.rates_c_per_min)),
+        prefix.start_c,
+    )
+
+
+def check_continuation(
+    programme: Programme,
+    spec: ExperimentSpec,
+    limits: Limits,
+    params: ThermalParams,
+    model: LinearThermalModel,
+    continuation: Continuation,
+) -> tuple[CoverageReport, CoverageReport, list[str], float, float]:
+    """Coverage of a continued run: measured passes plus the passes simulated after ``M``.
+
+    The whole programme is simulated every 0.1 min from t = 0 with ``model`` and the
+    measured offset at ``M`` (decaying with the model's time constant); only samples from
+    ``M`` on make new passes, and the first of them is dropped when ``T(M)`` lies inside a
+    bin (that pass began before ``M``; its measured part was left out too). Limits are
+    checked on the new steps only (the executed ones are history).
+    """
+    at = continuation.at_min
+    times = dense_times(programme.total_min, CHECK_DT_MIN)
+    t0 = limits.t_init_c if continuation.t0_c is None else continuation.t0_c
+    resp = affine_response(model, programme.durations_min, times, programme.start_c, t0)
+    temp, grad, _ = resp.evaluate(programme.rates_c_per_min)
+    decay = np.where(times >= at, np.exp(-np.maximum(times - at, 0.0) / params.tau_min), 0.0)
+    temp = temp + continuation.start_correction_c * decay
+    grad = grad - continuation.start_correction_c / params.tau_min * decay
+    after = times >= at - 1e-9
+    grid = spec.grid
+    kb, mean_g, first, _ = passes(temp[after], grad[after], grid)
+    if kb.size and first[0] == 0 and grid.index(temp[after][:1])[0] >= 0:
+        kb, mean_g = kb[1:], mean_g[1:]
+    reports = []
+    for delta in (spec.delta_c_per_min, REPORT_DELTA_C_PER_MIN):
+        grads = tuple(
+            np.concatenate((continuation.existing_gradients[i], mean_g[kb == i]))
+            for i in range(grid.n_bins)
+        )
+        counts = np.array([g.size for g in grads], dtype=np.int64)
+        levels = np.array([distinct_levels(g, delta) for g in grads], dtype=np.int64)
+        reports.append(CoverageReport(grid, spec.levels_required, delta, counts, levels, grads))
+    new_steps = Programme(
+        programme.durations_min[continuation.prefix.n_segments :],
+        programme.rates_c_per_min[continuation.prefix.n_segments :],
+        continuation.prefix.end_c,
+    )
+    problems = [p for p in new_steps.violations(limits) if "starts at" not in p]
+    if programme.total_min > limits.duration_max_min + 1e-9:
+        problems = [p for p in problems if "lasts" not in p]
+        problems.append(
+            f"the run lasts {programme.total_min:.1f} min, longer than the limit "
+            f"{limits.duration_max_min:.0f} min"
+        )
+    t_lo, t_hi = float(temp[after].min()), float(temp[after].max())
+    if t_lo < limits.device_min_c - DEVICE_TOL_C or t_hi > limits.device_max_c + DEVICE_TOL_C:
+        problems.append(
+            f"the device reaches {t_lo:.2f} .. {t_hi:.2f} °C after minute {at:g}, outside "
+            f"its limits {limits.device_min_c:g} .. {limits.device_max_c:g} °C"
+        )
+    return reports[0], reports[1], problems, t_lo, t_hi
+
+
+def sweeps_needed(spec: ExperimentSpec, continuation: Continuation) -> int:
+    """The most levels any bin still lacks: the fewest new sweeps that can complete it."""
+    have = [distinct_levels(g, spec.delta_c_per_min) for g in continuation.existing_gradients]
+    return max(0, spec.levels_required - min(have))
+
+
+def plan_continuation(
+    spec: ExperimentSpec,
+    params: ThermalParams,
+    limits: Limits,
+    model: LinearThermalModel,
+    continuation: Continuation,
+    progress: Callable[[str], None] | None,
+    stats: LpStats,
+) -> tuple[Programme, float, float, Search | None, list[str], tuple]:
+    """The best continuation: the fewest new sweeps that complete every bin, else the one
+    that covers most. Returns the programme, its margins, the search it came from, notes
+    and its :func:`check_continuation` result."""
+    need = sweeps_needed(spec, continuation)
+    best: tuple | None = None
+    notes: list[str] = []
+    models: Sequence[LinearThermalModel] = [model]
+    for k in range(need, min(need + 2, spec.levels_required) + 1):
+        if progress:
+            progress(f"continuation from minute {continuation.at_min:g}: {k} new sweep(s)")
+        search = synthesise(
+            spec, [params], limits, models, progress, stats, continuation=continuation, n_sweeps=k
+        )
+        if search.best is not None:
+            u, mg, mt = polish(search.ctx, search.best[0])
+            durations = search.ctx.responses.durations[: u.size]
+        elif search.overrun is not None:
+            max_seg = search.ctx.responses.max_segments(limits.duration_max_min)
+            structure = truncate(search.ctx, search.overrun, max_seg)
+            u, mg, mt = structure.u, 0.0, 0.0
+            durations = search.ctx.responses.durations[: u.size]
+        else:
+            notes.append(f"{k} new sweep(s) do not fit: {'; '.join(search.reasons[:2])}")
+            continue
+        programme = continuation_programme(u, durations, continuation, limits)
+        check = check_continuation(programme, spec, limits, params, model, continuation)
+        key = (check[0].complete and not check[2], check[0].coverage, check[0].min_levels)
+        if best is None or key > best[0]:
+            best = (key, programme, mg, mt, search if search.best else None, check)
+        if key[0]:
+            break
+    if best is None:
+        raise InfeasiblePlanError(
+            f"{spec.name}: no continuation from minute {continuation.at_min:g} fits in the "
+            f"{limits.duration_max_min - continuation.at_min:g} min left ({'; '.join(notes)}); "
+            "lengthen the duration limit or accept the levels measured so far",
+            best_coverage=0.0,
+        )
+    _, programme, mg, mt, search, check = best
+    return programme, mg, mt, search, notes, check
