@@ -598,6 +598,14 @@ class Decoded:
     parts: tuple[Programme, ...]
     header: Mapping[str, Any]
 
+    def __post_init__(self) -> None:
+        if len(self.numbers) != len(self.parts):
+            raise StepTableError(
+                f"{self.controller} export: {len(self.numbers)} programme numbers for "
+                f"{len(self.parts)} programmes"
+            )
+        join_parts(self.parts, f"{self.controller} export")  # the chain is continuous
+
     @property
     def programme(self) -> Programme:
         return join_parts(self.parts, f"{self.controller} export")
@@ -806,6 +814,13 @@ def export_programme(
     from .controllers import CODECS
 
     limits = Limits() if limits is None else limits
+    broken = programme.violations(limits)
+    if broken:
+        raise StepTableError(
+            f"the programme breaks the limits it is exported with: {broken[0]}"
+            + (f" (and {len(broken) - 1} more)" if len(broken) > 1 else "")
+            + "; fix the step table or export with the chamber's own limits"
+        )
     spec = settings.spec
     codec = CODECS[spec.key]
     q = quantise(programme, spec.time_step_min, limits, spec.temp_step_c, spec.max_step_min)
