@@ -299,15 +299,6 @@ def read_step_table(path: Path | str, limits: Limits | None = None) -> StepTable
     return StepTable(path, prog, meta, hashlib.sha256(raw).hexdigest(), lim)
 
 
-def sha256_file(path: Path | str) -> str:
-    """SHA-256 of a file's bytes (hex)."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 # ---------------------------------------------------------------------------------------
 # the coverage check
 # ---------------------------------------------------------------------------------------

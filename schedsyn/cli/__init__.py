@@ -14,7 +14,18 @@ import sys
 from ..errors import SchedsynError
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ("simulate", "sweep", "estimate", "compare", "diagnose", "plan", "campaign", "export")
+COMMANDS = (
+    "simulate",
+    "sweep",
+    "estimate",
+    "compare",
+    "diagnose",
+    "plan",
+    "campaign",
+    "export",
+    "sheet",
+    "report",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
