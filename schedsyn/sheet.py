@@ -345,8 +345,10 @@ def operator_sheet(
     else:
         todo.append("Type the programme in from the step table below and check it twice.")
     todo += [
-        f"Soak the device with the chamber at {prog.start_c:g} °C until its internal "
-        f"temperature reads {prog.start_c:g} °C (the plan starts from {prog.start_c:g} °C).",
+        f"Soak the device with the chamber at {prog.start_c:g} °C. The plan assumes its "
+        f"internal temperature is {cp.t_c[0]:g} °C when the programme starts (a device "
+        "that heats itself reads more once running: the first checkpoints then read high "
+        "by that difference, which fades within about three time constants).",
         "Start the data logger (time, internal temperature, chamber setpoint and air "
         "temperature) at the same moment as the programme.",
         "At every checkpoint write down the device temperature. Outside the band: check "
@@ -382,7 +384,8 @@ def operator_sheet(
     w30 = cp.band_width_at(min(30.0, total))
     w60 = cp.band_width_at(min(60.0, total))
     body.append(
-        f"<p>Band width after 30 min: {w30:.1f} °C, after 60 min: {w60:.1f} °C. "
+        f"<p>One checkpoint every {_interval(cp):g} min. Band width after 30 min: "
+        f"{w30:.1f} °C, after 60 min: {w60:.1f} °C. "
         "Rows of the first hour are shaded. The band covers the model's uncertainty "
         "only: allow for your sensor's accuracy on top.</p>"
     )
