@@ -114,9 +114,13 @@ def check_for(args: argparse.Namespace, table):
 
 
 def export_name(table) -> str:
+    """The experiment's name: its metadata, else the folder of a ``steps.csv`` (as
+    written by plan/campaign), else the file's stem."""
     import re
 
-    name = table.meta.get("experiment") or Path(table.path).parent.name or "schedsyn"
+    path = Path(table.path)
+    name = table.meta.get("experiment") or (path.parent.name if path.stem == "steps" else "")
+    name = name or path.stem or "schedsyn"
     return re.sub(r"[^A-Za-z0-9_\-]", "_", name)[:64] or "schedsyn"
 
 
