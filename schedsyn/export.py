@@ -940,6 +940,8 @@ def write_export(
 
 
 def default_export_path(steps_path: Path | str, controller: str) -> Path:
-    """``STEM.<controller><suffix>`` beside the step table (e.g. ``steps.espec-p300.json``)."""
+    """Beside the step table: ``STEM.<controller><suffix>`` (e.g. ``steps.espec-p300.json``),
+    ``STEM.typed.csv`` for the plain step table."""
     p = Path(steps_path)
-    return p.with_name(f"{p.stem}.{controller}{controller_spec(controller).file_suffix}")
+    tag = "typed" if controller == "csv" else controller
+    return p.with_name(f"{p.stem}.{tag}{controller_spec(controller).file_suffix}")

@@ -185,7 +185,7 @@ def band_plot(
     gives the clock. ``until_min`` shows only the first minutes (e.g. the first two
     hours, where a wrong start shows).
     """
-    ax = _axes(ax, (10.0, 4.6))
+    ax = _axes(ax, (9.0, 4.4))
     t = cp.time_min
     keep = np.ones(t.size, bool) if until_min is None else t <= until_min + 1e-9
     if region is not None:
@@ -232,7 +232,7 @@ def band_plot(
         ticks = np.arange(float(first), end + 1e-9, step)
         top.set_xticks(ticks, labels=[clock(cp.start, m) for m in ticks])
         top.set_xlabel("clock time")
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=3, frameon=False, fontsize=8)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, frameon=False, fontsize=9)
     if title:
         ax.set_title(title)
     return ax
@@ -380,7 +380,7 @@ def operator_sheet(
         )
     )
 
-    body.append('<h2 class="page-break">Checkpoints</h2>')
+    body.append("<h2>Checkpoints</h2>")
     w30 = cp.band_width_at(min(30.0, total))
     w60 = cp.band_width_at(min(60.0, total))
     body.append(
@@ -391,7 +391,7 @@ def operator_sheet(
     )
     frame = cp.to_frame()
     frame["band"] = [
-        f"{lo:.1f} .. {hi:.1f}"
+        f"{lo:.1f}\u00a0..\u00a0{hi:.1f}"  # no line break inside a band
         for lo, hi in zip(frame["device_low_c"], frame["device_high_c"], strict=True)
     ]
     body.append(

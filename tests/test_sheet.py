@@ -462,3 +462,30 @@ def test_core_modules_do_not_load_matplotlib():
     )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
     assert res.returncode == 0, res.stderr
+
+
+def test_a_failing_export_does_not_stop_the_sheet(tmp_path):
+    from types import SimpleNamespace
+
+    from schedsyn.cli.sheet import write_plan_deliverables
+    from schedsyn.params import Limits
+    from schedsyn.planner import ExperimentSpec
+
+    table = read_step_table(BASELINE)
+    (tmp_path / "steps.csv").write_bytes(BASELINE.read_bytes())
+    plan = SimpleNamespace(
+        spec=ExperimentSpec("E1", -50.0, -30.0, -52.0, -20.0),
+        params=ThermalParams(),
+        limits=Limits(),
+        programme=table.programme,
+        scenarios=(ThermalParams(),),
+    )
+    too_small = ExportSettings("espec-p300", max_steps=1, programmes=2)
+    lines, links, problem = write_plan_deliverables(
+        plan, tmp_path, (too_small, ExportSettings("csv")), None
+    )
+    assert problem and any("espec-p300 export of E1 FAILED" in ln for ln in lines)
+    assert (tmp_path / "sheet.html").is_file()
+    assert links == [("sheet", "sheet.html"), ("plan", "plan.json"), ("csv", "steps.typed.csv")]
+    assert not (tmp_path / "steps.espec-p300.json").exists()
+    assert read_step_table(tmp_path / "steps.typed.csv").programme.n_segments == 12

@@ -54,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
     from ..campaign import default_campaign, load_campaign, plan_campaign, stderr_progress
+    from ..export import default_export_path
     from ..io import write_frame_atomic
     from .plan import report_plan, write_plan_outputs
     from .sheet import write_campaign_index, write_plan_deliverables
@@ -98,10 +99,13 @@ def run(args: argparse.Namespace) -> int:
         )
     )
     if lost:
-        print(f"*** the controller export of {', '.join(lost)} covers LESS than its step table")
+        print(
+            f"*** the controller export of {', '.join(lost)} failed or covers LESS than its "
+            "step table (see above)"
+        )
     print(
         f"wrote {out}/summary.csv, index.html and {out}/<experiment>/steps.csv, plan.json, "
         "program.png, phase.png, coverage.png, sheet.html"
-        + "".join(f", steps.{e.controller}.*" for e in config.exports)
+        + "".join(f", {default_export_path('steps.csv', e.controller)}" for e in config.exports)
     )
     return 0 if n_bad == 0 and not lost else 1

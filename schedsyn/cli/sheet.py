@@ -24,7 +24,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from ..errors import ParameterError
+from ..errors import ParameterError, SchedsynError
 from ..export import CONTROLLER_KEYS
 from .export import add_check_options, check_for, export_name
 
@@ -195,7 +195,9 @@ def run(args: argparse.Namespace) -> int:
 def write_plan_deliverables(plan, out: Path, exports=(), sheet=None, inputs=()):
     """Controller exports and the operator sheet of a plan, into ``out`` (its folder).
 
-    Returns ``(lines to print, links [(label, file name)], coverage lost by an export)``.
+    Returns ``(lines to print, links [(label, file name)], problem)`` where ``problem``
+    is true when an export covers less than the table or could not be made (e.g. more
+    programmes than the controller stores): the line says which.
     """
     import dataclasses
 
@@ -215,13 +217,18 @@ def write_plan_deliverables(plan, out: Path, exports=(), sheet=None, inputs=()):
     done = []
     for settings in exports:
         settings = dataclasses.replace(settings, name=_safe_name(spec.name))
-        ex = export_programme(
-            plan.programme,
-            settings,
-            limits=plan.limits,
-            check=check,
-            header={"experiment": spec.name, "source": "steps.csv"},
-        )
+        try:
+            ex = export_programme(
+                plan.programme,
+                settings,
+                limits=plan.limits,
+                check=check,
+                header={"experiment": spec.name, "source": "steps.csv"},
+            )
+        except SchedsynError as exc:  # the other exports, the sheet and the index go on
+            lines.append(f"  *** {settings.controller} export of {spec.name} FAILED: {exc}")
+            lost = True
+            continue
         path = write_export(default_export_path(steps_path, settings.controller), ex, inputs)
         lines += [f"  {ln}" for ln in ex.summary()]
         links.append((settings.controller, path.name))
