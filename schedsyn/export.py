@@ -157,6 +157,10 @@ class ExportSettings:
                 f"({spec.reserved_steps} step(s) per programme are reserved), "
                 f"got {self.max_steps}"
             )
+        if spec.max_steps is None and self.max_steps is not None:
+            raise ParameterError(
+                f"max_steps does not apply to the {spec.title}: it has no step limit"
+            )
         if self.programmes is not None and self.programmes < 1:
             raise ParameterError(f"programmes must be >= 1, got {self.programmes}")
         if self.end_mode is not None and self.end_mode not in spec.end_modes:

@@ -382,6 +382,8 @@ def test_settings_are_validated():
         ExportSettings("espec-p300", first_programme=0)
     with pytest.raises(ParameterError, match="name"):
         ExportSettings("espec-p300", name="W1; rm")
+    with pytest.raises(ParameterError, match="no step limit"):
+        ExportSettings("csv", max_steps=10)
 
 
 # ---------------------------------------------------------------------------------------
