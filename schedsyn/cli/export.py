@@ -1,18 +1,19 @@
-"""``schedsyn export STEPS.csv --controller C``: the step table as a controller programme.
+"""schedsyn export STEPS.csv --controller C: the step table as a controller programme.
 
 Controllers: espec-p300 and espec-scp220 (JSON: ChamberConnectLibrary's
-``set_program(N, dict)`` dictionaries), watlow-f4t (JSON, same library), binder-mb (CSV
-segment table after auger-prime-sde/ess ``binder.py``), csv (the step table, whole
+set_program(N, dict) dictionaries), watlow-f4t (JSON, same library), binder-mb (CSV
+segment table after auger-prime-sde/ess binder.py), csv (the step table, whole
 minutes and 0.1 °C, for typing in by hand).
 
 The programme is rounded to the controller's resolution, split into chained programmes
 when one holds too few steps, encoded, read back by a strict reader that checks the
 controller's limits, and re-simulated: the coverage of the exported programme is printed
 next to the coverage of the step table. Region and model come from the table's
-``# key: value`` lines (``working_lo_c``, ``working_hi_c``, ``tau_s``, ``dt0_c``, ...) or
+# key: value lines (working_lo_c, working_hi_c, tau_s, dt0_c, ...) or
 from the options.
 
-Writes ``--out`` (default: beside the table, ``STEM.<controller>.json`` or ``.csv``).
+Writes --out (default: beside the table, STEM.<controller>.json or .csv; STEM.typed.csv
+for csv).
 Exit codes: 0 written and the export covers what the table covers; 1 written, but the
 export covers less (the rounding cost coverage: read the notes); 2 bad input.
 """

@@ -1,16 +1,16 @@
-"""``schedsyn report LOG.csv STEPS.csv``: the report of a finished run, for filing.
+"""schedsyn report LOG.csv STEPS.csv: the report of a finished run, for filing.
 
-Compares the measured log with the step table that was run (as ``schedsyn compare``:
+Compares the measured log with the step table that was run (as schedsyn compare:
 Kalman-smoothed gradient, the plan simulated through the model, the same coverage metric
 on both) and writes one self-contained HTML page (printable to PDF): achieved vs planned
 coverage, phase portraits and temperatures planned vs measured, the diagnosis
-(``--diagnosis DIR`` from ``schedsyn diagnose --out DIR``) and the drift fit
-(``--fit DIR``) where given, and what produced it: package versions, every input file
+(--diagnosis DIR from schedsyn diagnose --out DIR) and the drift fit
+(--fit DIR) where given, and what produced it: package versions, every input file
 with its SHA-256, the command.
 
-Region and model come from the step table's ``# key: value`` lines or the options.
-Writes ``--out`` (default ``out/report``): ``report.html``, ``report.json`` (summary,
-versions, input hashes) and ``coverage.csv``. Exit codes: 0 written; 2 bad input.
+Region and model come from the step table's # key: value lines or the options.
+Writes --out (default out/report): report.html, report.json (summary,
+versions, input hashes) and coverage.csv. Exit codes: 0 written; 2 bad input.
 """
 
 from __future__ import annotations

@@ -1,18 +1,18 @@
-"""``schedsyn sheet STEPS.csv|PLAN_DIR``: the operator sheet of one experiment (HTML).
+"""schedsyn sheet STEPS.csv|PLAN_DIR: the operator sheet of one experiment (HTML).
 
 One self-contained page (pictures embedded, printable to PDF from a browser): the
 programme with the device's tolerance band, checkpoints every 30 min with the chamber
 and device temperatures the operator should see (the band: min/max of the simulated
 device temperature over tau ±15 % × dT0 ±2 °C, or over the plan's robust box), and the
-step table with wall-clock times from ``--start``.
+step table with wall-clock times from --start.
 
-PLAN_DIR is a folder written by ``schedsyn plan`` or ``schedsyn campaign`` (its
-``steps.csv`` and ``plan.json`` give the region, the model and the robust box); for a
-step table they come from its ``# key: value`` lines or from the options. With
-``--controller`` the sheet shows the exported programme (what the controller runs) with
+PLAN_DIR is a folder written by schedsyn plan or schedsyn campaign (its
+steps.csv and plan.json give the region, the model and the robust box); for a
+step table they come from its # key: value lines or from the options. With
+--controller the sheet shows the exported programme (what the controller runs) with
 its programme and step numbers.
 
-Writes ``--out`` (default ``PLAN_DIR/sheet.html``, or ``STEM.sheet.html`` beside the
+Writes --out (default PLAN_DIR/sheet.html, or STEM.sheet.html beside the
 table). Exit codes: 0 written; 2 bad input.
 """
 
