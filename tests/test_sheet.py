@@ -68,6 +68,7 @@ needs_browser = pytest.mark.skipif(
     BROWSER is None,
     reason="no headless browser: install Debian's chromium (apt-get install -y chromium)",
 )
+slow = pytest.mark.slow
 
 
 def browse(page: Path, *args: str, window: str = "1200,2400") -> subprocess.CompletedProcess:
@@ -231,6 +232,7 @@ def test_sheet_is_self_contained_and_complete(tmp_path):
         assert unit in text
 
 
+@slow
 @needs_browser
 def test_sheet_renders_in_a_headless_browser(tmp_path):
     path, text, cp, ex = _sheet(tmp_path)
@@ -314,6 +316,7 @@ def small_campaign(tmp_path_factory):
     return out, rc, text, err
 
 
+@slow
 @pytest.mark.filterwarnings("ignore:Solution may be inaccurate:UserWarning")
 def test_campaign_writes_exports_sheets_and_an_index(small_campaign):
     out, rc, text, err = small_campaign
@@ -334,6 +337,7 @@ def test_campaign_writes_exports_sheets_and_an_index(small_campaign):
         assert (out / href).is_file(), href
 
 
+@slow
 @needs_browser
 @pytest.mark.filterwarnings("ignore:Solution may be inaccurate:UserWarning")
 def test_campaign_index_renders_with_one_row_per_experiment(small_campaign):
@@ -437,6 +441,7 @@ def test_report_names_versions_inputs_and_verdict(tmp_path):
     assert rc == 2 and "--fit" in err and "not a folder" in err
 
 
+@slow
 @needs_browser
 def test_report_renders_every_bin(tmp_path):
     out = tmp_path / "rep"
