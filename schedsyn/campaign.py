@@ -9,6 +9,11 @@ The paper splits -50 .. +60 degC into four working regions, one 9-hour experimen
     [settings]     levels_required, delta_c_per_min, segment_min, objective, ...
                    (ExperimentSpec fields shared by every experiment)
     [robust]       tau_s = [LO, HI], dt0_c = [LO, HI]  (optional robust box)
+    [export]       controller = "espec-p300" (or a list), first_programme, max_steps,
+                   programmes, end_mode  (optional: controller programmes, see
+                   schedsyn.export)
+    [sheet]        start = "2026-11-24 08:00", interval_min, band_tau_rel, band_dt0_c,
+                   n_tau  (optional: operator sheets, see schedsyn.checkpoints)
     [[experiment]] name, working_lo_c, working_hi_c, approx_lo_c, approx_hi_c,
                    any setting to override, baseline_steps = "FILE.csv" (optional,
                    relative to the TOML file)
@@ -36,8 +41,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from .checkpoints import SheetSettings, parse_start
 from .coverage import coverage_report
 from .errors import InfeasiblePlanError, ParameterError, SchedsynError
+from .export import ExportSettings
 from .params import Limits, ThermalParams
 from .planner import ExperimentSpec, Plan, plan_experiment, planning_effort
 from .programme import read_steps
@@ -81,6 +88,10 @@ class CampaignConfig:
         Robust box: each programme must cover its region for every (tau, dT0) in it.
     baseline_steps : tuple of (Path or None)
         Empty, or one entry per experiment: a paper-like step table to compare with.
+    exports : tuple of ExportSettings
+        Controller programmes written beside each step table (``[export]``).
+    sheet : SheetSettings
+        Operator sheets: start time, checkpoint interval, band (``[sheet]``).
     """
 
     experiments: tuple[ExperimentSpec, ...]
@@ -89,6 +100,8 @@ class CampaignConfig:
     robust_tau_s: tuple[float, float] | None = None
     robust_dt0_c: tuple[float, float] | None = None
     baseline_steps: tuple[Path | None, ...] = ()
+    exports: tuple[ExportSettings, ...] = ()
+    sheet: SheetSettings = field(default_factory=SheetSettings)
 
     def __post_init__(self) -> None:
         exps = tuple(self.experiments)
@@ -186,7 +199,9 @@ def _wrap(where: str, build: Callable[[], Any]) -> Any:
 def campaign_from_dict(doc: dict, path: Path | str = "<config>") -> CampaignConfig:
     """Build a :class:`CampaignConfig` from a parsed TOML document (see module doc)."""
     path = Path(path)
-    _check_keys(doc, ("model", "limits", "settings", "robust", "experiment"), str(path))
+    _check_keys(
+        doc, ("model", "limits", "settings", "robust", "experiment", "export", "sheet"), str(path)
+    )
     model = _table(doc, "model", path)
     _check_keys(model, ("tau_s", "dt0_c"), _where(path, "model"))
     params = _wrap(
@@ -206,6 +221,8 @@ def campaign_from_dict(doc: dict, path: Path | str = "<config>") -> CampaignConf
     robust = _table(doc, "robust", path)
     _check_keys(robust, ("tau_s", "dt0_c"), _where(path, "robust"))
     box = {k: _pair(v, _where(path, "robust", k)) for k, v in robust.items()}
+    exports = _export_table(_table(doc, "export", path), _where(path, "export"))
+    sheet = _sheet_table(_table(doc, "sheet", path), _where(path, "sheet"))
 
     raw = doc.get("experiment")
     if raw is None:
@@ -251,8 +268,63 @@ def campaign_from_dict(doc: dict, path: Path | str = "<config>") -> CampaignConf
             robust_tau_s=box.get("tau_s"),
             robust_dt0_c=box.get("dt0_c"),
             baseline_steps=tuple(baselines) if any(b is not None for b in baselines) else (),
+            exports=exports,
+            sheet=sheet,
         ),
     )
+
+
+def _export_table(t: dict, where: str) -> tuple[ExportSettings, ...]:
+    """``[export]``: ``controller`` (a name or a list of names) and the export options."""
+    if not t:
+        return ()
+    _check_keys(t, ("controller", "first_programme", "max_steps", "programmes", "end_mode"), where)
+    ctl = t.get("controller")
+    names = [ctl] if isinstance(ctl, str) else ctl
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+        raise ParameterError(
+            f"{where} controller must be a controller name or a list of names, got {ctl!r}"
+        )
+    kw: dict[str, Any] = {}
+    for key in ("first_programme", "max_steps", "programmes"):
+        if key in t:
+            v = t[key]
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise ParameterError(f"{where} {key} must be a whole number, got {v!r}")
+            kw[key] = v
+    if "end_mode" in t:
+        if not isinstance(t["end_mode"], str):
+            raise ParameterError(f"{where} end_mode must be a string, got {t['end_mode']!r}")
+        kw["end_mode"] = t["end_mode"]
+    return tuple(_wrap(where, partial(ExportSettings, controller=n, **kw)) for n in names)
+
+
+def _sheet_table(t: dict, where: str) -> SheetSettings:
+    """``[sheet]``: start (a string or a TOML date-time), interval and band options."""
+    _check_keys(t, ("start", "interval_min", "band_tau_rel", "band_dt0_c", "n_tau"), where)
+    kw: dict[str, Any] = {}
+    if "start" in t:
+        v = t["start"]
+        if isinstance(v, str):
+            kw["start"] = _wrap(where, partial(parse_start, v))
+        elif hasattr(v, "hour") and hasattr(v, "year"):  # a TOML local date-time
+            kw["start"] = v.replace(tzinfo=None)
+        else:
+            raise ParameterError(
+                f'{where} start must be a date and time like "2026-11-24 08:00", got {v!r}'
+            )
+    for key in ("interval_min", "band_tau_rel", "band_dt0_c"):
+        if key in t:
+            v = t[key]
+            if isinstance(v, bool) or not isinstance(v, int | float):
+                raise ParameterError(f"{where} {key} must be a number, got {v!r}")
+            kw[key] = float(v)
+    if "n_tau" in t:
+        v = t["n_tau"]
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise ParameterError(f"{where} n_tau must be a whole number, got {v!r}")
+        kw["n_tau"] = v
+    return _wrap(where, partial(SheetSettings, **kw))
 
 
 def load_campaign(path: Path | str) -> CampaignConfig:

@@ -23,6 +23,9 @@ COMMANDS = (
     "monitor",
     "plan",
     "campaign",
+    "export",
+    "sheet",
+    "report",
 )
 
 

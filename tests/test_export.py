@@ -1,0 +1,595 @@
+"""Controller exports: shapes, limits, round trips, chaining, and the coverage re-check.
+
+Every export is read back from its file by the strict reader and compared with the
+source table here, boundary by boundary, to the controller's resolution; coverage claims
+are recomputed with scipy's ODE solver and separate counting code. Some tests plant a
+wrong rounding or a broken chain and check that the checks catch it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+from scipy.integrate import solve_ivp
+
+import schedsyn.export as export_mod
+from schedsyn.cli import main
+from schedsyn.controllers import CODECS, SPECS
+from schedsyn.errors import ParameterError, StepTableError
+from schedsyn.export import (
+    CONTROLLER_KEYS,
+    CoverageCheck,
+    ExportSettings,
+    check_from_meta,
+    export_programme,
+    quantise,
+    read_export,
+    read_step_table,
+    robust_box_from_meta,
+    split_parts,
+    write_export,
+)
+from schedsyn.grid import BinGrid
+from schedsyn.params import Limits, ThermalParams
+from schedsyn.programme import Programme
+
+BASELINE = "data/baseline_exp1_steps.csv"
+BASELINE_TEXT = Path(BASELINE).read_text(encoding="utf-8")
+W1 = BinGrid(-50.0, -30.0)
+
+
+def fine_programme(rng, n_cycles: int = 9, max_total_min: float = 530.0) -> Programme:
+    """A programme off every controller grid: fractional minutes, temperatures between
+    0.1 degC steps, alternating ramps (|rate| <= 0.9 degC/min) and holds of >= 2 min,
+    starting and ending at 20 degC, at most ``max_total_min`` long."""
+    while True:
+        temps = [20.0]
+        durs: list[float] = []
+        for k in range(n_cycles):
+            target = float(rng.uniform(-45.0, -5.0) if k % 2 == 0 else rng.uniform(-25.0, 15.0))
+            if k == n_cycles - 1:
+                target = 20.0
+            rate = float(rng.uniform(0.4, 0.9))
+            durs.append(abs(target - temps[-1]) / rate)
+            temps.append(target)
+            if k < n_cycles - 1:
+                durs.append(float(rng.uniform(2.0, 12.0)))
+                temps.append(target)
+        if sum(durs) <= max_total_min:
+            break
+    d = np.array(durs)
+    t = np.array(temps)
+    return Programme(d, np.diff(t) / d, 20.0)
+
+
+def assert_round_trip(source: Programme, back: Programme, time_step_s: float) -> None:
+    """``back`` is ``source`` on the controller's grid: one boundary per source boundary,
+    each moved by at most half a time step (cumulative rounding) and half a 0.1 degC step,
+    every time and temperature on the grid, every rate within the default limits."""
+    q = time_step_s / 60.0
+    ts = np.concatenate(([0.0], np.cumsum(source.durations_min)))
+    tb = np.concatenate(([0.0], np.cumsum(back.durations_min)))
+    assert tb.size == ts.size, f"{tb.size - 1} steps read back, {ts.size - 1} exported"
+    assert np.allclose(tb / q, np.round(tb / q), atol=1e-6), "times off the controller grid"
+    assert np.max(np.abs(tb - ts)) <= q / 2 + 1e-9, "a boundary moved by more than q/2"
+    kb = back.boundary_temps_c
+    assert np.allclose(kb * 10, np.round(kb * 10), atol=1e-6), "setpoints off the 0.1 grid"
+    assert np.max(np.abs(kb - source.boundary_temps_c)) <= 0.05 + 1e-9, "setpoint moved > 0.05"
+    lim = Limits()
+    assert back.rates_c_per_min.min() >= lim.rate_min_c_per_min - 1e-9
+    assert back.rates_c_per_min.max() <= lim.rate_max_c_per_min + 1e-9
+
+
+# ---------------------------------------------------------------------------------------
+# independent re-simulation (scipy) and counting (not schedsyn.coverage)
+# ---------------------------------------------------------------------------------------
+def ode_levels(prog: Programme, grid: BinGrid, params: ThermalParams, delta: float):
+    edges = np.concatenate(([0.0], np.cumsum(prog.durations_min)))
+    temps = prog.boundary_temps_c
+    total = float(edges[-1])
+    t = np.arange(0.0, total + 1e-9, 0.1)
+    if total - t[-1] > 1e-9:
+        t = np.append(t, total)
+    tau = params.tau_s / 60.0
+
+    def tk(x):
+        return np.interp(x, edges, temps)
+
+    sol = solve_ivp(
+        lambda x, y: [(tk(x) + params.dt0_c - y[0]) / tau],
+        (0.0, total),
+        [20.0],
+        t_eval=t,
+        max_step=0.05,
+        rtol=1e-10,
+        atol=1e-10,
+    )
+    temp = sol.y[0]
+    grad = (tk(t) + params.dt0_c - temp) / tau
+    out = []
+    for b in grid.lower_c:
+        idx = np.flatnonzero((temp >= b) & (temp < b + grid.bin_c))
+        runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1) if idx.size else []
+        means = sorted(float(grad[r].mean()) for r in runs if r.size)
+        count, last = 0, -np.inf
+        for x in means:
+            if x - last >= delta - 1e-12:
+                count, last = count + 1, x
+        out.append(count)
+    return np.array(out)
+
+
+# ---------------------------------------------------------------------------------------
+# round trips
+# ---------------------------------------------------------------------------------------
+@pytest.mark.parametrize("controller", CONTROLLER_KEYS)
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_export_file_reads_back_to_the_controllers_resolution(tmp_path, controller, seed):
+    prog = fine_programme(np.random.default_rng(seed))
+    spec = SPECS[controller]
+    ex = export_programme(prog, ExportSettings(controller), check=CoverageCheck(W1))
+    path = write_export(tmp_path / f"p{spec.file_suffix}", ex)
+    back = read_export(path)  # from the file, controller named inside it
+    assert back.controller == controller
+    assert_round_trip(prog, back.programme, spec.time_step_s)
+    # the reported deviation is the real one
+    t = np.linspace(0, prog.total_min, 4001)
+    dev = np.max(np.abs(prog.chamber_at(t) - back.programme.chamber_at(t)))
+    assert dev <= ex.max_chamber_deviation_c + 1e-9
+    assert ex.max_boundary_shift_s <= spec.time_step_s / 2 + 1e-6
+
+
+def fine_baseline(rng) -> Programme:
+    """The paper-like baseline of experiment 1 moved off every grid: durations shifted by
+    up to 0.45 min, temperatures by up to 0.04 degC (start and end stay at 20 degC)."""
+    base = read_step_table(BASELINE).programme
+    d = base.durations_min + rng.uniform(-0.45, 0.45, base.n_segments)
+    tk = base.boundary_temps_c + np.concatenate(
+        ([0.0], rng.uniform(-0.04, 0.04, base.n_segments - 1), [0.0])
+    )
+    return Programme(d, np.diff(tk) / d, 20.0)
+
+
+@pytest.mark.parametrize("controller", ["espec-p300", "watlow-f4t", "binder-mb"])
+def test_exported_coverage_is_that_of_the_read_back_programme(controller):
+    prog = fine_baseline(np.random.default_rng(7))
+    params = ThermalParams(2400.0, 3.0)
+    ex = export_programme(
+        prog, ExportSettings(controller), check=CoverageCheck(W1, params, 3, 0.05)
+    )
+    want_src = ode_levels(prog, W1, params, 0.05)
+    want_exp = ode_levels(ex.exported, W1, params, 0.05)
+    assert np.array_equal(ex.source_coverage.levels, want_src)
+    assert np.array_equal(ex.export_coverage.levels, want_exp)
+    assert ex.export_coverage.coverage == pytest.approx(np.mean(want_exp >= 3))
+    assert 0 < ex.export_coverage.coverage < 1  # not vacuous: some bins pass, some do not
+
+
+@given(
+    durs=st.lists(st.floats(0.05, 40.0), min_size=1, max_size=25),
+    deltas=st.lists(st.floats(-30.0, 30.0), min_size=25, max_size=25),
+    q_s=st.sampled_from([1, 60]),
+)
+@settings(max_examples=60, deadline=None)
+def test_quantise_stays_within_limits_and_half_a_step(durs, deltas, q_s):
+    lim = Limits()
+    d = np.array(durs)
+    # rates within the chamber limits
+    dt = np.clip(np.array(deltas[: d.size]), lim.rate_min_c_per_min * d, lim.rate_max_c_per_min * d)
+    prog = Programme(d, dt / d, 20.0)
+    tk_src = prog.boundary_temps_c
+    assume(tk_src.min() >= lim.chamber_min_c and tk_src.max() <= lim.chamber_max_c)
+    q = q_s / 60.0
+    if prog.total_min < q / 2 + 1e-9:
+        with pytest.raises(StepTableError):
+            quantise(prog, q, lim)
+        return
+    out = quantise(prog, q, lim)
+    edges = np.concatenate(([0.0], np.cumsum(out.durations_min)))
+    assert np.allclose(edges / q, np.round(edges / q), atol=1e-6)
+    assert abs(out.total_min - math.floor(prog.total_min / q + 0.5 + 1e-9) * q) < 1e-6
+    assert out.rates_c_per_min.min() >= lim.rate_min_c_per_min - 1e-9
+    assert out.rates_c_per_min.max() <= lim.rate_max_c_per_min + 1e-9
+    tk = out.boundary_temps_c
+    assert np.allclose(tk * 10, np.round(tk * 10), atol=1e-6)
+    assert out.start_c == 20.0
+    # the path stays within one rounding of the source wherever the source is slow enough
+    # that a half-step time shift and the 0.1 degC grid bound the difference
+    t = np.linspace(0, min(prog.total_min, out.total_min), 500)
+    bound = 0.1 + 3.0 * q  # temperature clamp (one grid step) + fastest rate x half-step x 2
+    assert np.max(np.abs(prog.chamber_at(t) - out.chamber_at(t))) <= bound + 1e-9
+
+
+# ---------------------------------------------------------------------------------------
+# controller shapes (ChamberConnectLibrary dictionaries, Binder segment table)
+# ---------------------------------------------------------------------------------------
+def _doc(controller: str, prog: Programme | None = None, **kw):
+    prog = Programme(np.array([87.0, 27.0, 30.0]), np.array([-1.0, 0.0, 2.9]), 20.0)
+    ex = export_programme(prog, ExportSettings(controller, **kw))
+    return ex, (json.loads(ex.text) if controller != "binder-mb" else None)
+
+
+def test_p300_programme_is_the_library_read_prgm_dict():
+    # keys and value types of p300.py read_prgm / parse_prgm_data / parse_prgm_data_step
+    ex, doc = _doc("espec-p300")
+    (entry,) = doc["programmes"]
+    prog = entry["program"]
+    assert isinstance(entry["number"], int) and entry["number"] == 1
+    assert set(prog) == {
+        "name",
+        "end",
+        "next_prgm",
+        "counter_a",
+        "counter_b",
+        "tempDetail",
+        "steps",
+    }
+    assert prog["end"] == "STANDBY" and prog["next_prgm"] == 0
+    assert prog["counter_a"] == {"start": 0, "end": 0, "cycles": 0}
+    assert prog["tempDetail"] == {
+        "range": {"max": 80.0, "min": -70.0},
+        "mode": "SV",
+        "setpoint": 20.0,
+    }
+    step = prog["steps"][0]
+    assert set(step) == {"number", "time", "paused", "granty", "refrig", "temperature", "relay"}
+    assert step["time"] == {"hour": 1, "minute": 27}
+    assert all(isinstance(v, int) for v in step["time"].values())
+    assert step["temperature"] == {"setpoint": -67.0, "ramp": True}
+    assert isinstance(step["temperature"]["setpoint"], float)
+    assert step["refrig"] == {"mode": "auto", "setpoint": 0}  # encode_refrig -> REF9
+    assert step["relay"] == [False] * 12
+    hold = prog["steps"][1]
+    assert hold["temperature"] == {"setpoint": -67.0, "ramp": False}
+    assert hold["time"] == {"hour": 0, "minute": 27}
+    # the wire form write_prgm_data_step builds from it keeps 0.1 degC and whole minutes
+    wire = "TEMP%0.1f,TIME%d:%d" % (  # noqa: UP031 (the library's own format)
+        step["temperature"]["setpoint"],
+        step["time"]["hour"],
+        step["time"]["minute"],
+    )
+    assert wire == "TEMP-67.0,TIME1:27"
+
+
+def test_f4t_profile_is_the_library_get_prgm_dict():
+    ex, doc = _doc("watlow-f4t")
+    prog = doc["programmes"][0]["program"]
+    assert set(prog) == {"name", "log", "haswaits", "hasenables", "gs_dev", "steps"}
+    kinds = [s["type"] for s in prog["steps"]]
+    assert kinds == ["instant", "ramptime", "soak", "ramptime", "end"]
+    for s in prog["steps"]:
+        assert set(s) == {"type", "duration", "loops", "events", "waits", "jstep", "jcount"}
+        assert set(s["duration"]) == {"hours", "minutes", "seconds"}
+        (lp,) = s["loops"]
+        assert set(lp) == {
+            "max",
+            "min",
+            "mode",
+            "gsoak",
+            "target",
+            "rate",
+            "showEnable",
+            "isCascade",
+            "cascade",
+            "enable",
+        }
+        assert lp["gsoak"] is False
+        assert [e["value"] for e in s["events"]] == ["nc"] * 8
+    assert prog["steps"][0]["loops"][0]["target"] == 20.0
+    assert prog["steps"][0]["duration"] == {"hours": 0, "minutes": 0, "seconds": 0}
+    assert prog["steps"][1]["duration"] == {"hours": 1, "minutes": 27, "seconds": 0}
+    assert prog["steps"][-1]["loops"][0]["mode"] == "hold"
+
+
+def test_binder_segment_table_follows_ess_binder_py():
+    ex, _ = _doc("binder-mb")
+    frame = pd.read_csv(io.StringIO(ex.text), comment="#")
+    # start value of each segment, duration in whole seconds, final 1-s segment
+    assert frame["start_value_c"].tolist() == [20.0, -67.0, -67.0, 20.0]
+    assert frame["duration_s"].tolist() == [87 * 60, 27 * 60, 30 * 60, 1]
+    assert frame["progno"].tolist() == [0] * 4 and frame["program"].tolist() == [1] * 4
+    assert frame["gradient_c_per_min"].tolist()[:3] == pytest.approx([-1.0, 0.0, 2.9])
+
+
+# ---------------------------------------------------------------------------------------
+# limits: splitting, chaining, programmes available
+# ---------------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("controller", "max_steps", "capacity"),
+    [("espec-p300", 5, 5), ("espec-scp220", 4, 4), ("watlow-f4t", 6, 4), ("binder-mb", 5, 4)],
+)
+def test_a_long_programme_is_split_and_chained(tmp_path, controller, max_steps, capacity):
+    table = read_step_table(BASELINE)
+    check = CoverageCheck(W1)
+    one = export_programme(table.programme, ExportSettings(controller), check=check)
+    ex = export_programme(
+        table.programme,
+        ExportSettings(controller, max_steps=max_steps, first_programme=3),
+        check=check,
+    )
+    path = write_export(tmp_path / f"x{SPECS[controller].file_suffix}", ex)
+    back = read_export(path)
+    n = table.programme.n_segments
+    assert back.numbers == tuple(range(3, 3 + math.ceil(n / capacity)))
+    assert all(p.n_segments <= capacity for p in back.parts)
+    assert max(p.n_segments for p in back.parts) - min(p.n_segments for p in back.parts) <= 1
+    # the chained parts run the same path as the single programme: same coverage
+    assert np.array_equal(back.programme.boundary_temps_c, one.exported.boundary_temps_c)
+    assert np.array_equal(back.programme.durations_min, one.exported.durations_min)
+    assert np.array_equal(ex.export_coverage.levels, one.export_coverage.levels)
+    if controller.startswith("espec"):
+        progs = [e["program"] for e in json.loads(path.read_text())["programmes"]]
+        assert [p["end"] for p in progs] == ["RUN"] * (len(progs) - 1) + ["STANDBY"]
+        assert [p["next_prgm"] for p in progs[:-1]] == list(back.numbers[1:])
+        for a, b in zip(back.parts[:-1], progs[1:], strict=True):
+            assert b["tempDetail"]["setpoint"] == pytest.approx(a.end_c)
+    if controller == "watlow-f4t":
+        progs = [e["program"] for e in json.loads(path.read_text())["programmes"]]
+        assert all(len(p["steps"]) <= max_steps for p in progs)
+        assert [p["steps"][-1]["loops"][0]["mode"] for p in progs] == ["hold"] * len(progs)
+        assert "start profile 4 at once" in " ".join(ex.notes)
+
+
+def test_more_programmes_than_the_controller_stores_is_refused():
+    prog = read_step_table(BASELINE).programme  # 12 steps
+    with pytest.raises(StepTableError, match=r"36\.\.41.*1\.\.40"):
+        export_programme(prog, ExportSettings("espec-p300", max_steps=2, first_programme=36))
+    with pytest.raises(StepTableError, match=r"1\.\.20"):
+        export_programme(prog, ExportSettings("espec-scp220", max_steps=2, first_programme=16))
+    # 25 Binder programmes of at most 99 segments + the end marker
+    ok = export_programme(prog, ExportSettings("binder-mb", max_steps=2, first_programme=14))
+    assert ok.numbers == tuple(range(14, 26))
+
+
+def test_steps_longer_than_the_controller_allows_are_cut():
+    # a 120-h hold: the P-300 takes at most 99:59 per step
+    prog = Programme(np.array([30.0, 7200.0, 30.0]), np.array([-1.0, 0.0, 1.0]), 20.0)
+    ex = export_programme(
+        prog, ExportSettings("espec-p300"), limits=Limits(duration_max_min=10080.0)
+    )
+    steps = json.loads(ex.text)["programmes"][0]["program"]["steps"]
+    minutes = [60 * s["time"]["hour"] + s["time"]["minute"] for s in steps]
+    assert max(minutes) <= 99 * 60 + 59 and sum(minutes) == 7260
+    assert ex.exported.end_c == 20.0 and ex.max_chamber_deviation_c == 0.0
+
+
+def test_split_parts_are_balanced_and_continuous():
+    prog = fine_programme(np.random.default_rng(3))
+    parts = split_parts(prog, 4)
+    assert [p.n_segments for p in parts] == [4, 4, 3, 3, 3]
+    for a, b in zip(parts[:-1], parts[1:], strict=True):
+        assert b.start_c == pytest.approx(a.end_c)
+    assert split_parts(prog, None) == (prog,)
+
+
+def test_settings_are_validated():
+    with pytest.raises(ParameterError, match="controller 'espec'"):
+        ExportSettings("espec")
+    with pytest.raises(ParameterError, match="end_mode 'RUN'"):
+        ExportSettings("espec-p300", end_mode="RUN")
+    with pytest.raises(ParameterError, match="max_steps must be >= 3"):
+        ExportSettings("watlow-f4t", max_steps=2)
+    with pytest.raises(ParameterError, match="first_programme must be >= 1"):
+        ExportSettings("espec-p300", first_programme=0)
+    with pytest.raises(ParameterError, match="name"):
+        ExportSettings("espec-p300", name="W1; rm")
+    with pytest.raises(ParameterError, match="no step limit"):
+        ExportSettings("csv", max_steps=10)
+
+
+# ---------------------------------------------------------------------------------------
+# planted bugs: a wrong rounding or a broken chain must not pass
+# ---------------------------------------------------------------------------------------
+def test_a_biased_setpoint_rounding_is_caught(monkeypatch):
+    prog = fine_programme(np.random.default_rng(5))
+    ok = export_programme(prog, ExportSettings("espec-p300"))
+    assert_round_trip(prog, ok.exported, 60)
+    # plant: truncate setpoints instead of rounding them (a bias of up to -0.1 degC)
+    monkeypatch.setattr(export_mod, "_grid_round", lambda x, step: math.floor(x / step) * step)
+    bad = export_programme(prog, ExportSettings("espec-p300"))
+    with pytest.raises(AssertionError, match="setpoint moved"):
+        assert_round_trip(prog, bad.exported, 60)
+
+
+def test_step_by_step_time_rounding_is_caught(monkeypatch):
+    # plant: round each duration on its own (errors accumulate) instead of the boundaries
+    def drifting(programme, time_step_min, limits, temp_step_c=0.1, max_step_min=None):
+        d = np.maximum(np.round(programme.durations_min / time_step_min), 1) * time_step_min
+        tk = np.round(programme.boundary_temps_c, 1)
+        return Programme(d, np.diff(tk) / d, float(tk[0]))
+
+    prog = Programme(np.full(12, 2.4), np.tile([0.5, -0.5], 6), 20.0)
+    assert_round_trip(prog, quantise(prog, 1.0, Limits()), 60)
+    monkeypatch.setattr(export_mod, "quantise", drifting)
+    bad = export_programme(prog, ExportSettings("espec-p300"))
+    with pytest.raises(AssertionError, match="boundary moved"):
+        assert_round_trip(prog, bad.exported, 60)
+
+
+def test_a_broken_chain_is_caught(monkeypatch, tmp_path):
+    prog = read_step_table(BASELINE).programme
+    codec = CODECS["espec-p300"]
+    good_encode = type(codec).encode
+
+    def wrong_link(self, parts, numbers, settings, limits, header):  # next_prgm off by one
+        doc = json.loads(good_encode(self, parts, numbers, settings, limits, header))
+        doc["programmes"][0]["program"]["next_prgm"] += 1
+        return json.dumps(doc)
+
+    monkeypatch.setattr(type(codec), "encode", wrong_link)
+    with pytest.raises(StepTableError, match="must chain to programme 2"):
+        export_programme(prog, ExportSettings("espec-p300", max_steps=5))
+    monkeypatch.undo()
+
+    # hand-edited files: a profile that does not hold before the next, a Binder part that
+    # does not start where the previous ended
+    ex = export_programme(prog, ExportSettings("watlow-f4t", max_steps=6))
+    doc = json.loads(ex.text)
+    doc["programmes"][0]["program"]["steps"][-1]["loops"][0]["mode"] = "user"
+    p = tmp_path / "f4t.json"
+    p.write_text(json.dumps(doc))
+    with pytest.raises(StepTableError, match="must end in 'hold'"):
+        read_export(p)
+    ex = export_programme(prog, ExportSettings("binder-mb", max_steps=5))
+    lines = ex.text.splitlines()
+    i = next(k for k, ln in enumerate(lines) if ln.startswith("2,1,1,"))
+    lines[i] = lines[i].replace("2,1,1,-14.0,", "2,1,1,-14.3,")
+    p = tmp_path / "binder.csv"
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(StepTableError, match="continuous"):
+        read_export(p)
+
+
+def test_limits_are_checked_when_reading_a_file_back(tmp_path):
+    prog = read_step_table(BASELINE).programme
+    ex = export_programme(prog, ExportSettings("espec-p300"))
+    doc = json.loads(ex.text)
+    steps = doc["programmes"][0]["program"]["steps"]
+    cases = [
+        (lambda d: d["programmes"][0].update(number=41), "outside ESPEC P-300's programmes"),
+        (lambda d: steps[0]["temperature"].update(setpoint=-67.05), "finer than"),
+        (lambda d: steps[2]["temperature"].update(ramp=False), "jumps the setpoint"),
+        (lambda d: steps[0]["time"].update(minute=75), "minute 75 is outside"),
+        (lambda d: steps[3].update(granty=True), "guaranteed soak"),
+        (lambda d: steps.extend([dict(steps[-1], number=k) for k in range(13, 101)]), "99"),
+    ]
+    for k, (edit, words) in enumerate(cases):
+        d = json.loads(json.dumps(doc))
+        steps = d["programmes"][0]["program"]["steps"]
+        edit(d)
+        path = tmp_path / f"c{k}.json"
+        path.write_text(json.dumps(d))
+        with pytest.raises(StepTableError, match=words):
+            read_export(path)
+
+
+def test_lost_coverage_is_reported_and_exits_1(monkeypatch, tmp_path):
+    # plant: a "rounding" that pulls every setpoint 10 % towards 20 degC
+    real = export_mod.quantise
+
+    def squashed(programme, *a, **kw):
+        q = real(programme, *a, **kw)
+        tk = np.round(20.0 + 0.9 * (q.boundary_temps_c - 20.0), 1)
+        return Programme(q.durations_min, np.diff(tk) / q.durations_min, float(tk[0]))
+
+    monkeypatch.setattr(export_mod, "quantise", squashed)
+    prog = read_step_table(BASELINE).programme
+    ex = export_programme(prog, ExportSettings("espec-p300"), check=CoverageCheck(W1))
+    assert ex.coverage_lost
+    assert ex.export_coverage.coverage < ex.source_coverage.coverage
+    assert "LESS" in ex.summary()[0]
+    out = tmp_path / "b.json"
+    rc, text, _ = run_cli(
+        [
+            "export",
+            BASELINE,
+            "--controller",
+            "espec-p300",
+            "--region",
+            "-50",
+            "-30",
+            "--out",
+            str(out),
+        ]
+    )
+    assert rc == 1 and out.is_file() and "LESS" in text
+
+
+# ---------------------------------------------------------------------------------------
+# step-table metadata and the command line
+# ---------------------------------------------------------------------------------------
+def run_cli(argv):
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = main(argv)
+    return rc, out.getvalue(), err.getvalue()
+
+
+META = """# schedsyn_version: 0.1.0
+# experiment: W1
+# working_lo_c: -50
+# working_hi_c: -30
+# tau_s: 2700
+# dt0_c: 2
+# levels_required: 6
+# delta_c_per_min: 0.05
+# robust_tau_s: 2200:2600
+"""
+
+
+def test_step_table_metadata_gives_region_model_and_box(tmp_path):
+    path = tmp_path / "steps.csv"
+    body = BASELINE_TEXT
+    path.write_text(META + body, encoding="utf-8")
+    table = read_step_table(path)
+    assert table.meta["experiment"] == "W1" and table.programme.n_segments == 12
+    import hashlib
+
+    assert table.sha256 == hashlib.sha256(path.read_bytes()).hexdigest()
+    chk = check_from_meta(table.meta)
+    assert (chk.grid.lo_c, chk.grid.hi_c) == (-50.0, -30.0)
+    assert chk.params == ThermalParams(2700.0, 2.0)
+    assert check_from_meta(table.meta, tau_s=2000.0).params.tau_s == 2000.0
+    assert robust_box_from_meta(table.meta) == ((2200.0, 2600.0), (2.0, 2.0))
+    assert robust_box_from_meta({}) is None
+    with pytest.raises(ParameterError, match="give --region LO HI"):
+        check_from_meta({}, source="t.csv")
+    # a limit in the metadata applies when reading the table
+    path.write_text("# chamber_min_c: -60\n" + body, encoding="utf-8")
+    with pytest.raises(StepTableError, match="outside the chamber limits"):
+        read_step_table(path)
+
+
+def test_cli_export_uses_the_table_metadata(tmp_path):
+    path = tmp_path / "steps.csv"
+    path.write_text(META + BASELINE_TEXT, encoding="utf-8")
+    rc, text, err = run_cli(["export", str(path), "--controller", "watlow-f4t"])
+    assert rc == 0, err
+    out = tmp_path / "steps.watlow-f4t.json"
+    doc = json.loads(out.read_text())
+    check = doc["schedsyn"]["check"]
+    assert check["region_c"] == [-50.0, -30.0] and check["tau_s"] == 2700.0
+    assert doc["schedsyn"]["source_sha256"] == read_step_table(path).sha256
+    assert doc["programmes"][0]["program"]["name"] == "W1"
+    assert "coverage of [-50, -30] °C re-simulated" in text
+    back = read_export(out)
+    assert back.programme.n_segments == 12
+
+
+def test_cli_export_refuses_to_guess_and_to_overwrite(tmp_path):
+    rc, _, err = run_cli(["export", BASELINE, "--controller", "csv", "--out", str(tmp_path / "x")])
+    assert rc == 2 and "give --region LO HI" in err and len(err.strip().splitlines()) == 1
+    src = tmp_path / "steps.csv"
+    src.write_text(BASELINE_TEXT)
+    rc, _, err = run_cli(
+        ["export", str(src), "--controller", "csv", "--region", "-50", "-30", "--out", str(src)]
+    )
+    assert rc == 2 and "refusing to overwrite" in err
+    assert src.read_text() == BASELINE_TEXT
+    rc, _, err = run_cli(
+        ["export", BASELINE, "--controller", "espec-p300", "--region", "-50", "-30",
+         "--max-steps", "2", "--first-programme", "39", "--out", str(tmp_path / "y.json")]
+    )  # fmt: skip
+    assert rc == 2 and "stores programmes 1..40" in err
+
+
+def test_cli_csv_export_is_a_step_table_that_reads_back(tmp_path):
+    out = tmp_path / "typed.csv"
+    rc, _, err = run_cli(
+        ["export", BASELINE, "--controller", "csv", "--region", "-50", "-30", "--out", str(out)]
+    )
+    assert rc == 0, err
+    table = read_step_table(out)
+    src = read_step_table(BASELINE)
+    assert np.array_equal(table.programme.durations_min, src.programme.durations_min)
+    assert np.allclose(table.programme.boundary_temps_c, src.programme.boundary_temps_c)
+    assert table.meta["controller"] == "csv"
