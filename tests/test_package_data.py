@@ -55,3 +55,19 @@ def test_package_data_patterns_match_every_shipped_file():
 def test_a_missing_data_file_is_named():
     with pytest.raises(SchedsynError, match="no_such_file.csv"):
         package_data("no_such_file.csv")
+
+
+def test_real_logs_the_tests_use_are_in_the_repository_with_their_licence():
+    """The TCLab logs live in tests/data/tclab (BSD-3-Clause, attributed): a fresh clone
+    runs the real-data tests instead of skipping them."""
+    tclab = ROOT / "tests" / "data" / "tclab"
+    licence = (tclab / "LICENSE").read_text(encoding="utf-8")
+    assert licence.startswith("BSD 3-Clause License") and "Alexander Dowling" in licence
+    readme = (tclab / "README.md").read_text(encoding="utf-8")
+    assert "dowlinglab/pyomo-doe" in readme and "LICENSE" in readme
+    used = [
+        *(f"validation_experiment_env_2_step_50_run_{i}.csv" for i in (1, 2, 3)),
+        "validation_experiment_env_2_sin_5_50_run_1.csv",
+    ]
+    for name in used:
+        assert (tclab / name).stat().st_size > 10_000, name
