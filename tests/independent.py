@@ -32,40 +32,47 @@ def ode_trajectories(
     dt0_c: np.ndarray | float,
     t0_c: float = 20.0,
     dt_min: float = 0.1,
+    tau2_s: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Device temperature and gradient every ``dt_min`` for each scenario (tau_s, dt0_c).
 
+    ``tau dT/dt + T = M + dT0`` with ``M = Tk`` (the planning model), or with a second
+    thermal mass ``tau2 dM/dt + M = Tk`` (``M(0) = Tk(0)``) when ``tau2_s > 0``.
     Returns ``(time_min (m,), temp_c (s, m), grad_c_per_min (s, m))`` for ``s`` scenarios.
     """
     tau = np.atleast_1d(np.asarray(tau_s, dtype=float)) / 60.0
     dt0 = np.atleast_1d(np.asarray(dt0_c, dtype=float))
     tau, dt0 = np.broadcast_arrays(tau, dt0)
+    n = tau.size
+    tau2 = tau2_s / 60.0
     end = float(knots_t[-1])
     t = dt_min * np.arange(int(np.floor(end / dt_min + 1e-9)) + 1)
 
     def chamber(x):
         return np.interp(x, knots_t, knots_tk)
 
-    temp = np.empty((tau.size, t.size))
-    y = np.full(tau.size, float(t0_c))
-    temp[:, 0] = y
+    def rhs(x, v):  # v = [T (n), M (n) if tau2 > 0]
+        drive = v[n:] if tau2 > 0 else chamber(x)
+        dtemp = (drive + dt0 - v[:n]) / tau
+        return dtemp if tau2 == 0 else np.concatenate((dtemp, (chamber(x) - v[n:]) / tau2))
+
+    temp = np.empty((n, t.size))
+    mass = np.empty((n, t.size))
+    y = np.full(n, float(t0_c))
+    if tau2 > 0:
+        y = np.concatenate((y, np.full(n, float(knots_tk[0]))))
+    temp[:, 0] = y[:n]
+    mass[:, 0] = knots_tk[0]
     for a, b in zip(knots_t[:-1], knots_t[1:], strict=True):
         inside = (t > a) & (t <= b)
         pts = t[inside]
         # the samples, and the knot the next piece starts from (unless it is a sample)
         evals = pts if pts.size and pts[-1] >= b else np.append(pts, b)
-        sol = solve_ivp(
-            lambda x, v: (chamber(x) + dt0 - v) / tau,
-            (a, b),
-            y,
-            t_eval=evals,
-            method="DOP853",
-            rtol=1e-10,
-            atol=1e-10,
-        )
-        temp[:, inside] = sol.y[:, : pts.size]
+        sol = solve_ivp(rhs, (a, b), y, t_eval=evals, method="DOP853", rtol=1e-12, atol=1e-12)
+        temp[:, inside] = sol.y[:n, : pts.size]
+        mass[:, inside] = sol.y[n:, : pts.size] if tau2 > 0 else chamber(pts)[None, :]
         y = sol.y[:, -1]
-    grad = (chamber(t)[None, :] + dt0[:, None] - temp) / tau[:, None]
+    grad = (mass + dt0[:, None] - temp) / tau[:, None]
     return t, temp, grad
 
 
@@ -109,10 +116,11 @@ def table_check(
     tau_s: float = 2400.0,
     dt0_c: float = 3.0,
     delta: float = 0.05,
+    tau2_s: float = 0.0,
 ) -> dict:
     """Coverage, fewest levels and device range of a step table for one (tau, dT0)."""
     knots_t, knots_tk = chamber_knots(steps_csv)
-    _, temp, grad = ode_trajectories(knots_t, knots_tk, tau_s, dt0_c)
+    _, temp, grad = ode_trajectories(knots_t, knots_tk, tau_s, dt0_c, tau2_s=tau2_s)
     lev = levels_per_bin(temp[0], grad[0], region[0], region[1], delta)
     return {
         "coverage": float(np.mean(lev >= levels_required)),
