@@ -9,27 +9,34 @@ from pathlib import Path
 import numpy as np
 
 
+def _figure(figsize, nrows: int = 1, ncols: int = 1, **subplots_kw):
+    """A new figure and its axes, without pyplot: the user's backend is left alone.
+
+    A :class:`matplotlib.figure.Figure` made directly belongs to no backend and needs
+    none to be saved (``savefig`` renders PNG with Agg on its own).
+    """
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize, layout="constrained")
+    return fig, fig.subplots(nrows, ncols, **subplots_kw)
+
+
 def _axes(ax, figsize=(8, 4.5)):
     if ax is not None:
         return ax
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    _, ax = plt.subplots(figsize=figsize, constrained_layout=True)
-    return ax
+    return _figure(figsize)[1]
 
 
 def save_figure(ax, path: Path | str, inputs=()) -> Path:
-    """Save the figure holding ``ax`` atomically as PNG and close it."""
-    import matplotlib.pyplot as plt
-
+    """Save the figure holding ``ax`` atomically as PNG (and close it if pyplot made it)."""
     from .io import write_atomic
 
     fig = ax.figure if hasattr(ax, "figure") else ax
     out = write_atomic(path, lambda p: fig.savefig(p, dpi=120, format="png"), inputs)
-    plt.close(fig)
+    if getattr(fig.canvas, "manager", None) is not None:  # a pyplot figure: free it
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
     return out
 
 
@@ -220,15 +227,8 @@ def sweep_panels(
     ``box`` = ``((tau_lo_s, tau_hi_s), (dt0_lo_c, dt0_hi_c))`` outlines a robust box on
     every panel. Save with ``save_figure(axes[0], path)``.
     """
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
     panels = list(panels)
-    fig, axes = plt.subplots(
-        1, len(panels), figsize=(6.5 * len(panels), 5), constrained_layout=True, squeeze=False
-    )
+    fig, axes = _figure((6.5 * len(panels), 5), 1, len(panels), squeeze=False)
     for ax, (frame, column, title) in zip(axes[0], panels, strict=True):
         sweep_heatmap(frame, column, ax=ax, nominal=nominal, title=title)
         if box is not None:
@@ -366,12 +366,7 @@ def compare_panels(comparison, region=None, suptitle: str | None = None):
     """Phase overlay, T with residual, gradients and coverage of a
     :class:`~schedsyn.compare.RunComparison` in one 2x2 figure; returns the list of axes.
     Save with ``save_figure(axes[0], path)``."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 2, figsize=(14, 9), constrained_layout=True)
+    fig, axes = _figure((14, 9), 2, 2)
     c = comparison
     phase_overlay_plot(
         c.planned.t_c,
