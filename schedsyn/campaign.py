@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
 import time
 import tomllib
 from collections.abc import Callable, Sequence
@@ -41,6 +40,7 @@ from .errors import InfeasiblePlanError, ParameterError, SchedsynError
 from .params import Limits, ThermalParams
 from .planner import ExperimentSpec, Plan, plan_experiment, planning_effort
 from .programme import read_steps
+from .progress import Progress
 from .simulate import simulate
 from .sweep import run_map
 
@@ -271,8 +271,9 @@ def load_campaign(path: Path | str) -> CampaignConfig:
 # planning
 # ---------------------------------------------------------------------------------------
 def stderr_progress(message: str) -> None:
-    """A picklable progress callable: one line on stderr."""
-    print(message, file=sys.stderr, flush=True)
+    """A picklable progress callable: one line on stderr (timestamped when stderr is a
+    file or pipe; see :class:`schedsyn.progress.Progress`)."""
+    Progress()(message)
 
 
 @dataclass(frozen=True, slots=True)

@@ -63,6 +63,35 @@ def distinct_levels(gradients: np.ndarray, delta_c_per_min: float) -> int:
     return count
 
 
+def level_separation(gradients: np.ndarray, levels_required: int) -> float:
+    """The widest separation at which ``gradients`` still hold ``levels_required`` levels.
+
+    ``max d`` such that ``distinct_levels(gradients, d) >= levels_required``: how far
+    apart the bin's best ``levels_required`` passes are, in degC/min. Compared with the
+    required ``delta`` it says how thin the margin is (``separation / delta`` just above
+    1: one slightly different gradient and the bin falls short). NaN when the bin has
+    fewer passes than ``levels_required``; ``inf`` when one level is required.
+
+    The optimum is one of the pairwise differences (the greedy count only changes
+    there), found by bisection over them.
+    """
+    g = np.sort(np.asarray(gradients, dtype=float))
+    k = int(levels_required)
+    if g.size < k:
+        return float("nan")
+    if k <= 1:
+        return float("inf")
+    cand = np.unique((g[None, :] - g[:, None])[np.triu_indices(g.size, 1)])
+    lo, hi = 0, cand.size - 1  # distinct_levels(g, cand[0]) >= k always holds
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if distinct_levels(g, float(cand[mid])) >= k:
+            lo = mid
+        else:
+            hi = mid - 1
+    return float(cand[lo])
+
+
 @dataclass(frozen=True, slots=True)
 class CoverageReport:
     """Per-bin pass counts, distinct levels and gradients for one working region."""
@@ -86,6 +115,12 @@ class CoverageReport:
     @property
     def min_levels(self) -> int:
         return int(self.levels.min())
+
+    @property
+    def separations_c_per_min(self) -> np.ndarray:
+        """Per bin, the widest separation of ``levels_required`` of its passes, degC/min
+        (:func:`level_separation`; NaN where a bin has fewer passes)."""
+        return np.array([level_separation(g, self.levels_required) for g in self.gradients])
 
     @property
     def complete(self) -> bool:

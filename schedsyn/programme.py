@@ -275,7 +275,7 @@ class StepTableMeta:
         """
         spec, params, limits = plan.spec, plan.params, plan.limits
         scen = tuple(getattr(plan, "scenarios", ()) or ())
-        box: dict[str, float] = {}
+        box: dict[str, Any] = {}
         if len(scen) > 1:
             taus = [p.tau_s for p in scen]
             dt0s = [p.dt0_c for p in scen]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,7 +61,7 @@ def simulate(
     model: LinearThermalModel | None = None,
     dt_min: float = 0.1,
     t0_c: float | None = None,
-    times_min: np.ndarray | None = None,
+    times_min: np.ndarray | Sequence[float] | None = None,
 ) -> Trajectory:
     """Simulate ``programme`` exactly at ``dt_min`` spacing (or at ``times_min``).
 
@@ -134,7 +135,9 @@ def end_soak_min(
     if model is None:
         model = FirstOrderLag(model_params(programme, params))
     end = programme.total_min
-    settled = float(simulate(programme, model=model, t0_c=t0_c, times_min=[end + 1e6]).t_c[0])
+    settled = float(
+        simulate(programme, model=model, t0_c=t0_c, times_min=np.array([end + 1e6])).t_c[0]
+    )
     horizon = 60.0
     while True:
         # 0.05-min samples after the end; the soak is the last time still outside tol
