@@ -78,6 +78,8 @@ def write_frame_atomic(path: Path | str, frame, inputs: Iterable[Path | str] = (
 MANIFEST = "schedsyn-run.json"
 #: Present only while (or if killed while) a run moves its outputs into a folder.
 INCOMPLETE_MARKER = "SCHEDSYN-RUN-INCOMPLETE.txt"
+#: The files of the run being moved in (so that the next run can clean up after it).
+PENDING = ".schedsyn-run-pending.json"
 _STAGING = re.compile(r"^\.(?P<name>.*)\.schedsyn-staging-(?P<pid>\d+)-[^/]*$")
 
 
@@ -256,7 +258,7 @@ class OutputDir:
             _check_not_input(self.target / rel, self.inputs)
         try:
             if not self.target.exists():
-                self._write_manifest(staging, files, staging)
+                self._write_manifest(staging / MANIFEST, files, staging)
                 try:
                     os.rename(staging, self.target)
                 except OSError:
@@ -277,7 +279,9 @@ class OutputDir:
     def _merge(self, files: Sequence[Path]) -> None:
         assert self._staging is not None
         target, staging = self.target, self._staging
-        old = _read_manifest(target)
+        # the earlier run's files, and those of a run killed while moving its files in
+        old = _read_manifest(target / MANIFEST) + _read_manifest(target / PENDING)
+        self._write_manifest(target / PENDING, files, staging)
         now = _dt.datetime.now().isoformat(" ", "seconds")
         write_text_atomic(
             target / INCOMPLETE_MARKER,
@@ -300,22 +304,21 @@ class OutputDir:
             p = target / name
             try:
                 st = p.stat()
-            except OSError:
+            except OSError:  # gone (or never moved in by a killed run): its empty folders
+                _prune_empty(p.parent, target)
                 continue
             unchanged = st.st_size == entry.get("size") and st.st_mtime_ns == entry.get("mtime_ns")
             if p.resolve() in inputs or not unchanged:
                 self.kept_stale.append(p)  # someone's data now: leave it
                 continue
             p.unlink()
-            parent = p.parent
-            while parent != target and parent.is_dir() and not any(parent.iterdir()):
-                parent.rmdir()
-                parent = parent.parent
-        self._write_manifest(target, files, target)
+            _prune_empty(p.parent, target)
+        self._write_manifest(target / MANIFEST, files, target)
         (target / INCOMPLETE_MARKER).unlink(missing_ok=True)
+        (target / PENDING).unlink(missing_ok=True)
         shutil.rmtree(staging, ignore_errors=True)
 
-    def _write_manifest(self, where: Path, files: Sequence[Path], root: Path) -> None:
+    def _write_manifest(self, path: Path, files: Sequence[Path], root: Path) -> None:
         from . import __version__
 
         rows = []
@@ -323,7 +326,7 @@ class OutputDir:
             st = (root / rel).stat()
             rows.append({"path": str(rel), "size": st.st_size, "mtime_ns": st.st_mtime_ns})
         write_json_atomic(
-            where / MANIFEST,
+            path,
             {
                 "schedsyn_version": str(__version__),
                 "command": self.command,
@@ -346,9 +349,18 @@ class OutputDir:
                 break
 
 
-def _read_manifest(folder: Path) -> list[dict]:
+def _prune_empty(folder: Path, root: Path) -> None:
+    """Remove ``folder`` and its parents up to (not including) ``root`` while empty."""
+    while folder != root and root in folder.parents and folder.is_dir():
+        if any(folder.iterdir()):
+            return
+        folder.rmdir()
+        folder = folder.parent
+
+
+def _read_manifest(path: Path) -> list[dict]:
     try:
-        obj = json.loads((folder / MANIFEST).read_text(encoding="utf-8"))
+        obj = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return []
     files = obj.get("files") if isinstance(obj, dict) else None

@@ -291,7 +291,7 @@ def coverage_plot(report, ax=None, title: str | None = None):
     """
     from matplotlib.colors import LinearSegmentedColormap, Normalize
 
-    ax = _axes(ax, figsize=(9, 3.8))
+    ax = _axes(ax, figsize=(9, 4.0))
     lo = report.grid.lower_c
     w = report.grid.bin_c
     delta = report.delta_c_per_min
@@ -351,8 +351,8 @@ def coverage_plot(report, ax=None, title: str | None = None):
         i = int(np.flatnonzero(ok)[np.argmin(ratio[ok])])
         sep = report.separations_c_per_min[i]
         title += (
-            f"; tightest bin [{lo[i]:g}, {lo[i] + w:g}) °C: levels {sep:.4f} °C/min apart "
-            f"= {ratio[i]:.2f} Δ"
+            f"\ntightest bin [{lo[i]:g}, {lo[i] + w:g}) °C: its {report.levels_required} "
+            f"levels are {sep:.4f} °C/min apart = {ratio[i]:.2f} Δ"
         )
     ax.set_title(title, fontsize=9)
     ax.legend(loc="upper left", fontsize=8, framealpha=0.9)
