@@ -152,8 +152,9 @@ def sweeps_of(g_c_per_min, min_samples: int | None = None) -> list[tuple[int, in
     """Split a trajectory into sweeps: maximal runs of one sign of the gradient.
 
     Returns ``[(start, stop), ...]`` sample ranges (stop exclusive) covering every sample;
-    runs shorter than ``min_samples`` (default 1 % of the samples) join the previous one,
-    so that noise around a turning point does not make sweeps of its own.
+    runs shorter than ``min_samples`` (default 1 % of the samples) take the sign of the
+    run before them (the first: of the next), so that noise around a turning point does
+    not make sweeps of its own.
     """
     g = np.asarray(g_c_per_min, dtype=float)
     n = g.size
@@ -164,17 +165,18 @@ def sweeps_of(g_c_per_min, min_samples: int | None = None) -> list[tuple[int, in
     for i in range(1, n):
         if sign[i] == 0:
             sign[i] = sign[i - 1]
-    change = np.flatnonzero(np.diff(sign) != 0) + 1
-    edges = [0, *change.tolist(), n]
-    runs = list(zip(edges[:-1], edges[1:], strict=True))
     min_len = max(2, int(0.01 * n)) if min_samples is None else int(min_samples)
-    merged: list[list[int]] = []
-    for a, b in runs:
-        if merged and (b - a < min_len or merged[-1][1] - merged[-1][0] < min_len):
-            merged[-1][1] = b
-        else:
-            merged.append([a, b])
-    return [(a, b) for a, b in merged]
+
+    def runs(sg):
+        change = np.flatnonzero(np.diff(sg) != 0) + 1
+        edges = [0, *change.tolist(), n]
+        return list(zip(edges[:-1], edges[1:], strict=True))
+
+    r = runs(sign)
+    for i, (a, b) in enumerate(r):  # a short run takes the sign around it
+        if b - a < min_len and len(r) > 1:
+            sign[a:b] = sign[r[i - 1][0]] if i > 0 else sign[r[1][0]]
+    return runs(sign)
 
 
 def _arrow(ax, x, y, colour, lw):

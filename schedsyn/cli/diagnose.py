@@ -71,7 +71,8 @@ def _pm(value: float, stderr: float | None, digits: str = ".4g") -> str:
 
 
 def findings(d) -> list[str]:
-    """The main findings in words: the fitted model with uncertainties, the effect."""
+    """The main finding in words: the fitted model with its uncertainties (the effect and
+    its parameters follow in ``Diagnosis.summary()``)."""
     se = d.stderr
     lines = [
         f"fitted device model: tau {_pm(d.model.tau_s, se.get('tau_s'), '.1f')} s, "
@@ -84,10 +85,6 @@ def findings(d) -> list[str]:
             f"base model alone: tau {_pm(base.values['tau_s'], base.stderr.get('tau_s'), '.1f')}"
             f" s, dT0 {_pm(base.values['dt0_c'], base.stderr.get('dt0_c'), '.3f')} °C"
         )
-        params = ", ".join(f"{k} = {_pm(float(v), se.get(k))}" for k, v in d.parameters.items())
-        lines.append(f"effect: {d.effect} ({params})")
-    else:
-        lines.append("effect: none (the base model explains the log)")
     if d.ambiguous_with:
         lines.append(f"cannot be told apart from: {', '.join(d.ambiguous_with)}")
     return lines
@@ -134,13 +131,15 @@ def _plots(d, log, out, name) -> None:
     from ..errors import SchedsynError
     from ..estimate import estimate_gradient
 
+    found = d.effect != "none"
     plots.save_figure(
         plots.residual_plot(
             d.time_min,
             d.before_c - d.measured_c,
-            d.after_c - d.measured_c,
-            title=f"{name}: residuals, base model vs with {d.effect} "
-            f"(tau {d.model.tau_s:.0f} s, dT0 {d.model.dt0_c:.2f} °C)",
+            d.after_c - d.measured_c if found else None,
+            title=f"{name}: residuals\n"
+            + (f"base model vs with {d.effect}" if found else "base model (no effect found)")
+            + f"; fitted tau {d.model.tau_s:.0f} s, dT0 {d.model.dt0_c:.2f} °C",
             labels=("base model", f"with {d.effect}"),
         ),
         out.path("residuals.png"),
@@ -165,6 +164,7 @@ def _plots(d, log, out, name) -> None:
         ax=ax,
         label=f"with {d.effect}",
         color="tab:blue",
-        title=f"{name}: phase portraits",
+        title=f"{name}: phase portraits\n(fitted tau {d.model.tau_s:.0f} s, "
+        f"dT0 {d.model.dt0_c:.2f} °C)",
     )
     plots.save_figure(ax, out.path("phase.png"))
