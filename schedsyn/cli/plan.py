@@ -268,8 +268,11 @@ def with_end_soak(plan: Plan, model=None) -> Plan:
     soak, _, _ = end_state(plan, model)
     if soak <= 0:
         return plan
-    try:
-        prog = plan.programme.with_end_soak(soak, plan.limits)
+    from ..programme import StepTableMeta
+
+    base = plan.programme
+    try:  # the metadata records the soak the table includes (end_soak_included_min)
+        prog = base.with_meta(base.meta or StepTableMeta()).with_end_soak(soak, plan.limits)
     except ParameterError as exc:
         raise ParameterError(f"{plan.spec.name}: --end-soak: {exc}") from None
     # the soak runs after the planned sweeps, so the device passes bins again: check anew
