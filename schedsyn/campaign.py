@@ -557,7 +557,7 @@ def chamber_plans(
         try:
             lim = dataclasses.replace(limits, chamber_min_c=f, chamber_max_c=c)
         except ParameterError as exc:
-            raise ParameterError(f"chamber floor {f:g} / ceiling {c:g} degC: {exc}") from None
+            raise ParameterError(f"chamber floor {f:g} / ceiling {c:g} °C: {exc}") from None
         jobs.append(_ChamberJob(spec, params, lim, robust_tau_s, robust_dt0_c))
     out = run_map(
         partial(_chamber_job, progress=progress),

@@ -152,9 +152,9 @@ class CoverageReport:
     def summary(self) -> str:
         short = self.short_bins()
         text = (
-            f"coverage of [{self.grid.lo_c:g}, {self.grid.hi_c:g}] degC: {self.coverage:.1%} "
+            f"coverage of [{self.grid.lo_c:g}, {self.grid.hi_c:g}] °C: {self.coverage:.1%} "
             f"({int(self.covered.sum())}/{self.grid.n_bins} bins with >= {self.levels_required} "
-            f"gradient levels {self.delta_c_per_min:g} degC/min apart; min {self.min_levels})"
+            f"gradient levels {self.delta_c_per_min:g} °C/min apart; min {self.min_levels})"
         )
         if short:
             text += "; short: " + ", ".join(f"[{a:g},{b:g}):{n}" for a, b, n in short[:8])
@@ -174,7 +174,7 @@ def coverage_report(
     if int(levels_required) != levels_required or levels_required < 1:
         raise ParameterError(f"levels_required must be a whole number >= 1, got {levels_required}")
     if not (np.isfinite(delta_c_per_min) and delta_c_per_min > 0):
-        raise ParameterError(f"delta_c_per_min must be > 0 degC/min, got {delta_c_per_min}")
+        raise ParameterError(f"delta_c_per_min must be > 0 °C/min, got {delta_c_per_min}")
     kb, mg, _, _ = passes(temps_c, grads_c_per_min, grid)
     order = np.argsort(kb, kind="stable")
     kb, mg = kb[order], mg[order]

@@ -159,10 +159,10 @@ def _check_params(tau_s_values: np.ndarray, dt0_c_values: np.ndarray) -> None:
 def _deltas(deltas_c_per_min) -> tuple[float, ...]:
     d = tuple(float(x) for x in np.atleast_1d(np.asarray(deltas_c_per_min, dtype=float)))
     if not d:
-        raise ParameterError("deltas_c_per_min needs at least one gradient separation, degC/min")
+        raise ParameterError("deltas_c_per_min needs at least one gradient separation, °C/min")
     for x in d:
         if not (math.isfinite(x) and x > 0):
-            raise ParameterError(f"every delta_c_per_min must be > 0 degC/min, got {x}")
+            raise ParameterError(f"every delta_c_per_min must be > 0 °C/min, got {x}")
     if len(set(d)) != len(d):
         raise ParameterError(f"deltas_c_per_min has repeated values: {d}")
     return d
@@ -603,12 +603,12 @@ class SweepResult:
         cov = self.coverage_grid
         lo, hi = self.region_c
         return (
-            f"sweep of [{lo:g}, {hi:g}] degC over tau {self.tau_s_values[0]:g} .. "
+            f"sweep of [{lo:g}, {hi:g}] °C over tau {self.tau_s_values[0]:g} .. "
             f"{self.tau_s_values[-1]:g} s x dT0 {self.dt0_c_values[0]:g} .. "
-            f"{self.dt0_c_values[-1]:g} degC ({cov.size} points, >= {self.levels_required} "
-            f"levels {self.deltas_c_per_min[0]:g} degC/min apart): coverage "
+            f"{self.dt0_c_values[-1]:g} °C ({cov.size} points, >= {self.levels_required} "
+            f"levels {self.deltas_c_per_min[0]:g} °C/min apart): coverage "
             f"{cov.min():.1%} .. {cov.max():.1%}; worst at tau {w['tau_s']:g} s, dT0 "
-            f"{w['dt0_c']:g} degC ({w['coverage']:.1%}, min {w['min_levels']} levels); full "
+            f"{w['dt0_c']:g} °C ({w['coverage']:.1%}, min {w['min_levels']} levels); full "
             f"coverage on {self.full_share:.1%} of the grid"
         )
 
@@ -723,7 +723,7 @@ def verify_box(
     axes = []
     for name, rng, n, n_min, unit in (
         ("tau_s_range", tau_s_range, n_tau, MIN_VERIFY_N_TAU, "s"),
-        ("dt0_c_range", dt0_c_range, n_dt0, MIN_VERIFY_N_DT0, "degC"),
+        ("dt0_c_range", dt0_c_range, n_dt0, MIN_VERIFY_N_DT0, "°C"),
     ):
         try:
             lo, hi = (float(x) for x in rng)
