@@ -186,7 +186,8 @@ class OutputDir:
                 p = p.parent
             where.mkdir(parents=True, exist_ok=True)
             self._created_parents = missing
-            self._remove_dead_staging(where)
+            for folder in {where, target.parent}:
+                self._remove_dead_staging(folder)
             prefix = f".{target.name or 'out'}.schedsyn-staging-{os.getpid()}-"
             staging = Path(tempfile.mkdtemp(prefix=prefix, dir=where))
             os.chmod(staging, 0o777 & ~_umask())
@@ -205,14 +206,19 @@ class OutputDir:
         return staging
 
     def _remove_dead_staging(self, where: Path) -> None:
-        """Staging folders left by killed runs (their process is gone)."""
+        """Staging folders for this target left by killed runs (their process is gone)."""
         try:
             entries = list(where.iterdir())
         except OSError:
             return
         for p in entries:
             m = _STAGING.match(p.name)
-            if m and p.is_dir() and not _pid_alive(int(m.group("pid"))):
+            if (
+                m
+                and m.group("name") == (self.target.name or "out")
+                and p.is_dir()
+                and not _pid_alive(int(m.group("pid")))
+            ):
                 shutil.rmtree(p, ignore_errors=True)
 
     # -- writing ------------------------------------------------------------------------

@@ -361,3 +361,23 @@ def test_sigkill_of_a_campaign_leaves_no_worker_and_the_outputs_untouched(tmp_pa
     nxt.check()  # ... the next run removes
     nxt.discard()
     assert all(not p.exists() for p in staged)
+
+
+def test_staging_left_by_a_dead_run_is_removed_beside_and_inside(tmp_path):
+    dead = subprocess.Popen(["true"])  # a pid that has exited
+    dead.wait()
+    target = tmp_path / "out"
+    beside = tmp_path / f".out.schedsyn-staging-{dead.pid}-abc"
+    other = tmp_path / f".other.schedsyn-staging-{dead.pid}-abc"  # another target's
+    beside.mkdir()
+    other.mkdir()
+    target.mkdir()
+    inside = target / f".out.schedsyn-staging-{dead.pid}-def"
+    inside.mkdir()
+    alive = target / f".out.schedsyn-staging-{os.getpid()}-ghi"  # a live run's
+    alive.mkdir()
+    out = OutputDir(target)
+    out.check()
+    out.discard()
+    assert not beside.exists() and not inside.exists()
+    assert other.exists() and alive.exists()

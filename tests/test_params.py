@@ -70,3 +70,12 @@ def test_bin_grid_refuses_bools():
 
     with pytest.raises(ParameterError, match="lo_c"):
         BinGrid(True, 5)
+
+
+def test_diagnose_settings_refuse_strings():
+    from schedsyn.discrepancy import DiagnoseSettings
+
+    with pytest.raises(ParameterError, match="fit_step_s must be a number"):
+        DiagnoseSettings(fit_step_s="3")
+    with pytest.raises(ParameterError, match="bic_margin must be a number"):
+        DiagnoseSettings(bic_margin="15")
