@@ -19,6 +19,8 @@ _DECIMAL_COMMA = re.compile(r"^\s*[+-]?\d+,\d+(?:[eE][+-]?\d+)?\s*$")
 _DECIMAL_POINT = re.compile(r"^\s*[+-]?(?:\d+\.\d*|\.\d+)(?:[eE][+-]?\d+)?\s*$")
 
 _NAMES = {",": "comma", ";": "semicolon", "\t": "tab"}
+#: The first line some spreadsheets write to name the separator, e.g. ``sep=;``.
+SEP_HINT = re.compile(r"^\s*\"?sep=(.)\"?\s*$")
 
 
 class CsvDialect(NamedTuple):
@@ -49,10 +51,12 @@ def detect_csv_dialect(head: str) -> CsvDialect:
     Returns
     -------
     CsvDialect
-        ``(separator, decimal)``: the separator (``","``, ``";"`` or tab) that splits the
-        header into the most fields, every data line into as many fields as the header
-        (ties go to the comma); the decimal mark is ``","`` when the separator is not a
-        comma and the data fields hold numbers like ``-1,5`` but none like ``-1.5``.
+        ``(separator, decimal)``: the separator named by a ``sep=X`` first line (a
+        spreadsheet's hint; readers skip that line), else the one (``","``, ``";"`` or
+        tab) that splits the header into the most fields, every data line into as many
+        fields as the header (ties go to the comma); the decimal mark is ``","`` when
+        the separator is not a comma and the data fields hold more numbers like ``-1,5``
+        than like ``-1.5``.
         A table of one column gives ``(",", ".")``.
     """
     text = head.lstrip("\ufeff")
@@ -62,6 +66,13 @@ def detect_csv_dialect(head: str) -> CsvDialect:
     rows = [ln for ln in lines if ln.strip() and not ln.lstrip().startswith("#")][:50]
     if not rows:
         return CsvDialect(",", ".")
+    hint = SEP_HINT.match(rows[0])
+    if hint:  # a spreadsheet's "sep=;" line names the separator
+        sep = hint.group(1)
+        cells = [c for r in rows[2:] for c in _fields(r, sep)]
+        commas = sum(bool(_DECIMAL_COMMA.match(c)) for c in cells)
+        points = sum(bool(_DECIMAL_POINT.match(c)) for c in cells)
+        return CsvDialect(sep, "," if sep != "," and commas > points else ".")
     best, best_n = ",", 1
     for sep in SEPARATORS:
         n = len(_fields(rows[0], sep))

@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .csvdialect import detect_csv_dialect
+from .csvdialect import SEP_HINT, detect_csv_dialect
 from .errors import ParameterError, StepTableError
 from .params import Limits, ThermalParams
 
@@ -743,7 +743,10 @@ def _split_table(path: Path):
         k += 1
     comments = [ln for ln in lines[:k] if ln.strip()]
     body = "".join(lines[k:])
+    dialect = detect_csv_dialect(body[:16384])
+    if SEP_HINT.match(body.split("\n", 1)[0]):  # "sep=;": a hint, not the header
+        body = body.split("\n", 1)[1] if "\n" in body else ""
     meta = StepTableMeta.from_lines(comments, str(path)) if comments else None
     if meta is not None and meta == StepTableMeta(extra=meta.extra) and not meta.extra:
         meta = None  # free comments only
-    return meta, body, detect_csv_dialect(body[:16384])
+    return meta, body, dialect

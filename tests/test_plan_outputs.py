@@ -125,3 +125,17 @@ def test_campaign_tables_carry_metadata_and_a_manifest_lists_the_run(tmp_path, c
     want = {"summary.csv"} | {f"S/{n}" for n in ("steps.csv", "plan.json", "program.png")}
     assert want <= listed and not any(p.startswith("OLD") for p in listed)
     assert "end: the chamber ends at" in capsys.readouterr().out
+
+
+def test_campaign_end_soak_that_does_not_fit_is_reported_and_exit_1(tmp_path, capsys):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[limits]\nduration_max_min = 140\n" + SMALL_TOML)
+    out = tmp_path / "out"
+    rc = main(["campaign", str(cfg), "--out", str(out), "--end-soak", "--quiet"])
+    text = capsys.readouterr().out
+    assert rc == 1
+    assert "*** S: --end-soak: the end soak of" in text and "WITHOUT an end soak" in text
+    assert "no end soak fits in S" in text
+    prog = read_steps(out / "S" / "steps.csv")
+    assert prog.meta.end_soak_included_min is None and prog.meta.end_soak_min > 0
+    assert prog.total_min <= 140

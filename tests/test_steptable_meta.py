@@ -143,6 +143,8 @@ def test_the_recorded_limits_validate_the_table_when_none_are_given(tmp_path):
         ("# tau_s: 2400,0\n\nstep;start_min\n1;0,5\n2;1", (";", ",")),
         ('a,b\n"1,5",2\n', (",", ".")),
         ("only_one_column\n1\n2\n", (",", ".")),
+        ("sep=;\nstep;start_min\n1;0,5\n", (";", ",")),
+        ('"sep=,"\nstep,start_min\n1,0.5\n', (",", ".")),
         ("", (",", ".")),
     ],
 )
@@ -250,3 +252,11 @@ def test_meta_fields_are_validated():
     m = StepTableMeta(levels_required=6.0)
     assert m.levels_required == 6 and isinstance(m.levels_required, int)
     assert dataclasses.replace(m, tau_s=2000).tau_s == 2000.0
+
+
+def test_a_separator_hint_line_is_honoured_and_skipped(tmp_path):
+    prog = Programme([30, 15, 60], [-1.0, 0.0, 0.5])
+    path = tmp_path / "hint.csv"
+    path.write_text("sep=;\n" + prog.to_frame().to_csv(sep=";", decimal=",", index=False))
+    back = read_steps(path)
+    np.testing.assert_allclose(back.rates_c_per_min, prog.rates_c_per_min)

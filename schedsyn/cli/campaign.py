@@ -11,16 +11,20 @@ folder beside DIR first), and DIR/schedsyn-run.json lists them; files of an earl
 that this one does not rewrite are removed. Outputs that would overwrite an input are
 refused before any planning.
 
+With --end-soak each table ends with a hold until the device settles; an experiment
+whose soak does not fit in the time limit is written without it and reported.
+
 Exit codes: 0 every experiment is complete (independent check of its exported table);
-1 at least one experiment is incomplete or infeasible (its files, if any, are still
-written and the problem is printed); 2 bad input (config, options); 3 an environment
-fault (an output cannot be written, a worker process died).
+1 at least one experiment is incomplete or infeasible, or its end soak does not fit (its
+files, if any, are still written and the problem is printed); 2 bad input (config,
+options); 3 an environment fault (an output cannot be written, a worker process died).
 """
 
 from __future__ import annotations
 
 import argparse
 
+from ..errors import ParameterError
 from . import _common
 from .plan import PLAN_FILES, add_end_soak_option
 
@@ -81,6 +85,7 @@ def run(args: argparse.Namespace) -> int:
         workers=args.workers,
     )
     lines = []
+    no_soak: list[str] = []
     plans = list(result.plans)
     for i, (spec, plan, err) in enumerate(
         zip(config.experiments, result.plans, result.errors, strict=True)
@@ -89,7 +94,11 @@ def run(args: argparse.Namespace) -> int:
             lines.append(f"*** {spec.name} COULD NOT BE PLANNED: {err}")
             continue
         if args.end_soak:
-            plan = plans[i] = with_end_soak(plan)
+            try:
+                plan = plans[i] = with_end_soak(plan)
+            except ParameterError as exc:  # the others go on; this one is reported
+                no_soak.append(spec.name)
+                lines.append(f"*** {exc}; its table is written WITHOUT an end soak")
         write_plan_outputs(plan, out.folder(spec.name))
         lines += report_plan(plan)
         lines += end_soak_lines(plan)
@@ -103,6 +112,7 @@ def run(args: argparse.Namespace) -> int:
     with pd.option_context("display.width", 200, "display.max_columns", 30):
         summary = frame.to_string(index=False, float_format=lambda x: f"{x:.4g}")
     n_bad = sum(not (p is not None and p.complete) for p in result.plans)
+    soak_text = f"; no end soak fits in {', '.join(no_soak)}" if no_soak else ""
     _common.say(
         summary,
         *lines,
@@ -111,8 +121,9 @@ def run(args: argparse.Namespace) -> int:
             "every experiment is complete"
             if n_bad == 0
             else f"{n_bad} of {len(result.plans)} experiments are NOT complete"
-        ),
+        )
+        + soak_text,
         f"wrote {out.target}/summary.csv and {out.target}/<experiment>/steps.csv, plan.json, "
         "program.png, phase.png, coverage.png",
     )
-    return 0 if n_bad == 0 else 1
+    return 0 if n_bad == 0 and not no_soak else 1
