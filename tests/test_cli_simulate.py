@@ -114,3 +114,23 @@ def test_region_model_and_levels_come_from_the_table(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "tau 2400 s, dT0 1 °C (from the step table and the options)" in text
     assert "coverage of [-10, 0] °C" in text
+
+
+def test_a_robust_table_says_it_is_simulated_at_its_nominal_point(tmp_path, capsys):
+    from schedsyn import Programme
+    from schedsyn.programme import StepTableMeta
+
+    meta = StepTableMeta(
+        working_lo_c=-5.0,
+        working_hi_c=5.0,
+        tau_s=2400.0,
+        dt0_c=3.0,
+        robust_tau_lo_s=2200.0,
+        robust_tau_hi_s=2600.0,
+        robust_dt0_lo_c=2.0,
+        robust_dt0_hi_c=4.0,
+    )
+    steps = Programme([40, 40], [-1.0, 1.0], meta=meta).to_csv(tmp_path / "r.csv")
+    assert main(["simulate", str(steps), "--out", str(tmp_path / "o")]) == 0
+    text = capsys.readouterr().out
+    assert "robust box tau 2200 .. 2600 s x dT0 2 .. 4 °C; this is its nominal point" in text

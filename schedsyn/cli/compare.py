@@ -61,6 +61,13 @@ def run(args: argparse.Namespace) -> int:
     lo, hi = _common.region_from_table(args, programme.meta, args.steps)
     levels, delta = _common.coverage_settings(args, programme.meta)
     params, source = _common.model_from_table(args, programme.meta)
+    recorded = programme.meta.model_json() if programme.meta is not None else None
+    if recorded is not None and recorded.get("effect", "none") != "none":
+        _common.stderr(
+            f"note: {args.steps} was planned with the augmented model "
+            f"{recorded.get('effect')}; compare simulates the plan with its base model "
+            "(tau, dT0)"
+        )
     out = _common.output_dir(args.out, "out/compare", [args.log, args.steps], NAMES)
     log = read_log(args.log)
     print_log_report(log)

@@ -102,6 +102,20 @@ def run(args: argparse.Namespace) -> int:
         lines.append(f"model: tau {params.tau_s:g} s, dT0 {params.dt0_c:g} °C ({source})")
     region_src = "given" if args.region is not None else "from the step table"
     lines.append(f"working region: [{lo:g}, {hi:g}] °C ({region_src})")
+    tau_box, dt0_box = programme.meta.robust_box if programme.meta is not None else (None, None)
+    if tau_box is not None or dt0_box is not None:
+        box = " x ".join(
+            t
+            for t in (
+                f"tau {tau_box[0]:g} .. {tau_box[1]:g} s" if tau_box else "",
+                f"dT0 {dt0_box[0]:g} .. {dt0_box[1]:g} °C" if dt0_box else "",
+            )
+            if t
+        )
+        lines.append(
+            f"the table was planned for the robust box {box}; this is its nominal point "
+            "(schedsyn sweep checks the box)"
+        )
     report = trajectory_coverage(traj, lo, hi, levels, delta)
     soak = end_soak_min(
         programme, params, model=model, tol_c=limits.end_tol_c, t0_c=limits.t_init_c
