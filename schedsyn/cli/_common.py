@@ -117,10 +117,16 @@ def region_from_table(args: argparse.Namespace, meta, steps: str) -> tuple[float
 
 def add_limit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
-        "--chamber-min-c", type=float, default=None, help="chamber air floor, °C (default -70)"
+        "--chamber-min-c",
+        type=float,
+        default=None,
+        help="chamber air floor, °C (default: the step table's, else -70)",
     )
     p.add_argument(
-        "--chamber-max-c", type=float, default=None, help="chamber air ceiling, °C (default 80)"
+        "--chamber-max-c",
+        type=float,
+        default=None,
+        help="chamber air ceiling, °C (default: the step table's, else 80)",
     )
 
 
