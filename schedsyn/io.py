@@ -141,6 +141,8 @@ class OutputDir:
         self, target: Path | str, inputs: Iterable[Path | str | None] = (), command: str = ""
     ) -> None:
         self.target = Path(target)
+        #: The folder's own name (of the resolved path: ``--out .`` has one too).
+        self._name = self.target.resolve().name or "out"
         self.inputs = [Path(p) for p in inputs if p is not None and str(p)]
         self.command = command or " ".join(["schedsyn", *sys.argv[1:]])
         self._staging: Path | None = None
@@ -188,7 +190,7 @@ class OutputDir:
             self._created_parents = missing
             for folder in {where, target.parent}:
                 self._remove_dead_staging(folder)
-            prefix = f".{target.name or 'out'}.schedsyn-staging-{os.getpid()}-"
+            prefix = f".{self._name}.schedsyn-staging-{os.getpid()}-"
             staging = Path(tempfile.mkdtemp(prefix=prefix, dir=where))
             os.chmod(staging, 0o777 & ~_umask())
             probe = staging / ".write-test"
@@ -215,7 +217,7 @@ class OutputDir:
             m = _STAGING.match(p.name)
             if (
                 m
-                and m.group("name") == (self.target.name or "out")
+                and m.group("name") == self._name
                 and p.is_dir()
                 and not _pid_alive(int(m.group("pid")))
             ):
