@@ -32,7 +32,6 @@ import atexit
 import contextlib
 import dataclasses
 import math
-import sys
 import time
 import tomllib
 from collections.abc import Callable, Sequence
@@ -52,6 +51,7 @@ from .export import ExportSettings
 from .params import Limits, ThermalParams
 from .planner import ExperimentSpec, Plan, plan_experiment, planning_effort
 from .programme import read_steps
+from .progress import Progress
 from .simulate import simulate
 from .sweep import run_map
 
@@ -373,8 +373,9 @@ def load_campaign(path: Path | str) -> CampaignConfig:
 # planning
 # ---------------------------------------------------------------------------------------
 def stderr_progress(message: str) -> None:
-    """A picklable progress callable: one line on stderr."""
-    print(message, file=sys.stderr, flush=True)
+    """A picklable progress callable: one line on stderr (timestamped when stderr is a
+    file or pipe; see :class:`schedsyn.progress.Progress`)."""
+    Progress()(message)
 
 
 @dataclass(frozen=True, slots=True)
@@ -658,7 +659,7 @@ def chamber_plans(
         try:
             lim = dataclasses.replace(limits, chamber_min_c=f, chamber_max_c=c)
         except ParameterError as exc:
-            raise ParameterError(f"chamber floor {f:g} / ceiling {c:g} degC: {exc}") from None
+            raise ParameterError(f"chamber floor {f:g} / ceiling {c:g} °C: {exc}") from None
         jobs.append(_ChamberJob(spec, params, lim, robust_tau_s, robust_dt0_c))
     out = run_map(
         partial(_chamber_job, progress=progress),

@@ -85,6 +85,13 @@ class DiagnoseSettings:
     effects: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
+        from .params import real_number
+
+        for name in ("fit_step_s", "bic_margin", "min_rel_improvement", "ambiguity_bic"):
+            if getattr(self, name) is not None:  # a string fails here, not inside a fit
+                real_number(name, getattr(self, name))
+        for name in ("holdout_fraction", "setpoint_tol_c"):
+            real_number(name, getattr(self, name))
         if self.fit_step_s is not None and not (
             math.isfinite(self.fit_step_s) and self.fit_step_s > 0
         ):

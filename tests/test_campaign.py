@@ -214,7 +214,11 @@ def test_campaign_writes_every_output(small_campaign):
 
 def test_campaign_reports_progress_with_experiment_and_solver_time(small_campaign):
     *_, err = small_campaign
-    lines = [ln for ln in err.splitlines() if ln.startswith("S [")]
+    # stderr is not a terminal here: plain lines, each with a timestamp
+    stamp = re.compile(r"^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d ")
+    assert all(stamp.match(ln) for ln in err.splitlines()), err
+    lines = [stamp.sub("", ln) for ln in err.splitlines()]
+    lines = [ln for ln in lines if ln.startswith("S [")]
     assert lines, err
     times = [float(re.match(r"S \[\s*([0-9.]+) s\]", ln).group(1)) for ln in lines]
     assert times == sorted(times) and times[-1] > 0

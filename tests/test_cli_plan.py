@@ -74,7 +74,7 @@ def test_plan_with_a_model_file_writes_outputs_and_its_coverage_survives_re_simu
     assert rep.coverage == pytest.approx(plan["coverage"])
     assert rep.min_levels == plan["min_levels"]
     assert prog.total_min == pytest.approx(plan["duration_min"])
-    assert "coverage of [-10, 0] degC" in text
+    assert "coverage of [-10, 0] °C" in text
     # ... and it differs from the plain first-order lag (the model was really used)
     plain = simulate(prog, ThermalParams(tau_s=2400.0), dt_min=0.1)
     assert np.max(np.abs(plain.t_c - traj.t_c)) > 0.01
