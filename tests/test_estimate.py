@@ -36,6 +36,11 @@ TCLAB = Path(__file__).resolve().parents[2] / "shared" / "data" / "tclab"
 BASELINE = "data/baseline_exp1_steps.csv"
 
 
+def _lag(tau_min):
+    """The first-order lag with time constant ``tau_min`` minutes."""
+    return FirstOrderLag(ThermalParams(tau_s=60.0 * tau_min))
+
+
 def _van_loan(a_cont, g_vec, q, h):
     """Exact (F, Q) of dx = A x dt + G dW (density q) over h, by Van Loan's matrix exponential."""
     n = a_cont.shape[0]
@@ -62,7 +67,7 @@ def test_lag_discretisation_matches_van_loan(h):
     q, tau = 3e-4, 40.0
     a_cont = np.array([[-1.0 / tau, 1.0], [0.0, 0.0]])
     f, qd = _van_loan(a_cont, np.array([0.0, 1.0]), q, h)
-    a, b, q11, q12, q22 = lag_transition(np.array([h]), tau, q)
+    a, b, q11, q12, q22 = lag_transition(np.array([h]), _lag(tau), q)
     np.testing.assert_allclose([a[0], b[0]], [f[0, 0], f[0, 1]], rtol=1e-11)
     np.testing.assert_allclose([q11[0], q12[0], q22[0]], [qd[0, 0], qd[0, 1], qd[1, 1]], rtol=1e-6)
 
@@ -72,7 +77,7 @@ def test_lag_input_matches_ode():
     model = FirstOrderLag(params)
     h, tk0, tk1, t_start = 7.5, -10.0, 5.0, 3.0
     u = lag_input(np.array([h]), np.array([tk0]), np.array([tk1]), model)[0]
-    a, *_ = lag_transition(np.array([h]), params.tau_min, 1.0)
+    a, *_ = lag_transition(np.array([h]), model, 1.0)
 
     def rhs(t, x):
         tk = tk0 + (tk1 - tk0) * t / h
@@ -138,7 +143,7 @@ def test_filter_and_smoother_equal_batch_conditioning(kind, rng):
         a, b, q11, q12, q22 = kinematic_transition(h, q)
         u = np.zeros(n)
     else:
-        a, b, q11, q12, q22 = lag_transition(h, 2.0, q)
+        a, b, q11, q12, q22 = lag_transition(h, _lag(2.0), q)
         tk = 25.0 + 3.0 * np.sin(t)
         u = np.concatenate(
             ([0.0], lag_input(h[1:], tk[:-1], tk[1:], FirstOrderLag(ThermalParams(tau_s=120.0))))
@@ -348,7 +353,7 @@ def _fq(kind, h, q, tau=40.0):
     a, b, q11, q12, q22 = (
         kinematic_transition(np.array([h]), q)
         if kind == "kinematic"
-        else lag_transition(np.array([h]), tau, q)
+        else lag_transition(np.array([h]), _lag(tau), q)
     )
     f = np.array([[a[0], b[0]], [0.0, 1.0]])
     return f, np.array([[q11[0], q12[0]], [q12[0], q22[0]]])
@@ -390,7 +395,7 @@ def test_steady_state_fast_path_equals_plain_recursions(kind, rng, monkeypatch):
         a, b, q11, q12, q22 = kinematic_transition(h, 1e-3)
         u = np.zeros(n)
     else:
-        a, b, q11, q12, q22 = lag_transition(h, 40.0, 1e-4)
+        a, b, q11, q12, q22 = lag_transition(h, _lag(40.0), 1e-4)
         tk = 20.0 + 8.0 * np.sin(t / 25.0)
         u = np.concatenate(([0.0], lag_input(h[1:], tk[:-1], tk[1:], FirstOrderLag())))
     x0, p0 = (y[0], 0.0), (100.0, 0.0, 9.0)
@@ -421,17 +426,18 @@ def test_strided_copy_composes_the_chamber_input_exactly(rng):
     n, tau = 3000, 40.0
     h = np.concatenate(([0.0], rng.uniform(0.01, 0.5, n - 1)))
     u = np.concatenate(([0.0], rng.normal(0.0, 1.0, n - 1)))
-    setup = est_mod._Setup(np.cumsum(h), rng.normal(size=n), h, u, tau, (0.0, 0.0))
+    setup = est_mod._Setup(60.0 * np.cumsum(h), rng.normal(size=n), _lag(tau), None, u)
     coarse = setup.stride(7)
     idx = np.arange(0, n, 7)
-    np.testing.assert_allclose(coarse.t_min, setup.t_min[idx])
-    a_c, b_c, *_ = lag_transition(coarse.h_min, tau, 1.0)
+    np.testing.assert_allclose(coarse.time_s, setup.time_s[idx])
+    h_c, _, u_c = coarse.steps(0, idx.size)
+    a_c, b_c, *_ = lag_transition(h_c, _lag(tau), 1.0)
     for k in (1, 2, 100, idx.size - 1):
         x = np.array([1.5, -0.2])  # (T, d) through the fine steps
         for j in range(idx[k - 1] + 1, idx[k] + 1):
-            a, b, *_ = lag_transition(np.array([h[j]]), tau, 1.0)
+            a, b, *_ = lag_transition(np.array([h[j]]), _lag(tau), 1.0)
             x = np.array([a[0] * x[0] + b[0] * x[1] + u[j], x[1]])
-        direct = a_c[k] * 1.5 + b_c[k] * -0.2 + coarse.u[k]
+        direct = a_c[k] * 1.5 + b_c[k] * -0.2 + u_c[k]
         assert direct == pytest.approx(x[0], rel=1e-12, abs=1e-12)
 
 
