@@ -134,3 +134,33 @@ def test_cli_every_quiet_and_progress(tmp_path, capsys, monkeypatch):
     assert (dec_out / "phase.png").stat().st_size > 0
     assert main([*args, "--every", "-5"]) == 2
     assert "every_s must be" in capsys.readouterr().err
+
+
+def test_diagnose_thins_a_log_longer_than_its_budget(tmp_path, capsys, monkeypatch):
+    """Over DIAGNOSE_MAX_ROWS rows, diagnose works on every k-th row: the same answer as
+    diagnosing that thinned log directly, and the CLI says so."""
+    import schedsyn.cli.diagnose as cli_diag
+    import schedsyn.discrepancy as disc
+
+    monkeypatch.setattr(disc, "DIAGNOSE_MAX_ROWS", 1000)
+    monkeypatch.setattr(cli_diag, "DIAGNOSE_MAX_ROWS", 1000)
+    params = ThermalParams(tau_s=2700.0, dt0_c=2.0)
+    df = synth_log(read_steps(STEPS), params, sample_s=2.0, seed=4)
+    n = len(df)
+    stride = -(-n // 1000)
+    settings = disc.DiagnoseSettings(effects=("dead_time",))
+    d = disc.diagnose(log_from_frame(df), settings)
+    assert d.info["row_stride"] == stride > 1
+    direct = disc.diagnose(log_from_frame(df.iloc[::stride].reset_index(drop=True)), settings)
+    assert direct.info["row_stride"] == 1
+    assert d.base.tau_s == direct.base.tau_s and d.base.dt0_c == direct.base.dt0_c
+    assert d.base.tau_s == pytest.approx(2700.0, rel=0.02)
+    assert d.base.dt0_c == pytest.approx(2.0, abs=0.1)
+    assert d.time_min.size == int(np.isfinite(df["t_int_c"].to_numpy()[::stride]).sum())
+    path = tmp_path / "long.csv"
+    df.to_csv(path, index=False)
+    rc = main(["diagnose", str(path), "--out", str(tmp_path / "d"), "--effects", "dead_time"])
+    assert rc == 0
+    kept = len(range(0, n, stride))
+    note = f"note: the log has {n} rows; diagnosed on every {stride}th row ({kept} rows)"
+    assert note in capsys.readouterr().out

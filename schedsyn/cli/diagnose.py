@@ -7,9 +7,9 @@ import argparse
 import json
 import sys
 
-from ..discrepancy import DiagnoseSettings, diagnose
+from ..discrepancy import DIAGNOSE_MAX_ROWS, DiagnoseSettings, diagnose
 from ..io import write_frame_atomic, write_json_atomic
-from ..logs import read_log
+from ..logs import read_log, thin_log
 from ..models_io import write_model
 from . import _common
 
@@ -48,7 +48,11 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    log = read_log(args.log)
+    full = read_log(args.log, keep_extra=False)
+    n_rows = full.n_rows
+    # a long log is diagnosed on every k-th row (bounded memory); the full one is freed
+    log, stride = thin_log(full, DIAGNOSE_MAX_ROWS)
+    del full
     settings = DiagnoseSettings(
         fit_step_s=args.fit_step_s,
         effects=tuple(args.effects) if args.effects is not None else None,
@@ -73,6 +77,12 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_plots:
         written += _plots(d, log, out, inputs, args.log)
     msg = sys.stderr if args.json else sys.stdout
+    if stride > 1:
+        print(
+            f"note: the log has {n_rows} rows; diagnosed on every {stride}th row "
+            f"({log.n_rows} rows)",
+            file=msg,
+        )
     if args.json:
         print(json.dumps(d.to_json_dict()))
     else:
