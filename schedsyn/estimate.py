@@ -234,7 +234,7 @@ def _smoother_map(fa, pa, f_cov, p_cov, a, b):
     """``(M, w)`` of the smoothed mean ``x_k|N = rts_step(x_k+1|N)`` at fixed covariances,
     ``x_k|N = C x_k+1|N + (x_k|k - C x_k+1|k)``: ``M = C`` from the step with zero
     filtered and predicted means, ``w`` from ``x_k+1|N = 0`` with the means ``fa``, ``pa``
-    (filtered and predicted, one row per step)."""
+    (filtered and predicted, (2, n): one column per step)."""
     f11, f12, f22 = f_cov
     p11, p12, p22 = p_cov
 
@@ -242,7 +242,7 @@ def _smoother_map(fa, pa, f_cov, p_cov, a, b):
         return rts_step(fx1, fx2, f11, f12, f22, px1, px2, p11, p12, p22, s1, s2, 0, 0, 0, a, b)[:2]
 
     c1, c2 = step(1.0, 0.0, 0.0, 0.0, 0.0, 0.0), step(0.0, 1.0, 0.0, 0.0, 0.0, 0.0)
-    w = step(0.0, 0.0, fa[:, 0], fa[:, 1], pa[:, 0], pa[:, 1])
+    w = step(0.0, 0.0, fa[0], fa[1], pa[0], pa[1])
     return ((c1[0], c2[0]), (c1[1], c2[1])), w
 
 
@@ -280,15 +280,17 @@ class _Carry:
 class _Forward:
     """Output of :func:`_forward` over ``m`` rows."""
 
-    filt: np.ndarray | None  # (m, 5) filtered (x1, x2, P11, P12, P22); None if not stored
-    pred: np.ndarray | None  # (m, 5) predicted
+    filt: np.ndarray | None  # (5, m) filtered x1, x2, P11, P12, P22; None if not stored
+    pred: np.ndarray | None  # (5, m) predicted
     innov: np.ndarray  # (m,) innovations, NaN without a reading
     svar: np.ndarray  # (m,) their variances
     m2ll: float  # -2 log L of these rows
     stretches: tuple[tuple[int, int], ...]  # (first, last) rows solved in steady state
     carry: _Carry  # the state after the last row
-    plain: dict[int, tuple[tuple, tuple]] | None = None  # row -> (filtered, predicted) of
-    # the rows stepped one by one (the smoother reads them without converting the arrays)
+    # the same as Python floats for the smoother's row-by-row steps: (filt, pred) as five
+    # lists each, filled on the rows stepped one by one, at each stretch's first (pred)
+    # and last (filt) row; and the lists of a and b
+    lists: tuple[list[list[float]], list[list[float]], list[float], list[float]] | None = None
 
 
 def _forward(
@@ -312,11 +314,13 @@ def _forward(
     x1, x2, p11, p12, p22 = carry.state
     seen, steady = carry.seen, carry.steady
     o11, o12, o22 = carry.last_p
-    filt = np.empty((m if store else 0, 5))
-    pred = np.empty((m if store else 0, 5))
-    plain_rows: list[int] = []  # row-by-row results, written into the arrays in bulk
-    filt_l: list[tuple[float, float, float, float, float]] = []
-    pred_l: list[tuple[float, float, float, float, float]] = []
+    # stored states: one preallocated list per component (cheaper than a tuple per row)
+    nan = math.nan
+    fcols = [[nan] * m for _ in range(5)] if store else [[], [], [], [], []]
+    pcols = [[nan] * m for _ in range(5)] if store else [[], [], [], [], []]
+    f0, f1, f2, f3, f4 = fcols
+    g0, g1, g2, g3, g4 = pcols
+    stretch_states = []
     innov = np.full(m, np.nan)  # innovations and their variances (NaN: no reading)
     svar = np.full(m, np.nan)
     upd_k: list[int] = []  # rows updated one by one, their innovations and variances
@@ -346,14 +350,17 @@ def _forward(
             svar[k : k1 + 1] = s
             m2ll += float(np.sum(e * e)) / s + e.size * (log2pi + log(s))
             seen += e.size
-            if store:
-                pred[k : k1 + 1, 0] = xp1
-                pred[k : k1 + 1, 1] = xp2
-                pred[k : k1 + 1, 2:] = (pp11, pp12, pp22)
-                filt[k : k1 + 1, 0] = xf1
-                filt[k : k1 + 1, 1] = xf2
-                filt[k : k1 + 1, 2:] = (p11, p12, p22)
             x1, x2 = float(xf1[-1]), float(xf2[-1])
+            if store:
+                stretch_states.append(
+                    (k, k1, (xp1, xp2, pp11, pp12, pp22), (xf1, xf2, p11, p12, p22))
+                )
+                for col, v in zip(
+                    pcols, (float(xp1[0]), float(xp2[0]), pp11, pp12, pp22), strict=True
+                ):
+                    col[k] = v
+                for col, v in zip(fcols, (x1, x2, p11, p12, p22), strict=True):
+                    col[k1] = v
             o11, o12, o22 = p11, p12, p22
             stretches.append((k, k1))
             k = k1 + 1
@@ -363,7 +370,7 @@ def _forward(
                 x1, x2, p11, p12, p22, al[k], bl[k], ul[k], q11l[k], q12l[k], q22l[k]
             )
         if store:
-            pred_l.append((x1, x2, p11, p12, p22))
+            g0[k], g1[k], g2[k], g3[k], g4[k] = x1, x2, p11, p12, p22
         yk = yl[k]
         if yk == yk:  # not NaN
             x1, x2, p11, p12, p22, e, s = update(x1, x2, p11, p12, p22, yk, r)
@@ -385,77 +392,72 @@ def _forward(
             steady = False
             o11 = o12 = o22 = math.nan
         if store:
-            filt_l.append((x1, x2, p11, p12, p22))
-            plain_rows.append(k)
+            f0[k], f1[k], f2[k], f3[k], f4[k] = x1, x2, p11, p12, p22
         k += 1
-    if store and plain_rows:
-        filt[plain_rows] = filt_l
-        pred[plain_rows] = pred_l
     innov[upd_k] = upd_e
     svar[upd_k] = upd_s
     out = _Carry((x1, x2, p11, p12, p22), seen, steady, (o11, o12, o22))
     if not store:
         return _Forward(None, None, innov, svar, m2ll, tuple(stretches), out)
-    plain = dict(zip(plain_rows, zip(filt_l, pred_l, strict=True), strict=True))
-    return _Forward(filt, pred, innov, svar, m2ll, tuple(stretches), out, plain)
+    filt, pred = np.array(fcols), np.array(pcols)
+    for k, k1, ps, fs in stretch_states:
+        for i in range(5):
+            pred[i, k : k1 + 1] = ps[i]
+            filt[i, k : k1 + 1] = fs[i]
+    lists = (fcols, pcols, al, bl)
+    return _Forward(filt, pred, innov, svar, m2ll, tuple(stretches), out, lists)
 
 
-def _backward(filt, pred, a, b, stretches, nxt, *, fast, plain=None) -> np.ndarray:
+def _backward(filt, pred, lists, stretches, nxt, *, fast) -> np.ndarray:
     """RTS smoother over ``m`` rows: :func:`rts_step` from the last row back to the first.
 
-    ``filt``, ``pred`` (m, 5) and ``a, b`` (row ``k``: the step into row ``k``) come from
-    :func:`_forward`. ``nxt`` is None when the rows end the log (the last row's smoothed
-    state is its filtered one), else ``(smoothed, predicted, a, b)`` of the row after
-    them. With ``fast``, the rows of a steady stretch share ``P_k|k``, ``P_k+1|k`` and
-    ``F``, hence the gain ``C``: their means are solved vectorised, their covariance
-    iterated only until it stops changing. ``plain`` (:attr:`_Forward.plain`) holds the
-    rows stepped one by one as Python floats. Returns (m, 5) smoothed states.
+    ``filt``, ``pred`` (5, m) and ``lists`` come from :func:`_forward` (``lists``: the
+    same as Python floats where the rows are stepped one by one, with ``a`` and ``b``:
+    row ``k`` the step into row ``k``). ``nxt`` is None when the rows end the log (the
+    last row's smoothed state is its filtered one), else ``(smoothed, predicted, a, b)``
+    of the row after them. With ``fast``, the rows of a steady stretch share ``P_k|k``,
+    ``P_k+1|k`` and ``F``, hence the gain ``C``: their means are solved vectorised, their
+    covariance iterated only until it stops changing. Returns (5, m) smoothed states.
     """
-    m = filt.shape[0]
-    out = np.empty((m, 5))
-    if plain is None or 4 * len(plain) > m:
-        fl, pl = filt.tolist(), pred.tolist()
-        al, bl = np.asarray(a).tolist(), np.asarray(b).tolist()
-    else:  # mostly steady: the few plain rows from `plain`, the others from the arrays
-        fl, pl = _RowView(filt, plain, 0), _RowView(pred, plain, 1)
-        al, bl = _RowView(a, None, 0), _RowView(b, None, 0)
+    m = filt.shape[1]
+    (f0, f1, f2, f3, f4), (g0, g1, g2, g3, g4), al, bl = lists
+    nan = math.nan
+    ocols = [[nan] * m for _ in range(5)]
+    o0, o1, o2, o3, o4 = ocols
+    stretch_out = []
+    k = m - 1
     if nxt is None:
-        out[-1] = filt[-1]
-        cur = tuple(fl[m - 1])
-        k = m - 2
-    else:
-        cur, p_next, a_next, b_next = nxt
-        pl = pl + [p_next] if isinstance(pl, list) else _Extended(pl, m, p_next)
-        al = al + [a_next] if isinstance(al, list) else _Extended(al, m, a_next)
-        bl = bl + [b_next] if isinstance(bl, list) else _Extended(bl, m, b_next)
-        k = m - 1
+        cur = (f0[k], f1[k], f2[k], f3[k], f4[k])
+    else:  # the last row of a chunk is never inside a stretch's shared-gain range
+        s_next, p, a_next, b_next = nxt
+        cur = rts_step(
+            f0[k], f1[k], f2[k], f3[k], f4[k], p[0], p[1], p[2], p[3], p[4],
+            s_next[0], s_next[1], s_next[2], s_next[3], s_next[4], a_next, b_next,
+        )  # fmt: skip
+    o0[k], o1[k], o2[k], o3[k], o4[k] = cur
+    k -= 1
     starts = {k1: k0 for k0, k1 in stretches} if fast else {}
-    done_rows: list[int] = []
-    done_vals: list[tuple] = []
     while k >= 0:
         k0 = starts.get(k + 1)
         if k0 is None or k0 >= k:  # a plain row
-            f, p = fl[k], pl[k + 1]
+            j = k + 1
             cur = rts_step(
-                f[0], f[1], f[2], f[3], f[4], p[0], p[1], p[2], p[3], p[4],
-                cur[0], cur[1], cur[2], cur[3], cur[4], al[k + 1], bl[k + 1],
+                f0[k], f1[k], f2[k], f3[k], f4[k], g0[j], g1[j], g2[j], g3[j], g4[j],
+                cur[0], cur[1], cur[2], cur[3], cur[4], al[j], bl[j],
             )  # fmt: skip
-            done_rows.append(k)
-            done_vals.append(cur)
+            o0[k], o1[k], o2[k], o3[k], o4[k] = cur
             k -= 1
             continue
         # rows k0..k of a steady stretch: x_j|N = C x_j+1|N + (x_j|j - C x_j+1|j)
         lo = k0
-        f_cov, p_cov, ak, bk = fl[k][2:], pl[k + 1][2:], al[k + 1], bl[k + 1]
-        fa = filt[lo : k + 1][::-1]  # rows k, k-1, ..., lo
-        pa = pred[lo + 1 : k + 2][::-1]  # rows k+1, ..., lo+1 (a stretch ends in its chunk)
-        mm, w = _smoother_map(fa, pa, f_cov, p_cov, ak, bk)
+        f11, f12, f22 = filt[2:, k].tolist()
+        p11, p12, p22 = pred[2:, k + 1].tolist()
+        ak, bk = al[k + 1], bl[k + 1]
+        fa = filt[:2, lo : k + 1][:, ::-1]  # rows k, k-1, ..., lo
+        pa = pred[:2, lo + 1 : k + 2][:, ::-1]  # rows k+1, ..., lo+1 (ends in its chunk)
+        mm, w = _smoother_map(fa, pa, (f11, f12, f22), (p11, p12, p22), ak, bk)
         s1, s2 = _lti(mm, w[0], w[1], cur[:2])
-        out[lo : k + 1, 0] = s1[::-1]
-        out[lo : k + 1, 1] = s2[::-1]
         # covariance: P_j|N = P_j|j + C (P_j+1|N - P_j+1|j) C^T, constant once it settles
-        f11, f12, f22 = f_cov
-        p11, p12, p22 = p_cov
         s11, s12, s22 = cur[2:]
         covs = []
         j = k
@@ -470,37 +472,17 @@ def _backward(filt, pred, a, b, stretches, nxt, *, fast, plain=None) -> np.ndarr
             j -= 1
             if fixed:
                 break
-        out[j + 1 : k + 1, 2:] = covs[::-1]  # rows k, k-1, ..., j+1 stepped one by one
-        if j >= lo:
-            out[lo : j + 1, 2:] = (s11, s12, s22)  # the rest at the settled value
-        p_s = (s11, s12, s22)
-        cur = (float(s1[-1]), float(s2[-1]), *p_s)
+        stretch_out.append((lo, k, s1[::-1], s2[::-1], j, covs[::-1], (s11, s12, s22)))
+        cur = (float(s1[-1]), float(s2[-1]), s11, s12, s22)
         k = lo - 1
-    if done_rows:
-        out[done_rows] = done_vals
+    out = np.array(ocols)
+    for lo, k, x1, x2, j, covs, settled in stretch_out:
+        out[0, lo : k + 1] = x1
+        out[1, lo : k + 1] = x2
+        out[2:, j + 1 : k + 1] = np.array(covs).T  # rows j+1..k stepped one by one
+        if j >= lo:
+            out[2:, lo : j + 1] = np.array(settled)[:, None]  # the rest at the settled value
     return out
-
-
-class _RowView:
-    """``view[k]``: row ``k`` of an array as Python floats, from ``plain`` (a dict of
-    row -> tuples, see :attr:`_Forward.plain`) when it is there."""
-
-    def __init__(self, arr: np.ndarray, plain: dict | None, which: int) -> None:
-        self.arr, self.plain, self.which = arr, plain or {}, which
-
-    def __getitem__(self, k: int):
-        row = self.plain.get(k)
-        return row[self.which] if row is not None else self.arr[k].tolist()
-
-
-class _Extended:
-    """``rows`` with one more row ``extra`` at index ``m``."""
-
-    def __init__(self, rows, m: int, extra) -> None:
-        self.rows, self.m, self.extra = rows, m, extra
-
-    def __getitem__(self, k: int):
-        return self.extra if k == self.m else self.rows[k]
 
 
 def _prior_carry(x0) -> _Carry:
@@ -517,12 +499,13 @@ def kalman_filter(y, a, b, u, q11, q12, q22, r, x0, p0, *, store=True):
     -2 log-likelihood)``; ``filtered``/``predicted`` are ``(n, 5)`` arrays of ``(x1, x2,
     p11, p12, p22)`` per row (None when ``store`` is False: likelihood only).
     """
-    arr = [np.asarray(v, dtype=float) for v in (y, a, b, u, q11, q12, q22)]
-    yy, aa, bb, uu, qa, qb, qc = arr
+    yy, aa, bb, uu, qa, qb, qc = (np.asarray(v, dtype=float) for v in (y, a, b, u, q11, q12, q22))
     carry = _Carry((float(x0[0]), float(x0[1]), float(p0[0]), float(p0[1]), float(p0[2])))
     rows = _Rows(yy, _same_step(bb), aa, bb, uu, qa, qb, qc)
     fwd = _forward(carry, rows, r, offset=0, store=store, fast=False)
-    return fwd.filt, fwd.pred, fwd.innov, fwd.svar, fwd.m2ll
+    if fwd.filt is None or fwd.pred is None:
+        return None, None, fwd.innov, fwd.svar, fwd.m2ll
+    return fwd.filt.T.copy(), fwd.pred.T.copy(), fwd.innov, fwd.svar, fwd.m2ll
 
 
 def rts_smoother(filtered, predicted, a, b):
@@ -531,8 +514,11 @@ def rts_smoother(filtered, predicted, a, b):
     The plain path (:func:`rts_step` on every row). Returns arrays ``(x1, x2, p11, p12,
     p22)`` of the smoothed states and covariances.
     """
-    out = _backward(np.asarray(filtered), np.asarray(predicted), a, b, (), None, fast=False)
-    return tuple(out[:, i].copy() for i in range(5))
+    filt = np.asarray(filtered, dtype=float).T
+    pred = np.asarray(predicted, dtype=float).T
+    lists = (filt.tolist(), pred.tolist(), np.asarray(a).tolist(), np.asarray(b).tolist())
+    out = _backward(filt, pred, lists, (), None, fast=False)
+    return tuple(out[i].copy() for i in range(5))
 
 
 def filter_smooth(y, a, b, u, q11, q12, q22, r, x0, p0, *, smooth=True):
@@ -550,15 +536,14 @@ def filter_smooth(y, a, b, u, q11, q12, q22, r, x0, p0, *, smooth=True):
     ``(x1, x2, p11, p12, p22, innovations, innovation variances, -2 log L)`` as arrays
     (the first five None when ``smooth`` is False: the filter's likelihood only).
     """
-    arr = [np.asarray(v, dtype=float) for v in (y, a, b, u, q11, q12, q22)]
-    yy, aa, bb, uu, qa, qb, qc = arr
+    yy, aa, bb, uu, qa, qb, qc = (np.asarray(v, dtype=float) for v in (y, a, b, u, q11, q12, q22))
     carry = _Carry((float(x0[0]), float(x0[1]), float(p0[0]), float(p0[1]), float(p0[2])))
     rows = _Rows(yy, _same_step(bb), aa, bb, uu, qa, qb, qc)
     fwd = _forward(carry, rows, r, offset=0, store=smooth, fast=True)
     if not smooth:
         return None, None, None, None, None, fwd.innov, fwd.svar, fwd.m2ll
-    out = _backward(fwd.filt, fwd.pred, aa, bb, fwd.stretches, None, fast=True, plain=fwd.plain)
-    return (*(out[:, i].copy() for i in range(5)), fwd.innov, fwd.svar, fwd.m2ll)
+    out = _backward(fwd.filt, fwd.pred, fwd.lists, fwd.stretches, None, fast=True)
+    return (*(out[i].copy() for i in range(5)), fwd.innov, fwd.svar, fwd.m2ll)
 
 
 # -- quantisation and noise levels ---------------------------------------------------------
@@ -762,12 +747,10 @@ def _smooth(setup: _Setup, q: float, r: float, keep: np.ndarray | None, emit, pr
             rw = setup.rows(lo, hi, q)
             fwd = _forward(cp, rw, r, offset=lo, store=True, fast=True)
         assert fwd.filt is not None and fwd.pred is not None  # stored
-        sm = _backward(
-            fwd.filt, fwd.pred, rw.a, rw.b, fwd.stretches, nxt, fast=True, plain=fwd.plain
-        )
-        nxt = (tuple(sm[0].tolist()), tuple(fwd.pred[0].tolist()), float(rw.a[0]), float(rw.b[0]))
+        sm = _backward(fwd.filt, fwd.pred, fwd.lists, fwd.stretches, nxt, fast=True)
+        nxt = (tuple(sm[:, 0].tolist()), tuple(fwd.pred[:, 0].tolist()), rw.a[0], rw.b[0])
         sel = _kept(keep, lo, hi)
-        emit(_global(sel, lo), sm[sel], inn, sv)
+        emit(_global(sel, lo), sm[:, sel], inn, sv)
         if progress is not None:
             progress("smoother", setup.n - lo, setup.n)
     return m2ll
@@ -1045,9 +1028,9 @@ def _estimate(
     def emit(rows, sm, innov, svar):
         # rows: global rows (a slice when every row is kept); i: their output positions
         i = rows if keep is None else np.searchsorted(keep, rows)
-        g, g_var = grad(rows, sm[:, 0], sm[:, 1], sm[:, 2], sm[:, 3], sm[:, 4])
-        cols["t"][i] = sm[:, 0]
-        cols["t_std"][i] = np.sqrt(np.maximum(sm[:, 2], 0.0))
+        g, g_var = grad(rows, sm[0], sm[1], sm[2], sm[3], sm[4])
+        cols["t"][i] = sm[0]
+        cols["t_std"][i] = np.sqrt(np.maximum(sm[2], 0.0))
         cols["g"][i] = g
         cols["g_std"][i] = np.sqrt(np.maximum(g_var, 0.0))
         cols["innov"][i] = innov

@@ -265,9 +265,9 @@ def log_report(
 ) -> LogReport:
     """NaN counts, NaN runs of ``t_int_c`` and sampling gaps (step > ``gap_factor`` x median)."""
     t = np.asarray(time_s, dtype=float)
-    step = np.diff(t)
-    med = float(np.median(step)) if step.size else float("nan")
-    big = np.flatnonzero(step > gap_factor * med) if step.size else np.zeros(0, dtype=int)
+    # the steps twice rather than one array kept beside a sorted copy (long logs)
+    med = float(np.median(np.diff(t), overwrite_input=True)) if t.size > 1 else float("nan")
+    big = np.flatnonzero(np.diff(t) > gap_factor * med) if t.size > 1 else np.zeros(0, dtype=int)
     gaps = tuple((float(t[i]), float(t[i + 1])) for i in big)
     nan_counts = {k: int(np.isnan(v).sum()) for k, v in columns.items()}
     spans = _nan_spans(t, np.isnan(columns["t_int_c"]))
@@ -283,7 +283,9 @@ class _Collector:
     :meth:`finish`. One code path serves a DataFrame (one chunk) and a CSV file (many).
     """
 
-    def __init__(self, columns: Sequence[object], source: str, keep_extra: bool) -> None:
+    def __init__(
+        self, columns: Sequence[object], source: str, keep_extra: bool, expected_rows: int = 0
+    ) -> None:
         cols = [str(c).strip() for c in columns]
         if len(set(cols)) != len(cols):
             dup = sorted({c for c in cols if cols.count(c) > 1})
@@ -300,7 +302,9 @@ class _Collector:
         self.known = [c for c in REQUIRED_COLUMNS + OPTIONAL_COLUMNS if c in cols]
         self.extra_names = [c for c in cols if c not in self.known]
         self.keep_extra = keep_extra
-        self.parts: dict[str, list[np.ndarray]] = {c: [] for c in self.known}
+        # the known columns, preallocated for the expected rows (grown if needed): no list
+        # of chunk arrays to join at the end, which would hold the log twice
+        self.values = {c: np.empty(max(expected_rows, 16)) for c in self.known}
         self.extra_parts: list[pd.DataFrame] = []
         self.n_rows = 0
         self.last_time_s: float | None = None
@@ -309,8 +313,13 @@ class _Collector:
         frame = frame.set_axis(self.columns, axis=1).reset_index(drop=True)
         values = {c: _numeric_column(frame, c, self.source, self.n_rows) for c in self.known}
         _check_time(values["time_s"], self.source, self.n_rows, self.last_time_s)
+        lo, hi = self.n_rows, self.n_rows + len(frame)
         for c, v in values.items():
-            self.parts[c].append(v)
+            if hi > self.values[c].size:
+                grown = np.empty(max(hi, 2 * self.values[c].size))
+                grown[:lo] = self.values[c][:lo]
+                self.values[c] = grown
+            self.values[c][lo:hi] = v
         if self.keep_extra:
             self.extra_parts.append(frame[self.extra_names].copy())
         if len(frame):
@@ -319,12 +328,13 @@ class _Collector:
 
     def finish(self) -> MeasuredLog:
         values: dict[str, np.ndarray] = {}
-        for c in self.known:  # one column at a time: the chunks are freed as they are joined
-            parts = self.parts.pop(c)
-            v = np.concatenate(parts) if len(parts) != 1 else parts[0]
-            parts.clear()
+        for c in self.known:
+            v = self.values[c]
+            # a view when the estimate was close; a copy frees a much too large buffer
+            v = v[: self.n_rows] if v.size <= 1.25 * self.n_rows + 16 else v[: self.n_rows].copy()
             v.setflags(write=False)
             values[c] = v
+        self.values = {}
         for c in TEMPERATURE_COLUMNS:
             if c in values:
                 _check_temperature(values[c], c, self.source)
@@ -367,7 +377,7 @@ def log_from_frame(frame: pd.DataFrame, source: str = "log") -> MeasuredLog:
     """
     if not isinstance(frame, pd.DataFrame):
         raise LogFormatError(f"{source}: expected a pandas DataFrame, got {type(frame).__name__}")
-    collector = _Collector(frame.columns, source, keep_extra=True)
+    collector = _Collector(frame.columns, source, keep_extra=True, expected_rows=len(frame))
     collector.add(frame)
     return collector.finish()
 
@@ -426,7 +436,8 @@ def read_log(
                 collector: _Collector | None = None
                 for chunk in reader:
                     if collector is None:
-                        collector = _Collector(chunk.columns, str(path), keep_extra)
+                        expected = _count_lines(path)
+                        collector = _Collector(chunk.columns, str(path), keep_extra, expected)
                     collector.add(chunk)
                     if progress is not None:
                         progress("reading", min(fh.tell(), size), size)
@@ -438,6 +449,15 @@ def read_log(
     if collector is None:
         raise LogFormatError(f"{path}: not a readable CSV log (no header line)")
     return collector.finish()
+
+
+def _count_lines(path: Path, block_bytes: int = 1 << 20) -> int:
+    """Newlines in the file (an upper bound of its data rows, plus one)."""
+    n = 0
+    with path.open("rb") as fh:
+        while block := fh.read(block_bytes):
+            n += block.count(b"\n")
+    return n + 1
 
 
 def thin_log(log: MeasuredLog, max_rows: int) -> tuple[MeasuredLog, int]:

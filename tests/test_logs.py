@@ -312,3 +312,17 @@ def test_thin_log_keeps_every_kth_row():
     assert list(thin.extra["note"]) == list(f["note"][::4])
     with pytest.raises(ParameterError, match="max_rows"):
         thin_log(log, 2)
+
+
+def test_collector_grows_past_a_low_row_estimate():
+    """The reader preallocates from a line count; if that is ever low it grows."""
+    from schedsyn.logs import _Collector
+
+    f = _messy_frame(n=100)
+    col = _Collector(f.columns, "x", keep_extra=False, expected_rows=3)
+    for lo in range(0, 100, 30):
+        col.add(f.iloc[lo : lo + 30])
+    log = col.finish()
+    np.testing.assert_array_equal(log.time_s, f["time_s"].to_numpy())
+    np.testing.assert_array_equal(log.t_int_c, f["t_int_c"].to_numpy())
+    assert log.report == log_from_frame(f).report
