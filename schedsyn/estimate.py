@@ -45,6 +45,7 @@ the measurement update: the row still gets an estimate.
 from __future__ import annotations
 
 import math
+from array import array
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -266,6 +267,11 @@ def _run_ends(same: np.ndarray, finite: np.ndarray) -> np.ndarray:
     return nxt - 1
 
 
+def _nan_columns(m: int) -> list[array]:
+    """Five arrays of ``m`` doubles, NaN."""
+    return [array("d", [math.nan]) * m for _ in range(5)]
+
+
 @dataclass(frozen=True, slots=True)
 class _Carry:
     """The forward pass between two rows; restarting from it repeats the pass exactly."""
@@ -290,7 +296,7 @@ class _Forward:
     # the same as Python floats for the smoother's row-by-row steps: (filt, pred) as five
     # lists each, filled on the rows stepped one by one, at each stretch's first (pred)
     # and last (filt) row; and the lists of a and b
-    lists: tuple[list[list[float]], list[list[float]], list[float], list[float]] | None = None
+    lists: tuple[list[array], list[array], list[float], list[float]] | None = None
 
 
 def _forward(
@@ -314,18 +320,17 @@ def _forward(
     x1, x2, p11, p12, p22 = carry.state
     seen, steady = carry.seen, carry.steady
     o11, o12, o22 = carry.last_p
-    # stored states: one preallocated list per component (cheaper than a tuple per row)
-    nan = math.nan
-    fcols = [[nan] * m for _ in range(5)] if store else [[], [], [], [], []]
-    pcols = [[nan] * m for _ in range(5)] if store else [[], [], [], [], []]
+    # stored states: one preallocated array of doubles per component (no Python float kept
+    # per value, and numpy reads it without a copy)
+    fcols = _nan_columns(m if store else 0)
+    pcols = _nan_columns(m if store else 0)
     f0, f1, f2, f3, f4 = fcols
     g0, g1, g2, g3, g4 = pcols
     stretch_states = []
-    innov = np.full(m, np.nan)  # innovations and their variances (NaN: no reading)
-    svar = np.full(m, np.nan)
-    upd_k: list[int] = []  # rows updated one by one, their innovations and variances
-    upd_e: list[float] = []
-    upd_s: list[float] = []
+    # innovations and their variances (NaN: no reading), row by row into the doubles,
+    # stretches through numpy views of the same memory
+    innov_d, svar_d = array("d", [math.nan]) * m, array("d", [math.nan]) * m
+    innov, svar = np.frombuffer(innov_d), np.frombuffer(svar_d)
     m2ll = 0.0
     log2pi = math.log(2.0 * math.pi)
     log = math.log
@@ -374,9 +379,8 @@ def _forward(
         yk = yl[k]
         if yk == yk:  # not NaN
             x1, x2, p11, p12, p22, e, s = update(x1, x2, p11, p12, p22, yk, r)
-            upd_k.append(k)
-            upd_e.append(e)
-            upd_s.append(s)
+            innov_d[k] = e
+            svar_d[k] = s
             if seen >= N_DIFFUSE:
                 m2ll += log2pi + log(s) + e * e / s
             seen += 1
@@ -394,12 +398,11 @@ def _forward(
         if store:
             f0[k], f1[k], f2[k], f3[k], f4[k] = x1, x2, p11, p12, p22
         k += 1
-    innov[upd_k] = upd_e
-    svar[upd_k] = upd_s
     out = _Carry((x1, x2, p11, p12, p22), seen, steady, (o11, o12, o22))
     if not store:
         return _Forward(None, None, innov, svar, m2ll, tuple(stretches), out)
-    filt, pred = np.array(fcols), np.array(pcols)
+    filt = np.vstack([np.frombuffer(c) for c in fcols])
+    pred = np.vstack([np.frombuffer(c) for c in pcols])
     for k, k1, ps, fs in stretch_states:
         for i in range(5):
             pred[i, k : k1 + 1] = ps[i]
@@ -421,8 +424,7 @@ def _backward(filt, pred, lists, stretches, nxt, *, fast) -> np.ndarray:
     """
     m = filt.shape[1]
     (f0, f1, f2, f3, f4), (g0, g1, g2, g3, g4), al, bl = lists
-    nan = math.nan
-    ocols = [[nan] * m for _ in range(5)]
+    ocols = _nan_columns(m)
     o0, o1, o2, o3, o4 = ocols
     stretch_out = []
     k = m - 1
@@ -475,7 +477,7 @@ def _backward(filt, pred, lists, stretches, nxt, *, fast) -> np.ndarray:
         stretch_out.append((lo, k, s1[::-1], s2[::-1], j, covs[::-1], (s11, s12, s22)))
         cur = (float(s1[-1]), float(s2[-1]), s11, s12, s22)
         k = lo - 1
-    out = np.array(ocols)
+    out = np.vstack([np.frombuffer(c) for c in ocols])
     for lo, k, x1, x2, j, covs, settled in stretch_out:
         out[0, lo : k + 1] = x1
         out[1, lo : k + 1] = x2
