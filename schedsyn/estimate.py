@@ -44,6 +44,7 @@ the measurement update: the row still gets an estimate.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from array import array
 from collections.abc import Callable
@@ -59,9 +60,11 @@ from .logs import MeasuredLog
 from .model import FirstOrderLag
 from .params import ThermalParams
 
-#: Initial (diffuse) standard deviations of the state: T (degC) and g or d (degC/min).
+#: Initial (diffuse) standard deviations of the state: T (degC), g or d (degC/min) and,
+#: in the order-3 kinematic model, g's rate (degC/min^2).
 PRIOR_T_STD_C = 10.0
 PRIOR_G_STD_C_PER_MIN = 3.0
+PRIOR_A_STD_C_PER_MIN2 = 1.0
 #: The first finite measurements mostly fix the diffuse prior; they are left out of the
 #: likelihood (their terms would depend on the prior, not on q and r).
 N_DIFFUSE = 2
@@ -83,6 +86,9 @@ QUANT_SAMPLE_ROWS = 262_144
 STEADY_RTOL = 1e-11
 #: Shortest run of equal steps with readings worth the vectorised steady-state path.
 MIN_STEADY_ROWS = 32
+#: Relative change below which the smoothed covariance of a steady stretch counts as
+#: settled (the remaining rows of the stretch take that value).
+SMOOTHED_RTOL = 1e-12
 
 #: ``progress(stage, done, total)``; stages "noise levels" (evaluations, total 0: open),
 #: "filter" and "smoother" (rows).
@@ -97,6 +103,25 @@ def kinematic_transition(h_min: np.ndarray, q: float):
     """
     h = np.asarray(h_min, dtype=float)
     return np.ones_like(h), h, q * h**3 / 3.0, q * h**2 / 2.0, q * h
+
+
+def jerk_transition(h_min: np.ndarray, q: float):
+    """``(f, q)`` of the order-3 kinematic model over steps ``h_min``, as in :func:`predict`.
+
+    State ``(T, g, a)``, ``a = dg/dt`` a random walk (white jerk of density ``q``,
+    (degC/min^3)^2/min)::
+
+        F = [[1, h, h^2/2], [0, 1, h], [0, 0, 1]]
+        Q = q [[h^5/20, h^4/8, h^3/6], [h^4/8, h^3/3, h^2/2], [h^3/6, h^2/2, h]]
+
+    Returns ``f`` (5, n) ``= (1, h, h^2/2, 1, h)`` and ``q`` (6, n) ``= Q``'s upper
+    triangle ``(q11, q12, q13, q22, q23, q33)``.
+    """
+    h = np.asarray(h_min, dtype=float)
+    one = np.ones_like(h)
+    f = np.vstack([one, h, h * h / 2.0, one, h])
+    qq = q * np.vstack([h**5 / 20.0, h**4 / 8.0, h**3 / 6.0, h**3 / 3.0, h**2 / 2.0, h])
+    return f, qq
 
 
 def lag_transition(h_min: np.ndarray, model: FirstOrderLag, q: float):
@@ -134,117 +159,188 @@ def lag_input(
 
 
 # -- one step of the filter and of the smoother ------------------------------------------
-# The only place the recursions are written. Plain arithmetic, so the same functions run
-# on floats (row by row, ~1.5 us per row in CPython, far less than numpy's per-call cost
-# on 2x2 arrays) and on numpy arrays (the vectorised steady-state path). ``F = [[a, b],
-# [0, 1]]``; states are ``(x1, x2)`` and covariances ``(p11, p12, p22)`` (symmetric).
-def predict(x1, x2, p11, p12, p22, a, b, u, q11, q12, q22):
-    """Time update over one step: ``x- = F x + (u, 0)``, ``P- = F P F^T + Q``.
+# The only place the recursions are written. A state is the 9-tuple ``(x1, x2, x3, p11,
+# p12, p13, p22, p23, p33)`` (mean and symmetric covariance); a step's transition is
+# ``F = [[f11, f12, f13], [0, f22, f23], [0, 0, 1]]``, given as ``f = (f11, f12, f13, f22,
+# f23)``, with the input ``u`` on ``x1`` and process noise ``q = (q11, q12, q13, q22, q23,
+# q33)``; the reading measures ``x1``. A two-state model leaves ``x3`` inert (``f13 = f23
+# = 0``, no noise, prior variance 1: it stays uncorrelated and changes nothing). Plain
+# arithmetic, so the same functions run on floats (row by row; far cheaper in CPython
+# than numpy's per-call cost on 3x3 arrays) and on numpy arrays (the steady-state path).
+def predict(s, f, u, q):
+    """Time update over one step: ``x- = F x + (u, 0, 0)``, ``P- = F P F^T + Q``."""
+    x1, x2, x3, p11, p12, p13, p22, p23, p33 = s
+    f11, f12, f13, f22, f23 = f
+    # M = F P (rows 1, 2; row 3 of F P is P's row 3)
+    m11 = f11 * p11 + f12 * p12 + f13 * p13
+    m12 = f11 * p12 + f12 * p22 + f13 * p23
+    m13 = f11 * p13 + f12 * p23 + f13 * p33
+    m22 = f22 * p22 + f23 * p23
+    m23 = f22 * p23 + f23 * p33
+    # P- = M F^T + Q
+    return (
+        f11 * x1 + f12 * x2 + f13 * x3 + u,
+        f22 * x2 + f23 * x3,
+        x3,
+        m11 * f11 + m12 * f12 + m13 * f13 + q[0],
+        m12 * f22 + m13 * f23 + q[1],
+        m13 + q[2],
+        m22 * f22 + m23 * f23 + q[3],
+        m23 + q[4],
+        p33 + q[5],
+    )
 
-    Returns ``(x1-, x2-, P11-, P12-, P22-)``.
-    """
-    # x1- = a x1 + b x2 + u          P11- = a^2 P11 + 2ab P12 + b^2 P22 + Q11
-    # x2- = x2                       P12- = a P12 + b P22 + Q12
-    #                                P22- = P22 + Q22
-    t = a * p12 + b * p22
-    return a * x1 + b * x2 + u, x2, a * (a * p11 + b * p12) + b * t + q11, t + q12, p22 + q22
 
-
-def update(x1, x2, p11, p12, p22, y, r):
+def update(s, y, r):
     """Measurement update with reading ``y = x1 + v``, ``var v = r``.
 
-    Returns ``(x1+, x2+, P11+, P12+, P22+, e, S)``: the filtered state, the innovation
-    ``e`` and its variance ``S``.
+    Returns ``(state+, e, S)``: the filtered state, the innovation ``e = y - x1-`` and
+    its variance ``S = P11- + r``.
     """
-    # e = y - x1-,  S = P11- + r,  K = (P11-, P12-) / S
-    # x+ = x- + K e,  P+ = P- - K K^T S  (K K^T S = (P11 P11, P11 P12, P12 P12) / S)
-    s = p11 + r
+    x1, x2, x3, p11, p12, p13, p22, p23, p33 = s
+    # K = P- H^T / S = (P11, P12, P13) / S;  x+ = x- + K e;  P+ = P- - K K^T S
+    sv = p11 + r
     e = y - x1
-    k1 = p11 / s
-    k2 = p12 / s
-    return x1 + k1 * e, x2 + k2 * e, p11 - k1 * p11, p12 - k1 * p12, p22 - k2 * p12, e, s
+    k1, k2, k3 = p11 / sv, p12 / sv, p13 / sv
+    return (
+        (
+            x1 + k1 * e,
+            x2 + k2 * e,
+            x3 + k3 * e,
+            p11 - k1 * p11,
+            p12 - k1 * p12,
+            p13 - k1 * p13,
+            p22 - k2 * p12,
+            p23 - k2 * p13,
+            p33 - k3 * p13,
+        ),
+        e,
+        sv,
+    )
 
 
-def rts_step(fx1, fx2, f11, f12, f22, px1, px2, p11, p12, p22, sx1, sx2, s11, s12, s22, a, b):
+def rts_step(sf, sp, ss, f):
     """One Rauch-Tung-Striebel step backwards, from row ``k+1`` to row ``k``.
 
-    ``f``: filtered ``x_k|k, P_k|k``; ``p``: predicted ``x_k+1|k, P_k+1|k``; ``s``:
-    smoothed ``x_k+1|N, P_k+1|N``; ``a, b``: ``F`` of the step ``k -> k+1``. Returns the
-    smoothed ``(x1, x2, P11, P12, P22)`` of row ``k``.
+    ``sf``: filtered state of row ``k``; ``sp``: predicted state of row ``k+1``; ``ss``:
+    smoothed state of row ``k+1``; ``f``: ``F`` of the step ``k -> k+1``. Returns the
+    smoothed state of row ``k``.
     """
-    # C = P_k|k F^T (P_k+1|k)^-1,  P_k|k F^T = [[f11 a + f12 b, f12], [f12 a + f22 b, f22]]
-    m11 = f11 * a + f12 * b
-    m21 = f12 * a + f22 * b
-    det = p11 * p22 - p12 * p12
-    c11 = (m11 * p22 - f12 * p12) / det
-    c12 = (f12 * p11 - m11 * p12) / det
-    c21 = (m21 * p22 - f22 * p12) / det
-    c22 = (f22 * p11 - m21 * p12) / det
+    fx1, fx2, fx3, a11, a12, a13, a22, a23, a33 = sf
+    px1, px2, px3, b11, b12, b13, b22, b23, b33 = sp
+    sx1, sx2, sx3, c11, c12, c13, c22, c23, c33 = ss
+    f11, f12, f13, f22, f23 = f
+    # N = P_k|k F^T (columns: F's rows)
+    n11 = a11 * f11 + a12 * f12 + a13 * f13
+    n21 = a12 * f11 + a22 * f12 + a23 * f13
+    n31 = a13 * f11 + a23 * f12 + a33 * f13
+    n12 = a12 * f22 + a13 * f23
+    n22 = a22 * f22 + a23 * f23
+    n32 = a23 * f22 + a33 * f23
+    # (P_k+1|k)^-1 = adj / det (symmetric)
+    i11 = b22 * b33 - b23 * b23
+    i12 = b13 * b23 - b12 * b33
+    i13 = b12 * b23 - b13 * b22
+    i22 = b11 * b33 - b13 * b13
+    i23 = b12 * b13 - b11 * b23
+    i33 = b11 * b22 - b12 * b12
+    det = b11 * i11 + b12 * i12 + b13 * i13
+    # C = N (P_k+1|k)^-1   (N's third column is P_k|k's: a13, a23, a33)
+    g11 = (n11 * i11 + n12 * i12 + a13 * i13) / det
+    g12 = (n11 * i12 + n12 * i22 + a13 * i23) / det
+    g13 = (n11 * i13 + n12 * i23 + a13 * i33) / det
+    g21 = (n21 * i11 + n22 * i12 + a23 * i13) / det
+    g22 = (n21 * i12 + n22 * i22 + a23 * i23) / det
+    g23 = (n21 * i13 + n22 * i23 + a23 * i33) / det
+    g31 = (n31 * i11 + n32 * i12 + a33 * i13) / det
+    g32 = (n31 * i12 + n32 * i22 + a33 * i23) / det
+    g33 = (n31 * i13 + n32 * i23 + a33 * i33) / det
     # x_k|N = x_k|k + C (x_k+1|N - x_k+1|k)
-    d1 = sx1 - px1
-    d2 = sx2 - px2
-    # P_k|N = P_k|k + C (P_k+1|N - P_k+1|k) C^T
-    e11, e12, e22 = s11 - p11, s12 - p12, s22 - p22
-    t11 = c11 * e11 + c12 * e12
-    t12 = c11 * e12 + c12 * e22
-    t21 = c21 * e11 + c22 * e12
-    t22 = c21 * e12 + c22 * e22
+    d1, d2, d3 = sx1 - px1, sx2 - px2, sx3 - px3
+    # P_k|N = P_k|k + C E C^T,  E = P_k+1|N - P_k+1|k;  T = C E
+    e11, e12, e13, e22, e23, e33 = c11 - b11, c12 - b12, c13 - b13, c22 - b22, c23 - b23, c33 - b33
+    t11 = g11 * e11 + g12 * e12 + g13 * e13
+    t12 = g11 * e12 + g12 * e22 + g13 * e23
+    t13 = g11 * e13 + g12 * e23 + g13 * e33
+    t21 = g21 * e11 + g22 * e12 + g23 * e13
+    t22 = g21 * e12 + g22 * e22 + g23 * e23
+    t23 = g21 * e13 + g22 * e23 + g23 * e33
+    t31 = g31 * e11 + g32 * e12 + g33 * e13
+    t32 = g31 * e12 + g32 * e22 + g33 * e23
+    t33 = g31 * e13 + g32 * e23 + g33 * e33
     return (
-        fx1 + c11 * d1 + c12 * d2,
-        fx2 + c21 * d1 + c22 * d2,
-        f11 + t11 * c11 + t12 * c12,
-        f12 + t11 * c21 + t12 * c22,
-        f22 + t21 * c21 + t22 * c22,
+        fx1 + g11 * d1 + g12 * d2 + g13 * d3,
+        fx2 + g21 * d1 + g22 * d2 + g23 * d3,
+        fx3 + g31 * d1 + g32 * d2 + g33 * d3,
+        a11 + t11 * g11 + t12 * g12 + t13 * g13,
+        a12 + t11 * g21 + t12 * g22 + t13 * g23,
+        a13 + t11 * g31 + t12 * g32 + t13 * g33,
+        a22 + t21 * g21 + t22 * g22 + t23 * g23,
+        a23 + t21 * g31 + t22 * g32 + t23 * g33,
+        a33 + t31 * g31 + t32 * g32 + t33 * g33,
     )
 
 
 # -- the recursions over rows ------------------------------------------------------------
-def _lti(m, w1, w2, x_init):
+def _lti(m, w, x_init):
     """``x_j = M x_{j-1} + w_j`` for ``j = 0..n-1`` from ``x_{-1} = x_init``, vectorised.
 
-    ``(I - M z^-1)^-1 = adj(I - M z^-1) / det``: each state is a sum of second-order IIR
-    filters (``scipy.signal.lfilter``) with denominator ``1 - tr(M) z^-1 + det(M) z^-2``;
-    the initial state enters as ``M x_init`` added to ``w_0``.
+    ``M`` is d x d (d = len(w) <= 3). Each state is a sum of IIR filters
+    (``scipy.signal.lfilter``) of the inputs: ``(I - M z^-1)^-1 = sum_k B_k z^-k / p(z)``,
+    ``p(z) = 1 + c_1 z^-1 + ... + c_d z^-d``, by Faddeev-LeVerrier (``B_0 = I``,
+    ``c_k = -tr(M B_k-1)/k``, ``B_k = M B_k-1 + c_k I``). The initial state enters as
+    ``M x_init`` added to ``w_0``.
     """
-    (m11, m12), (m21, m22) = m
-    w1 = np.array(w1, dtype=float)
-    w2 = np.array(w2, dtype=float)
-    w1[0] += m11 * x_init[0] + m12 * x_init[1]
-    w2[0] += m21 * x_init[0] + m22 * x_init[1]
-    den = [1.0, -(m11 + m22), m11 * m22 - m12 * m21]
-    x1 = lfilter([1.0, -m22], den, w1) + lfilter([0.0, m12], den, w2)
-    x2 = lfilter([0.0, m21], den, w1) + lfilter([1.0, -m11], den, w2)
-    return x1, x2
+    mm = np.array(m, dtype=float)
+    d = mm.shape[0]
+    ws = [np.array(wi, dtype=float) for wi in w]
+    first = mm @ np.asarray(x_init, dtype=float)
+    for i in range(d):
+        ws[i][0] += first[i]
+    b_k = np.eye(d)
+    num = [b_k]
+    den = [1.0]
+    for k in range(1, d + 1):
+        mb = mm @ b_k
+        c = -np.trace(mb) / k
+        den.append(c)
+        b_k = mb + c * np.eye(d)
+        if k < d:
+            num.append(b_k)
+    coef = np.stack(num + [np.zeros((d, d))])  # (d + 1, d, d): z^-k coefficients
+    out = [np.zeros(ws[0].size) for _ in range(d)]
+    for o in range(d):
+        for i in range(d):
+            out[o] += lfilter(coef[:, o, i], den, ws[i])
+    return out
 
 
-def _filter_map(p, a, b, u, q11, q12, q22, y, r):
+def _filter_map(p, f, u, q, y, r, dim):
     """``(M, w)`` of the filtered mean ``x_j = update(predict(x_j-1))`` at a fixed
-    covariance ``p``: ``x_j = M x_j-1 + w_j``, ``M`` the step with no input and no reading,
-    ``w`` the step from ``x = 0`` with the inputs ``u`` and readings ``y`` (arrays)."""
-    p11, p12, p22 = p
+    covariance ``p`` (6 entries), over the first ``dim`` states: ``M`` is the step with
+    no input and no reading, ``w`` the step from ``x = 0`` with the inputs ``u`` and
+    readings ``y`` (arrays: one ``w`` per row)."""
 
-    def step(x1, x2, uu, yy):
-        xp1, xp2, pp11, pp12, pp22 = predict(x1, x2, p11, p12, p22, a, b, uu, q11, q12, q22)
-        return update(xp1, xp2, pp11, pp12, pp22, yy, r)[:2]
+    def step(x, uu, yy):
+        return update(predict((*x, *p), f, uu, q), yy, r)[0][:dim]
 
-    c1, c2 = step(1.0, 0.0, 0.0, 0.0), step(0.0, 1.0, 0.0, 0.0)
-    return ((c1[0], c2[0]), (c1[1], c2[1])), step(0.0, 0.0, u, y)
+    cols = [step(tuple(float(i == j) for i in range(3)), 0.0, 0.0) for j in range(dim)]
+    return [[cols[j][i] for j in range(dim)] for i in range(dim)], step((0.0, 0.0, 0.0), u, y)
 
 
-def _smoother_map(fa, pa, f_cov, p_cov, a, b):
+def _smoother_map(fa, pa, f_cov, p_cov, f, dim):
     """``(M, w)`` of the smoothed mean ``x_k|N = rts_step(x_k+1|N)`` at fixed covariances,
-    ``x_k|N = C x_k+1|N + (x_k|k - C x_k+1|k)``: ``M = C`` from the step with zero
-    filtered and predicted means, ``w`` from ``x_k+1|N = 0`` with the means ``fa``, ``pa``
-    (filtered and predicted, (2, n): one column per step)."""
-    f11, f12, f22 = f_cov
-    p11, p12, p22 = p_cov
+    ``x_k|N = C x_k+1|N + (x_k|k - C x_k+1|k)`` over the first ``dim`` states: ``M = C``
+    from the step with zero filtered and predicted means, ``w`` from ``x_k+1|N = 0`` with
+    the means ``fa``, ``pa`` (filtered and predicted, (3, n): one column per step)."""
 
-    def step(s1, s2, fx1, fx2, px1, px2):
-        return rts_step(fx1, fx2, f11, f12, f22, px1, px2, p11, p12, p22, s1, s2, 0, 0, 0, a, b)[:2]
+    def step(sx, fx, px):
+        return rts_step((*fx, *f_cov), (*px, *p_cov), (*sx, *p_cov), f)[:dim]
 
-    c1, c2 = step(1.0, 0.0, 0.0, 0.0, 0.0, 0.0), step(0.0, 1.0, 0.0, 0.0, 0.0, 0.0)
-    w = step(0.0, 0.0, fa[0], fa[1], pa[0], pa[1])
-    return ((c1[0], c2[0]), (c1[1], c2[1])), w
+    zero = (0.0, 0.0, 0.0)
+    cols = [step(tuple(float(i == j) for i in range(3)), zero, zero) for j in range(dim)]
+    m = [[cols[j][i] for j in range(dim)] for i in range(dim)]
+    return m, step(zero, tuple(fa), tuple(pa))
 
 
 def _same_step(b: np.ndarray) -> np.ndarray:
@@ -267,36 +363,78 @@ def _run_ends(same: np.ndarray, finite: np.ndarray) -> np.ndarray:
     return nxt - 1
 
 
-def _nan_columns(m: int) -> list[array]:
-    """Five arrays of ``m`` doubles, NaN."""
-    return [array("d", [math.nan]) * m for _ in range(5)]
+def _nan_columns(m: int, k: int = 9) -> list[array]:
+    """``k`` arrays of ``m`` doubles, NaN."""
+    return [array("d", [math.nan]) * m for _ in range(k)]
+
+
+def _settled(new, old, rtol: float) -> bool:
+    """Covariance ``new`` equals ``old`` to ``rtol``, each entry relative to its scale
+    (``|p_ii|`` on the diagonal, ``sqrt(|p_ii p_jj|)`` off it)."""
+    n11, n12, n13, n22, n23, n33 = new
+    o11, o12, o13, o22, o23, o33 = old
+    s1, s2, s3 = rtol * abs(n11), rtol * abs(n22), rtol * abs(n33)
+    return (
+        abs(n11 - o11) <= s1
+        and abs(n22 - o22) <= s2
+        and abs(n33 - o33) <= s3
+        and (n12 - o12) ** 2 <= s1 * s2
+        and (n13 - o13) ** 2 <= s1 * s3
+        and (n23 - o23) ** 2 <= s2 * s3
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class _Rows:
+    """Filter inputs of rows ``lo..hi-1`` (row ``k``: the step into it): readings ``y``,
+    ``same`` (the step equals the previous one), input ``u`` on ``x1``; the distinct
+    transitions ``f`` (5, nf) and process noise ``q`` (6, nf) as in :func:`predict`, row
+    ``k`` using column ``idx[k]`` (a log has few distinct steps); ``dim`` states are
+    active (a two-state model leaves ``x3`` inert)."""
+
+    y: np.ndarray
+    same: np.ndarray
+    u: np.ndarray
+    f: np.ndarray
+    q: np.ndarray
+    idx: np.ndarray
+    dim: int
+
+    def step_lists(self) -> tuple[list[tuple], list[tuple], list[int]]:
+        """``(f columns, q columns, idx)`` as Python tuples and ints (for the loops)."""
+        fl = list(zip(*self.f.tolist(), strict=True))
+        ql = list(zip(*self.q.tolist(), strict=True))
+        return fl, ql, self.idx.tolist()
+
+    def f_at(self, k: int) -> tuple[float, ...]:
+        return tuple(self.f[:, self.idx[k]].tolist())
 
 
 @dataclass(frozen=True, slots=True)
 class _Carry:
     """The forward pass between two rows; restarting from it repeats the pass exactly."""
 
-    state: tuple[float, float, float, float, float]  # filtered (x1, x2, P11, P12, P22)
-    seen: int = 0  # finite readings so far (the first N_DIFFUSE are not in the likelihood)
+    state: tuple[float, ...]  # filtered (x1, x2, x3, p11, p12, p13, p22, p23, p33)
+    seen: int = 0  # finite readings so far (the first `dim` are not in the likelihood)
     steady: bool = False  # the filtered covariance has converged under the current step
-    last_p: tuple[float, float, float] = (math.nan, math.nan, math.nan)  # previous row's P
+    last_p: tuple[float, ...] = (math.nan,) * 6  # previous row's filtered covariance
 
 
 @dataclass(frozen=True, slots=True)
 class _Forward:
     """Output of :func:`_forward` over ``m`` rows."""
 
-    filt: np.ndarray | None  # (5, m) filtered x1, x2, P11, P12, P22; None if not stored
-    pred: np.ndarray | None  # (5, m) predicted
+    filt: np.ndarray | None  # (9, m) filtered states; None if not stored
+    pred: np.ndarray | None  # (9, m) predicted
     innov: np.ndarray  # (m,) innovations, NaN without a reading
     svar: np.ndarray  # (m,) their variances
     m2ll: float  # -2 log L of these rows
     stretches: tuple[tuple[int, int], ...]  # (first, last) rows solved in steady state
     carry: _Carry  # the state after the last row
-    # the same as Python floats for the smoother's row-by-row steps: (filt, pred) as five
-    # lists each, filled on the rows stepped one by one, at each stretch's first (pred)
-    # and last (filt) row; and the lists of a and b
-    lists: tuple[list[array], list[array], list[float], list[float]] | None = None
+    # the same as doubles for the smoother's row-by-row steps: (filt, pred) as nine arrays
+    # each, filled on the rows stepped one by one, at each stretch's first (pred) and
+    # last (filt) row
+    cols: tuple[list[array], list[array]] | None = None
 
 
 def _forward(
@@ -304,28 +442,26 @@ def _forward(
 ) -> _Forward:
     """Kalman filter over ``m`` rows: :func:`predict` then :func:`update` on each.
 
-    Row ``k``'s ``a, b, u, q..`` is the transition from row ``k-1`` (the row before the
-    chunk for ``k = 0``); at the log's first row (``offset == 0``) ``carry.state`` is the
-    prior and there is no prediction. A NaN ``y`` skips the update. With ``fast``, runs
-    of at least ``MIN_STEADY_ROWS`` rows with readings and an unchanged step, once the
+    Row ``k``'s ``f, u, q`` is the transition from row ``k-1`` (the row before the chunk
+    for ``k = 0``); at the log's first row (``offset == 0``) ``carry.state`` is the prior
+    and there is no prediction. A NaN ``y`` skips the update. With ``fast``, runs of at
+    least ``MIN_STEADY_ROWS`` rows with readings and an unchanged step, once the
     covariance has converged (relative change < ``STEADY_RTOL``), are solved vectorised.
-    ``-2 log L`` sums ``log(2 pi S) + e^2/S`` over readings after the first ``N_DIFFUSE``.
+    ``-2 log L`` sums ``log(2 pi S) + e^2/S`` over readings after the first ``dim`` (they
+    fix the diffuse prior).
     """
-    y, u = rows.y, rows.u
+    y, u, dim = rows.y, rows.u, rows.dim
     m = len(y)
-    yl, al, bl, ul = y.tolist(), rows.a.tolist(), rows.b.tolist(), u.tolist()
-    q11l, q12l, q22l = rows.q11.tolist(), rows.q12.tolist(), rows.q22.tolist()
-    samel = rows.same.tolist()
+    yl, ul, samel = y.tolist(), u.tolist(), rows.same.tolist()
+    fu, qu, idx = rows.step_lists()
     end: list[int] = _run_ends(rows.same, np.isfinite(y)).tolist() if fast else []
-    x1, x2, p11, p12, p22 = carry.state
-    seen, steady = carry.seen, carry.steady
-    o11, o12, o22 = carry.last_p
-    # stored states: one preallocated array of doubles per component (no Python float kept
-    # per value, and numpy reads it without a copy)
+    st = carry.state
+    seen, steady, last_p = carry.seen, carry.steady, carry.last_p
+    # stored states: one preallocated array of doubles per component
     fcols = _nan_columns(m if store else 0)
     pcols = _nan_columns(m if store else 0)
-    f0, f1, f2, f3, f4 = fcols
-    g0, g1, g2, g3, g4 = pcols
+    f0, f1, f2, f3, f4, f5, f6, f7, f8 = fcols
+    g0, g1, g2, g3, g4, g5, g6, g7, g8 = pcols
     stretch_states = []
     # innovations and their variances (NaN: no reading), row by row into the doubles,
     # stretches through numpy views of the same memory
@@ -337,106 +473,97 @@ def _forward(
     stretches = []
     k = 0
     while k < m:
-        if fast and steady and seen >= N_DIFFUSE and end[k] - k + 1 >= MIN_STEADY_ROWS:
+        if fast and steady and seen >= dim and end[k] - k + 1 >= MIN_STEADY_ROWS:
             # steady state: P-, S, K and P+ are those of row k on every row to k1, so the
             # means follow x_j = M x_j-1 + w_j with M and w from the same predict/update
             k1 = end[k]
-            ak, bk, qa, qb, qc = al[k], bl[k], q11l[k], q12l[k], q22l[k]
+            fk, qk = fu[idx[k]], qu[idx[k]]
             ys, us = y[k : k1 + 1], u[k : k1 + 1]
-            mm, w = _filter_map((p11, p12, p22), ak, bk, us, qa, qb, qc, ys, r)
-            xf1, xf2 = _lti(mm, w[0], w[1], (x1, x2))
-            prev1 = np.concatenate(([x1], xf1[:-1]))
-            prev2 = np.concatenate(([x2], xf2[:-1]))
-            xp1, xp2, pp11, pp12, pp22 = predict(
-                prev1, prev2, p11, p12, p22, ak, bk, us, qa, qb, qc
-            )
-            _, _, p11, p12, p22, e, s = update(xp1, xp2, pp11, pp12, pp22, ys, r)
+            p = st[3:]
+            mm, w = _filter_map(p, fk, us, qk, ys, r, dim)
+            xf = _lti(mm, w, st[:dim])
+            xf += [np.full(ys.size, st[i]) for i in range(dim, 3)]  # inert states stay
+            prev = [np.concatenate(([st[i]], xf[i][:-1])) for i in range(3)]
+            sp = predict((*prev, *p), fk, us, qk)
+            sf, e, s = update(sp, ys, r)
             innov[k : k1 + 1] = e
             svar[k : k1 + 1] = s
             m2ll += float(np.sum(e * e)) / s + e.size * (log2pi + log(s))
             seen += e.size
-            x1, x2 = float(xf1[-1]), float(xf2[-1])
+            st = (*(float(v[-1]) for v in xf), *sf[3:])
             if store:
-                stretch_states.append(
-                    (k, k1, (xp1, xp2, pp11, pp12, pp22), (xf1, xf2, p11, p12, p22))
-                )
-                for col, v in zip(
-                    pcols, (float(xp1[0]), float(xp2[0]), pp11, pp12, pp22), strict=True
-                ):
-                    col[k] = v
-                for col, v in zip(fcols, (x1, x2, p11, p12, p22), strict=True):
-                    col[k1] = v
-            o11, o12, o22 = p11, p12, p22
+                stretch_states.append((k, k1, (*sp[:3], *sp[3:]), (*xf, *sf[3:])))
+                for i in range(9):
+                    pcols[i][k] = float(np.ravel(sp[i])[0])
+                    fcols[i][k1] = st[i]
+            last_p = st[3:]
             stretches.append((k, k1))
             k = k1 + 1
             continue
         if k or offset:
-            x1, x2, p11, p12, p22 = predict(
-                x1, x2, p11, p12, p22, al[k], bl[k], ul[k], q11l[k], q12l[k], q22l[k]
-            )
+            i = idx[k]
+            st = predict(st, fu[i], ul[k], qu[i])
         if store:
-            g0[k], g1[k], g2[k], g3[k], g4[k] = x1, x2, p11, p12, p22
+            (g0[k], g1[k], g2[k], g3[k], g4[k], g5[k], g6[k], g7[k], g8[k]) = st
         yk = yl[k]
         if yk == yk:  # not NaN
-            x1, x2, p11, p12, p22, e, s = update(x1, x2, p11, p12, p22, yk, r)
+            st, e, s = update(st, yk, r)
             innov_d[k] = e
             svar_d[k] = s
-            if seen >= N_DIFFUSE:
+            if seen >= dim:
                 m2ll += log2pi + log(s) + e * e / s
             seen += 1
             if not samel[k]:
                 steady = False
             elif not (offset + k) & 15:  # test convergence every 16th row (<= 16 rows late)
-                scale = STEADY_RTOL * (abs(p11) + abs(p22))
-                steady = (
-                    abs(p11 - o11) <= scale and abs(p12 - o12) <= scale and abs(p22 - o22) <= scale
-                )
-            o11, o12, o22 = p11, p12, p22
+                steady = _settled(st[3:], last_p, STEADY_RTOL)
+            last_p = st[3:]
         else:
             steady = False
-            o11 = o12 = o22 = math.nan
+            last_p = (math.nan,) * 6
         if store:
-            f0[k], f1[k], f2[k], f3[k], f4[k] = x1, x2, p11, p12, p22
+            (f0[k], f1[k], f2[k], f3[k], f4[k], f5[k], f6[k], f7[k], f8[k]) = st
         k += 1
-    out = _Carry((x1, x2, p11, p12, p22), seen, steady, (o11, o12, o22))
+    out = _Carry(tuple(st), seen, steady, tuple(last_p))
     if not store:
         return _Forward(None, None, innov, svar, m2ll, tuple(stretches), out)
     filt = np.vstack([np.frombuffer(c) for c in fcols])
     pred = np.vstack([np.frombuffer(c) for c in pcols])
     for k, k1, ps, fs in stretch_states:
-        for i in range(5):
+        for i in range(9):
             pred[i, k : k1 + 1] = ps[i]
             filt[i, k : k1 + 1] = fs[i]
-    lists = (fcols, pcols, al, bl)
-    return _Forward(filt, pred, innov, svar, m2ll, tuple(stretches), out, lists)
+    return _Forward(filt, pred, innov, svar, m2ll, tuple(stretches), out, (fcols, pcols))
 
 
-def _backward(filt, pred, lists, stretches, nxt, *, fast) -> np.ndarray:
+def _backward(filt, pred, cols, rows, stretches, nxt, *, fast) -> np.ndarray:
     """RTS smoother over ``m`` rows: :func:`rts_step` from the last row back to the first.
 
-    ``filt``, ``pred`` (5, m) and ``lists`` come from :func:`_forward` (``lists``: the
-    same as Python floats where the rows are stepped one by one, with ``a`` and ``b``:
-    row ``k`` the step into row ``k``). ``nxt`` is None when the rows end the log (the
-    last row's smoothed state is its filtered one), else ``(smoothed, predicted, a, b)``
-    of the row after them. With ``fast``, the rows of a steady stretch share ``P_k|k``,
-    ``P_k+1|k`` and ``F``, hence the gain ``C``: their means are solved vectorised, their
-    covariance iterated only until it stops changing. Returns (5, m) smoothed states.
+    ``filt``, ``pred`` (9, m) and ``cols`` come from :func:`_forward` (``cols``: the same
+    as doubles where the rows are stepped one by one); ``rows`` (:class:`_Rows`) gives
+    each row's step into it. ``nxt`` is None when the rows end the log (the last row's smoothed
+    state is its filtered one), else ``(smoothed, predicted, f)`` of the row after them.
+    With ``fast``, the rows of a steady stretch share ``P_k|k``, ``P_k+1|k`` and ``F``,
+    hence the gain ``C``: their means are solved vectorised, their covariance iterated
+    only until it stops changing. Returns (9, m) smoothed states.
     """
     m = filt.shape[1]
-    (f0, f1, f2, f3, f4), (g0, g1, g2, g3, g4), al, bl = lists
+    fcols, pcols = cols
+    f0, f1, f2, f3, f4, f5, f6, f7, f8 = fcols
+    g0, g1, g2, g3, g4, g5, g6, g7, g8 = pcols
+    fu, _, idx = rows.step_lists()
+    dim = rows.dim
     ocols = _nan_columns(m)
-    o0, o1, o2, o3, o4 = ocols
+    o0, o1, o2, o3, o4, o5, o6, o7, o8 = ocols
     stretch_out = []
     k = m - 1
     if nxt is None:
-        cur = (f0[k], f1[k], f2[k], f3[k], f4[k])
+        cur = tuple(c[k] for c in fcols)
     else:  # the last row of a chunk is never inside a stretch's shared-gain range
-        s_next, p, a_next, b_next = nxt
-        cur = rts_step(
-            f0[k], f1[k], f2[k], f3[k], f4[k], p[0], p[1], p[2], p[3], p[4],
-            s_next[0], s_next[1], s_next[2], s_next[3], s_next[4], a_next, b_next,
-        )  # fmt: skip
-    o0[k], o1[k], o2[k], o3[k], o4[k] = cur
+        s_next, p_next, f_next = nxt
+        cur = rts_step(tuple(c[k] for c in fcols), p_next, s_next, f_next)
+    for i in range(9):
+        ocols[i][k] = cur[i]
     k -= 1
     starts = {k1: k0 for k0, k1 in stretches} if fast else {}
     while k >= 0:
@@ -444,51 +571,70 @@ def _backward(filt, pred, lists, stretches, nxt, *, fast) -> np.ndarray:
         if k0 is None or k0 >= k:  # a plain row
             j = k + 1
             cur = rts_step(
-                f0[k], f1[k], f2[k], f3[k], f4[k], g0[j], g1[j], g2[j], g3[j], g4[j],
-                cur[0], cur[1], cur[2], cur[3], cur[4], al[j], bl[j],
-            )  # fmt: skip
-            o0[k], o1[k], o2[k], o3[k], o4[k] = cur
+                (f0[k], f1[k], f2[k], f3[k], f4[k], f5[k], f6[k], f7[k], f8[k]),
+                (g0[j], g1[j], g2[j], g3[j], g4[j], g5[j], g6[j], g7[j], g8[j]),
+                cur,
+                fu[idx[j]],
+            )
+            (o0[k], o1[k], o2[k], o3[k], o4[k], o5[k], o6[k], o7[k], o8[k]) = cur
             k -= 1
             continue
         # rows k0..k of a steady stretch: x_j|N = C x_j+1|N + (x_j|j - C x_j+1|j)
         lo = k0
-        f11, f12, f22 = filt[2:, k].tolist()
-        p11, p12, p22 = pred[2:, k + 1].tolist()
-        ak, bk = al[k + 1], bl[k + 1]
-        fa = filt[:2, lo : k + 1][:, ::-1]  # rows k, k-1, ..., lo
-        pa = pred[:2, lo + 1 : k + 2][:, ::-1]  # rows k+1, ..., lo+1 (ends in its chunk)
-        mm, w = _smoother_map(fa, pa, (f11, f12, f22), (p11, p12, p22), ak, bk)
-        s1, s2 = _lti(mm, w[0], w[1], cur[:2])
+        f_cov = tuple(filt[3:, k].tolist())
+        p_cov = tuple(pred[3:, k + 1].tolist())
+        fk = fu[idx[k + 1]]
+        fa = filt[:3, lo : k + 1][:, ::-1]  # rows k, k-1, ..., lo
+        pa = pred[:3, lo + 1 : k + 2][:, ::-1]  # rows k+1, ..., lo+1 (ends in its chunk)
+        mm, w = _smoother_map(fa, pa, f_cov, p_cov, fk, dim)
+        xs = _lti(mm, w, cur[:dim])
+        xs += [np.full(fa.shape[1], cur[i]) for i in range(dim, 3)]  # inert states stay
         # covariance: P_j|N = P_j|j + C (P_j+1|N - P_j+1|j) C^T, constant once it settles
-        s11, s12, s22 = cur[2:]
+        p_s = cur[3:]
         covs = []
         j = k
+        zero = (0.0, 0.0, 0.0)
         while j >= lo:
-            _, _, n11, n12, n22 = rts_step(
-                0.0, 0.0, f11, f12, f22, 0.0, 0.0, p11, p12, p22, 0.0, 0.0, s11, s12, s22, ak, bk
-            )
-            scale = 1e-14 * (abs(n11) + abs(n22))
-            fixed = abs(n11 - s11) <= scale and abs(n12 - s12) <= scale and abs(n22 - s22) <= scale
-            s11, s12, s22 = n11, n12, n22
-            covs.append((n11, n12, n22))
+            new = rts_step((*zero, *f_cov), (*zero, *p_cov), (*zero, *p_s), fk)[3:]
+            fixed = _settled(new, p_s, SMOOTHED_RTOL)
+            p_s = new
+            covs.append(new)
             j -= 1
             if fixed:
                 break
-        stretch_out.append((lo, k, s1[::-1], s2[::-1], j, covs[::-1], (s11, s12, s22)))
-        cur = (float(s1[-1]), float(s2[-1]), s11, s12, s22)
+        stretch_out.append((lo, k, [v[::-1] for v in xs], j, covs[::-1], p_s))
+        cur = (*(float(v[-1]) for v in xs), *p_s)
         k = lo - 1
     out = np.vstack([np.frombuffer(c) for c in ocols])
-    for lo, k, x1, x2, j, covs, settled in stretch_out:
-        out[0, lo : k + 1] = x1
-        out[1, lo : k + 1] = x2
-        out[2:, j + 1 : k + 1] = np.array(covs).T  # rows j+1..k stepped one by one
+    for lo, k, xs, j, covs, settled in stretch_out:
+        for i in range(3):
+            out[i, lo : k + 1] = xs[i]
+        out[3:, j + 1 : k + 1] = np.array(covs).T  # rows j+1..k stepped one by one
         if j >= lo:
-            out[2:, lo : j + 1] = np.array(settled)[:, None]  # the rest at the settled value
+            out[3:, lo : j + 1] = np.array(settled)[:, None]  # the rest at the settled value
     return out
 
 
-def _prior_carry(x0) -> _Carry:
-    return _Carry((float(x0[0]), float(x0[1]), PRIOR_T_STD_C**2, 0.0, PRIOR_G_STD_C_PER_MIN**2))
+def _embed(a, b, u, q11, q12, q22):
+    """A two-state transition ``F = [[a, b], [0, 1]]``, ``Q = [[q11, q12], [q12, q22]]``
+    as the three-state ``(f, u, q)`` of :func:`predict` (``x3`` inert)."""
+    a = np.asarray(a, dtype=float)
+    zero, one = np.zeros_like(a), np.ones_like(a)
+    f = np.vstack([a, np.asarray(b, dtype=float), zero, one, zero])
+    qq = np.vstack([np.asarray(v, dtype=float) for v in (q11, q12, zero, q22, zero, zero)])
+    return f, np.asarray(u, dtype=float), qq
+
+
+def _two_state(arr: np.ndarray) -> np.ndarray:
+    """(x1, x2, p11, p12, p22) rows of (9, m) three-state results, as (m, 5)."""
+    return arr[[0, 1, 3, 4, 6]].T.copy()
+
+
+def _prior(x0, p0) -> _Carry:
+    """Prior of a two-state model (``x0 = (T, x2)``, ``p0 = (p11, p12, p22)``)."""
+    return _Carry(
+        (float(x0[0]), float(x0[1]), 0.0, float(p0[0]), float(p0[1]), 0.0, float(p0[2]), 0.0, 1.0)
+    )
 
 
 def kalman_filter(y, a, b, u, q11, q12, q22, r, x0, p0, *, store=True):
@@ -501,13 +647,13 @@ def kalman_filter(y, a, b, u, q11, q12, q22, r, x0, p0, *, store=True):
     -2 log-likelihood)``; ``filtered``/``predicted`` are ``(n, 5)`` arrays of ``(x1, x2,
     p11, p12, p22)`` per row (None when ``store`` is False: likelihood only).
     """
-    yy, aa, bb, uu, qa, qb, qc = (np.asarray(v, dtype=float) for v in (y, a, b, u, q11, q12, q22))
-    carry = _Carry((float(x0[0]), float(x0[1]), float(p0[0]), float(p0[1]), float(p0[2])))
-    rows = _Rows(yy, _same_step(bb), aa, bb, uu, qa, qb, qc)
-    fwd = _forward(carry, rows, r, offset=0, store=store, fast=False)
+    yy = np.asarray(y, dtype=float)
+    f, uu, qq = _embed(a, b, u, q11, q12, q22)
+    rows = _Rows(yy, _same_step(f[1]), uu, f, qq, np.arange(yy.size), 2)
+    fwd = _forward(_prior(x0, p0), rows, r, offset=0, store=store, fast=False)
     if fwd.filt is None or fwd.pred is None:
         return None, None, fwd.innov, fwd.svar, fwd.m2ll
-    return fwd.filt.T.copy(), fwd.pred.T.copy(), fwd.innov, fwd.svar, fwd.m2ll
+    return _two_state(fwd.filt), _two_state(fwd.pred), fwd.innov, fwd.svar, fwd.m2ll
 
 
 def rts_smoother(filtered, predicted, a, b):
@@ -516,11 +662,19 @@ def rts_smoother(filtered, predicted, a, b):
     The plain path (:func:`rts_step` on every row). Returns arrays ``(x1, x2, p11, p12,
     p22)`` of the smoothed states and covariances.
     """
-    filt = np.asarray(filtered, dtype=float).T
-    pred = np.asarray(predicted, dtype=float).T
-    lists = (filt.tolist(), pred.tolist(), np.asarray(a).tolist(), np.asarray(b).tolist())
-    out = _backward(filt, pred, lists, (), None, fast=False)
-    return tuple(out[i].copy() for i in range(5))
+
+    def three(two):
+        t = np.asarray(two, dtype=float).T
+        z, o = np.zeros(t.shape[1]), np.ones(t.shape[1])
+        return np.vstack([t[0], t[1], z, t[2], t[3], z, t[4], z, o])
+
+    filt, pred = three(filtered), three(predicted)
+    n = filt.shape[1]
+    f, u, qq = _embed(a, b, np.zeros(n), *(np.zeros(n),) * 3)
+    rows = _Rows(np.zeros(n), np.zeros(n, dtype=bool), u, f, qq, np.arange(n), 2)
+    cols = ([array("d", c.tobytes()) for c in filt], [array("d", c.tobytes()) for c in pred])
+    out = _backward(filt, pred, cols, rows, (), None, fast=False)
+    return tuple(out[i].copy() for i in (0, 1, 3, 4, 6))
 
 
 def filter_smooth(y, a, b, u, q11, q12, q22, r, x0, p0, *, smooth=True):
@@ -538,14 +692,14 @@ def filter_smooth(y, a, b, u, q11, q12, q22, r, x0, p0, *, smooth=True):
     ``(x1, x2, p11, p12, p22, innovations, innovation variances, -2 log L)`` as arrays
     (the first five None when ``smooth`` is False: the filter's likelihood only).
     """
-    yy, aa, bb, uu, qa, qb, qc = (np.asarray(v, dtype=float) for v in (y, a, b, u, q11, q12, q22))
-    carry = _Carry((float(x0[0]), float(x0[1]), float(p0[0]), float(p0[1]), float(p0[2])))
-    rows = _Rows(yy, _same_step(bb), aa, bb, uu, qa, qb, qc)
-    fwd = _forward(carry, rows, r, offset=0, store=smooth, fast=True)
-    if not smooth:
+    yy = np.asarray(y, dtype=float)
+    f, uu, qq = _embed(a, b, u, q11, q12, q22)
+    rows = _Rows(yy, _same_step(f[1]), uu, f, qq, np.arange(yy.size), 2)
+    fwd = _forward(_prior(x0, p0), rows, r, offset=0, store=smooth, fast=True)
+    if not smooth or fwd.filt is None or fwd.pred is None or fwd.cols is None:
         return None, None, None, None, None, fwd.innov, fwd.svar, fwd.m2ll
-    out = _backward(fwd.filt, fwd.pred, fwd.lists, fwd.stretches, None, fast=True)
-    return (*(out[i].copy() for i in range(5)), fwd.innov, fwd.svar, fwd.m2ll)
+    out = _backward(fwd.filt, fwd.pred, fwd.cols, rows, fwd.stretches, None, fast=True)
+    return (*(out[i].copy() for i in (0, 1, 3, 4, 6)), fwd.innov, fwd.svar, fwd.m2ll)
 
 
 # -- quantisation and noise levels ---------------------------------------------------------
@@ -603,26 +757,13 @@ def _check_level(name: str, value: float | None, unit: str) -> float | None:
 
 # -- the models as row sources --------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
-class _Rows:
-    """Filter inputs of rows ``lo..hi-1`` (row ``k``: the step into it)."""
-
-    y: np.ndarray
-    same: np.ndarray
-    a: np.ndarray
-    b: np.ndarray
-    u: np.ndarray
-    q11: np.ndarray
-    q12: np.ndarray
-    q22: np.ndarray
-
-
-@dataclass(frozen=True, slots=True)
 class _Setup:
     """Everything the filter needs except the noise levels, computed chunk by chunk.
 
     ``time_s``, ``y`` and ``chamber_c`` are the log's arrays (not copied); ``model`` is
-    None for the kinematic model; ``u_merged`` replaces the chamber input of a strided
-    copy (the exact input over each merged step).
+    None for a kinematic model of ``order`` 2 (gradient a random walk) or 3 (its rate a
+    random walk); ``u_merged`` replaces the chamber input of a strided copy (the exact
+    input over each merged step).
     """
 
     time_s: np.ndarray
@@ -630,14 +771,23 @@ class _Setup:
     model: FirstOrderLag | None
     chamber_c: np.ndarray | None = None
     u_merged: np.ndarray | None = None
+    order: int = 3
 
     @property
     def n(self) -> int:
         return int(self.y.size)
 
     @property
-    def x0(self) -> tuple[float, float]:
-        return float(self.y[int(np.argmax(np.isfinite(self.y)))]), 0.0
+    def dim(self) -> int:
+        """Active states: 3 for the order-3 kinematic model, else 2."""
+        return 3 if self.model is None and self.order == 3 else 2
+
+    def prior(self) -> _Carry:
+        """Diffuse prior at the first row: T at the first reading, the rest 0."""
+        t0 = float(self.y[int(np.argmax(np.isfinite(self.y)))])
+        pt, pg, pa = PRIOR_T_STD_C**2, PRIOR_G_STD_C_PER_MIN**2, PRIOR_A_STD_C_PER_MIN2**2
+        p33 = pa if self.dim == 3 else 1.0  # an inert third state keeps variance 1
+        return _Carry((t0, 0.0, 0.0, pt, 0.0, 0.0, pg, 0.0, p33))
 
     def steps(self, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(h_min, same, u)`` of rows ``lo..hi-1`` (``h = 0``, ``u = 0`` at row 0).
@@ -665,12 +815,17 @@ class _Setup:
         return h, same, u
 
     def rows(self, lo: int, hi: int, q: float) -> _Rows:
-        h, same, u = self.steps(lo, hi)
-        if self.model is None:
-            a, b, q11, q12, q22 = kinematic_transition(h, q)
-        else:
+        h_rows, same, u = self.steps(lo, hi)
+        h, idx = np.unique(h_rows, return_inverse=True)  # the distinct steps
+        if self.model is not None:
             a, b, q11, q12, q22 = lag_transition(h, self.model, q)
-        return _Rows(self.y[lo:hi], same, a, b, u, q11, q12, q22)
+            f, _, qq = _embed(a, b, 0.0, q11, q12, q22)
+        elif self.order == 2:
+            a, b, q11, q12, q22 = kinematic_transition(h, q)
+            f, _, qq = _embed(a, b, 0.0, q11, q12, q22)
+        else:
+            f, qq = jerk_transition(h, q)
+        return _Rows(self.y[lo:hi], same, u, f, qq, idx.reshape(-1), self.dim)
 
     def stride(self, step: int) -> _Setup:
         """Every ``step``-th row, with exact transitions over the merged steps."""
@@ -693,16 +848,21 @@ class _Setup:
                 last = coarse * step - lo  # its last fine row, local
                 w = uf * np.exp(cum[last] - cum[rows - lo])
                 u += np.bincount(coarse, weights=w, minlength=idx.size)[: idx.size]
-        return _Setup(self.time_s[idx], self.y[idx], self.model, None, u)
+        return _Setup(self.time_s[idx], self.y[idx], self.model, None, u, self.order)
 
 
 def _chunks(n: int) -> list[tuple[int, int]]:
     return [(lo, min(lo + CHUNK_ROWS, n)) for lo in range(0, n, CHUNK_ROWS)]
 
 
-def _likelihood(setup: _Setup, q: float, r: float) -> float:
-    """``-2 log L`` of the innovations (the filter only, chunk by chunk)."""
-    carry = _prior_carry(setup.x0)
+def _likelihood(setup: _Setup, q: float, r: float, unit: _Rows | None = None) -> float:
+    """``-2 log L`` of the innovations (the filter only, chunk by chunk). ``unit``: the
+    setup's rows at ``q = 1`` when it is one chunk (every model's ``Q`` is ``q`` times a
+    matrix of the steps alone, so the noise search builds the transitions once)."""
+    carry = setup.prior()
+    if unit is not None:
+        rows = dataclasses.replace(unit, q=q * unit.q)
+        return _forward(carry, rows, r, offset=0, store=False, fast=True).m2ll
     m2ll = 0.0
     for lo, hi in _chunks(setup.n):
         fwd = _forward(carry, setup.rows(lo, hi, q), r, offset=lo, store=False, fast=True)
@@ -722,7 +882,7 @@ def _smooth(setup: _Setup, q: float, r: float, keep: np.ndarray | None, emit, pr
     """
     bounds = _chunks(setup.n)
     single = len(bounds) == 1
-    carry = _prior_carry(setup.x0)
+    carry = setup.prior()
     checkpoints = []
     kept_fwd: tuple[_Rows, _Forward] | None = None
     innov_parts = []
@@ -748,9 +908,9 @@ def _smooth(setup: _Setup, q: float, r: float, keep: np.ndarray | None, emit, pr
         else:
             rw = setup.rows(lo, hi, q)
             fwd = _forward(cp, rw, r, offset=lo, store=True, fast=True)
-        assert fwd.filt is not None and fwd.pred is not None  # stored
-        sm = _backward(fwd.filt, fwd.pred, fwd.lists, fwd.stretches, nxt, fast=True)
-        nxt = (tuple(sm[:, 0].tolist()), tuple(fwd.pred[:, 0].tolist()), rw.a[0], rw.b[0])
+        assert fwd.filt is not None and fwd.pred is not None and fwd.cols is not None
+        sm = _backward(fwd.filt, fwd.pred, fwd.cols, rw, fwd.stretches, nxt, fast=True)
+        nxt = (tuple(sm[:, 0].tolist()), tuple(fwd.pred[:, 0].tolist()), rw.f_at(0))
         sel = _kept(keep, lo, hi)
         emit(_global(sel, lo), sm[:, sel], inn, sv)
         if progress is not None:
@@ -803,6 +963,7 @@ def _fit_noise(
     coarse = setup.stride(step)
     if int(np.isfinite(coarse.y).sum()) < max(20, N_DIFFUSE + 3):
         coarse = setup
+    unit = coarse.rows(0, coarse.n, 1.0) if coarse.n <= CHUNK_ROWS else None
     # starting point: white noise dominates second differences, var(d2 y) ~ 6 r
     var_d2, n_d2 = _second_difference_var(setup.y)
     r_start = max(var_d2 / 6.0, 1e-8) if n_d2 > 1 else 1e-4
@@ -824,7 +985,7 @@ def _fit_noise(
 
     def cost(theta):
         qq, rr = levels(theta)
-        m2ll = _likelihood(coarse, qq, rr)
+        m2ll = _likelihood(coarse, qq, rr, unit)
         calls[0] += 1
         if progress is not None:
             progress("noise levels", calls[0], 0)
@@ -1030,9 +1191,10 @@ def _estimate(
     def emit(rows, sm, innov, svar):
         # rows: global rows (a slice when every row is kept); i: their output positions
         i = rows if keep is None else np.searchsorted(keep, rows)
-        g, g_var = grad(rows, sm[0], sm[1], sm[2], sm[3], sm[4])
+        # sm rows: x1, x2, x3, p11, p12, p13, p22, p23, p33
+        g, g_var = grad(rows, sm[0], sm[1], sm[3], sm[4], sm[6])
         cols["t"][i] = sm[0]
-        cols["t_std"][i] = np.sqrt(np.maximum(sm[2], 0.0))
+        cols["t_std"][i] = np.sqrt(np.maximum(sm[3], 0.0))
         cols["g"][i] = g
         cols["g_std"][i] = np.sqrt(np.maximum(g_var, 0.0))
         cols["innov"][i] = innov
@@ -1063,15 +1225,23 @@ def estimate_gradient(
     quant_c: float | None = None,
     every_s: float | None = None,
     progress: Progress | None = None,
+    order: int = 3,
 ) -> GradientEstimate:
-    """Kinematic Kalman smoother: ``(T, g)`` with the gradient a random walk.
+    """Kinematic Kalman smoother: no thermal model, the gradient a smooth random process.
+
+    ``order=3`` (default): state ``(T, g, a)``, ``a = dg/dt`` a random walk (white jerk).
+    A lagging device's gradient is smooth between the chamber's rate changes and bends at
+    them, which this model follows far better than ``order=2``: state ``(T, g)``, ``g``
+    itself a random walk (its likelihood-chosen ``q`` must cover the bends everywhere;
+    the gradient error is ~2x larger on the paper-like plans, see docs/estimate.md).
 
     Parameters
     ----------
     log : MeasuredLog
         The run (NaN readings are skipped, gaps handled exactly).
     q : float, optional
-        Gradient random-walk density, (degC/min^2)^2/min; fitted by ML when None.
+        Density of the random walk: of ``a`` (order 3), (degC/min^3)^2/min, or of ``g``
+        (order 2), (degC/min^2)^2/min; fitted by ML when None.
     r : float, optional
         Measurement variance, degC^2 (total, including quantisation); ML when None.
     quant_c : float, optional
@@ -1082,8 +1252,12 @@ def estimate_gradient(
         still filtered, only the output is thinned (and its memory with it).
     progress : callable(stage, done, total), optional
         Told how far the noise search, the filter and the smoother are.
+    order : {3, 2}
+        The kinematic model (see above).
     """
-    setup = _Setup(log.time_s, np.asarray(log.t_int_c, dtype=float), None)
+    if order not in (2, 3):
+        raise ParameterError(f"order must be 2 or 3, got {order!r}")
+    setup = _Setup(log.time_s, np.asarray(log.t_int_c, dtype=float), None, order=order)
 
     def grad(rows, x1, x2, p11, p12, p22):
         return x2, p22
