@@ -73,8 +73,9 @@ FULL_RATE_ML_ROWS = 4000
 #: ... and on an evenly strided copy of about this many rows of longer logs (the strided
 #: search fits q, r within ~10 % of the full-rate search; see tests and the benchmark).
 MAX_ML_ROWS = 1500
-#: Bounds of the search, in natural log of q ((degC/min^2)^2/min) and of r (degC^2).
-LOG_Q_BOUNDS = (math.log(1e-14), math.log(1e4))
+#: Bounds of the search, in natural log of q (order 2 and model-based: (degC/min^2)^2/min;
+#: order 3: (degC/min^3)^2/min; a fast small heater needs ~1e6) and of r (degC^2).
+LOG_Q_BOUNDS = (math.log(1e-14), math.log(1e8))
 LOG_R_BOUNDS = (math.log(1e-12), math.log(1e2))
 #: Rows per chunk of the filter and smoother: the working memory (about 0.5 kB per chunk
 #: row) does not grow with the log.
@@ -993,7 +994,7 @@ def _fit_noise(
 
     if q is None:
         # coarse scan of q (the likelihood is often flat far from the optimum)
-        grid = np.arange(-12.0, 3.0, 2.0) * math.log(10.0)
+        grid = np.arange(-12.0, 7.0, 2.0) * math.log(10.0)
         best: tuple[float, float] | None = None
         for lq in grid:
             theta = [lq] + ([] if r is not None else [math.log(r_extra_start)])

@@ -164,3 +164,19 @@ def test_diagnose_thins_a_log_longer_than_its_budget(tmp_path, capsys, monkeypat
     kept = len(range(0, n, stride))
     note = f"note: the log has {n} rows; diagnosed on every {stride}th row ({kept} rows)"
     assert note in capsys.readouterr().out
+
+
+def test_cli_order_option(tmp_path, capsys):
+    df = synth_log(read_steps(STEPS), sample_s=20.0, seed=3)
+    path = tmp_path / "run.csv"
+    df.to_csv(path, index=False)
+    for order in (2, 3):
+        out = tmp_path / f"o{order}"
+        assert (
+            main(["estimate", str(path), "--out", str(out), "--order", str(order), "--quiet"]) == 0
+        )
+        got = pd.read_csv(out / "gradient.csv")
+        want = estimate_gradient(read_log(path), order=order)
+        np.testing.assert_allclose(got["g_est_c_per_min"], want.g_est_c_per_min, rtol=1e-12)
+    capsys.readouterr()
+    assert main(["estimate", str(path), "--order", "4"]) == 2

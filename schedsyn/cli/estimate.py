@@ -83,6 +83,14 @@ def register(sub) -> None:
         help="write one row every S seconds to gradient.csv (default: every log row; "
         "every row is filtered either way)",
     )
+    p.add_argument(
+        "--order",
+        type=int,
+        choices=(2, 3),
+        default=3,
+        help="kinematic model: 3 = the gradient's rate a random walk (default; smooth "
+        "gradients that bend where the chamber changes rate), 2 = the gradient a random walk",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress messages on stderr")
     p.set_defaults(func=run)
 
@@ -120,7 +128,9 @@ def run(args: argparse.Namespace) -> int:
             progress=progress,
         )
     else:
-        est = estimate_gradient(log, q=args.q, r=args.r, every_s=args.every, progress=progress)
+        est = estimate_gradient(
+            log, q=args.q, r=args.r, every_s=args.every, progress=progress, order=args.order
+        )
     inputs = [args.log]
     write_gradient_csv(out / "gradient.csv", est, inputs, progress)
     if progress is not None:
