@@ -1049,6 +1049,8 @@ class GradientEstimate:
         The thermal model of the model-based variant.
     every_s : float or None
         The decimation: one row every ``every_s`` seconds (None: every log row).
+    order : int or None
+        The kinematic model's order (2 or 3; None for the model-based variant).
     """
 
     time_s: np.ndarray
@@ -1063,6 +1065,7 @@ class GradientEstimate:
     method: str
     params: ThermalParams | None = None
     every_s: float | None = None
+    order: int | None = None
 
     @property
     def q(self) -> float:
@@ -1110,6 +1113,7 @@ class GradientEstimate:
             method=self.method,
             params=self.params,
             every_s=self.every_s,
+            order=self.order,
         )
 
     def to_frame(self) -> pd.DataFrame:
@@ -1130,11 +1134,13 @@ class GradientEstimate:
         z = self.normalised_innovations
         z = z[np.isfinite(z)]
         every = "" if self.every_s is None else f"; one row every {self.every_s:g} s"
+        name = self.method if self.order is None else f"{self.method} (order {self.order})"
+        q_unit = "(°C/min³)²/min" if self.order == 3 else "(°C/min²)²/min"
         return (
-            f"{self.method} Kalman smoother: q = {self.q:.3g} (degC/min^2)^2/min, "
-            f"r = {self.r:.3g} degC^2 (sigma {math.sqrt(self.r):.3g} degC; quantisation "
-            f"{self.noise.quant_c:g} degC; fitted by ML: {fitted}); median gradient std "
-            f"{np.nanmedian(self.g_std_c_per_min):.3g} degC/min; normalised innovations "
+            f"{name} Kalman smoother: q = {self.q:.3g} {q_unit}, "
+            f"r = {self.r:.3g} °C² (σ {math.sqrt(self.r):.3g} °C; quantisation "
+            f"{self.noise.quant_c:g} °C; fitted by ML: {fitted}); median gradient std "
+            f"{np.nanmedian(self.g_std_c_per_min):.3g} °C/min; normalised innovations "
             f"std {np.std(z):.2f} (1 if consistent){every}"
         )
 
@@ -1166,7 +1172,7 @@ def _resolve_quant(log: MeasuredLog, quant_c: float | None) -> float:
         return quantisation_step(y[::stride])
     v = float(quant_c)
     if not (math.isfinite(v) and v >= 0):
-        raise ParameterError(f"quant_c must be >= 0 degC, got {quant_c!r}")
+        raise ParameterError(f"quant_c must be >= 0 °C, got {quant_c!r}")
     return v
 
 
@@ -1183,7 +1189,8 @@ def _estimate(
     progress: Progress | None,
 ) -> GradientEstimate:
     """Noise levels, then the chunked smoother; the kept rows go straight to the output."""
-    q, r = _check_level("q", q, "(degC/min^2)^2/min"), _check_level("r", r, "degC^2")
+    q = _check_level("q", q, "(°C/min³)²/min" if setup.dim == 3 else "(°C/min²)²/min")
+    r = _check_level("r", r, "°C²")
     keep = None if every_s is None else decimation_rows(log.time_s, every_s)
     noise = _fit_noise(setup, q, r, _resolve_quant(log, quant_c), progress)
     n_out = setup.n if keep is None else keep.size
@@ -1215,6 +1222,7 @@ def _estimate(
         method=method,
         params=params,
         every_s=None if every_s is None else float(every_s),
+        order=setup.order if setup.model is None else None,
     )
 
 

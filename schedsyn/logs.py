@@ -233,7 +233,7 @@ def _check_temperature(v: np.ndarray, col: str, source: str) -> None:
     if lo > KELVIN_FLOOR and hi < 500.0:
         raise LogFormatError(
             f"{source}: column {col}: every value lies in {lo:g} .. {hi:g}, which looks like "
-            "kelvin; the log needs degC (subtract 273.15)"
+            "kelvin; the log needs °C (subtract 273.15)"
         )
     plo, phi = PLAUSIBLE_C
     if lo < plo or hi > phi:
@@ -244,7 +244,7 @@ def _check_temperature(v: np.ndarray, col: str, source: str) -> None:
             hint = "; if the log is in Fahrenheit convert with (F - 32) * 5 / 9"
         raise LogFormatError(
             f"{source}: row {r + 1} (line {r + 2}), column {col}: {v[r]:g} is not a plausible "
-            f"temperature in degC (expected {plo:g} .. {phi:g}){hint}"
+            f"temperature in °C (expected {plo:g} .. {phi:g}){hint}"
         )
 
 
