@@ -114,13 +114,19 @@ def test_model_based_sigma_with_a_nearly_constant_correction():
     _assert_calibrated(z)
 
 
-@pytest.mark.parametrize("order", [2, 3])
-def test_kinematic_sigma_is_conservative_on_a_real_programme(order):
-    """On the baseline plan g has kinks (rate changes) that a constant-q random walk
-    cannot follow everywhere: the stated sigma is larger than the error (documented,
-    about 2x) but never overconfident and never wildly off."""
-    frame = synth_log(read_steps(BASELINE), sample_s=10.0, seed=0)
-    est = estimate_gradient(log_from_frame(frame), order=order)
-    z = (est.g_est_c_per_min - frame["g_true_c_per_min"].to_numpy()) / est.g_std_c_per_min
-    assert 0.3 <= np.std(z) <= 1.0
-    assert np.mean(np.abs(z) <= 2.0) >= 0.95
+def test_kinematic_sigma_on_a_real_programme():
+    """On the baseline plan g is smooth between the chamber's rate changes and bends at
+    them. Order 3 (the default) models exactly that: its sigma matches the error. Order 2
+    (g a random walk) must cover the bends with one q everywhere: its sigma is larger than
+    the error (about 2x), never overconfident."""
+    z = {2: [], 3: []}
+    for seed in range(2):
+        frame = synth_log(read_steps(BASELINE), sample_s=10.0, seed=seed)
+        truth = frame["g_true_c_per_min"].to_numpy()
+        for order in (2, 3):
+            est = estimate_gradient(log_from_frame(frame), order=order)
+            z[order].append((est.g_est_c_per_min - truth) / est.g_std_c_per_min)
+    _assert_calibrated(z[3])
+    z2 = np.concatenate(z[2])
+    assert 0.3 <= np.std(z2) <= 0.7
+    assert np.mean(np.abs(z2) <= 2.0) >= 0.99
