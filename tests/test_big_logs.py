@@ -180,3 +180,29 @@ def test_cli_order_option(tmp_path, capsys):
         np.testing.assert_allclose(got["g_est_c_per_min"], want.g_est_c_per_min, rtol=1e-12)
     capsys.readouterr()
     assert main(["estimate", str(path), "--order", "4"]) == 2
+
+
+def test_progress_reporter_lines_and_bar():
+    """Plain lines (not a terminal): each stage's first and last report, 10 % steps in
+    between at most every LINE_MIN_INTERVAL_S; a terminal gets a tqdm bar instead."""
+    import io
+
+    from schedsyn.cli._progress import StderrProgress
+
+    plain = io.StringIO()
+    rep = StderrProgress("estimate", stream=plain, tty=False)
+    for done in range(0, 1001, 50):
+        rep("filter", done, 1000)
+    rep("noise levels", 3, 0)
+    rep.close()
+    lines = plain.getvalue().splitlines()
+    assert lines[0] == "estimate: filter 0 % (0 rows of 1 000 rows)"
+    assert "estimate: filter 100 % (1 000 rows of 1 000 rows)" in lines
+    assert lines[-1] == "estimate: noise levels ..."
+    assert len(lines) <= 13
+    term = io.StringIO()
+    bar = StderrProgress("estimate", stream=term, tty=True)
+    for done in (0, 10_000_000, 20_000_000):
+        bar("reading", done, 20_000_000)
+    bar.close()
+    assert "estimate: reading" in term.getvalue() and "\n" not in term.getvalue().strip("\n")
