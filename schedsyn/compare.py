@@ -144,10 +144,11 @@ class RunComparison:
 def resample_run(log: MeasuredLog, estimate: GradientEstimate, dt_min: float = 0.1) -> Trajectory:
     """The smoothed run on a regular grid ``0, dt, ...`` over the log's span.
 
-    Linear interpolation between log rows; grid points inside a sampling gap
-    (``log.gaps``) get NaN, so the coverage metric never counts a gap as a pass.
+    Linear interpolation between the estimate's rows (the log's rows, or those kept by a
+    decimated estimate); grid points inside a sampling gap (``log.gaps``) get NaN, so the
+    coverage metric never counts a gap as a pass.
     """
-    t_log = log.time_min
+    t_log = estimate.time_min
     grid = dense_times(float(t_log[-1]), dt_min)
     grid = grid[grid >= t_log[0]]
     temp = np.interp(grid, t_log, estimate.t_est_c)
@@ -157,7 +158,7 @@ def resample_run(log: MeasuredLog, estimate: GradientEstimate, dt_min: float = 0
         temp[inside] = np.nan
         grad[inside] = np.nan
     tk = (
-        np.interp(grid, t_log, log.tk_set_c)
+        np.interp(grid, log.time_min, log.tk_set_c)
         if log.tk_set_c is not None
         else np.full(grid.shape, np.nan)
     )

@@ -1,93 +1,126 @@
-"""Which CSV dialect a table was saved in: the field separator and the decimal mark.
+"""Which CSV dialect a file is written in: separator and decimal mark, from its first lines.
 
 Spreadsheets set to a European locale save "CSV" with semicolons between fields and
-decimal commas (``1;0;30;20,0;-10,0;-1``); a tab-separated export is also common. The
-detection is a small pure function of the first lines of the file, so that every reader
-(step tables, logs) recognises the same formats and can name the one it saw in an error.
+decimal commas (``time_s;t_int_c`` / ``10;-23,45``); tab-separated exports exist too.
+:func:`detect_csv_dialect` looks at the head of a file (a pure function of the text, so
+every reader can use it and it is tested without files) and says how to read it, or
+raises :class:`ValueError` naming the problem when the text cannot be read unambiguously
+(decimal commas in a comma-separated file).
 """
 
 from __future__ import annotations
 
-import csv
 import re
 from typing import NamedTuple
 
-#: Candidate field separators, in order of preference on a tie.
-SEPARATORS = (",", ";", "\t")
+#: Separators tried, most specific first: a comma in a semicolon- or tab-separated file
+#: is a decimal mark, never the other way round.
+SEPARATORS = (";", "\t", ",")
+#: Data lines of the head that are examined (the rest of the file is not looked at).
+MAX_DATA_LINES = 50
 
-_DECIMAL_COMMA = re.compile(r"^\s*[+-]?\d+,\d+(?:[eE][+-]?\d+)?\s*$")
-_DECIMAL_POINT = re.compile(r"^\s*[+-]?(?:\d+\.\d*|\.\d+)(?:[eE][+-]?\d+)?\s*$")
-
+_POINT_NUMBER = re.compile(r"^[+-]?(\d+\.\d*|\.\d+)([eE][+-]?\d+)?$")
+_COMMA_NUMBER = re.compile(r"^[+-]?(\d+,\d*|,\d+)([eE][+-]?\d+)?$")
 _NAMES = {",": "comma", ";": "semicolon", "\t": "tab"}
-#: The first line some spreadsheets write to name the separator, e.g. ``sep=;``.
+#: The first line some spreadsheets write to name the separator, e.g. ``sep=;``; readers
+#: skip it.
 SEP_HINT = re.compile(r"^\s*\"?sep=(.)\"?\s*$")
 
 
 class CsvDialect(NamedTuple):
-    """A CSV dialect: ``separator`` between fields and ``decimal`` mark of numbers."""
+    """How to read a CSV file: field separator and decimal mark (``"."`` or ``","``)."""
 
     separator: str
     decimal: str
 
     def describe(self) -> str:
-        """E.g. ``"semicolon-separated with decimal commas"``."""
-        mark = "decimal commas" if self.decimal == "," else "decimal points"
-        return f"{_NAMES.get(self.separator, repr(self.separator))}-separated with {mark}"
+        """E.g. ``"semicolon-separated, decimal comma"``."""
+        mark = "decimal comma" if self.decimal == "," else "decimal point"
+        return f"{_NAMES[self.separator]}-separated, {mark}"
 
 
-def _fields(line: str, sep: str) -> list[str]:
-    return next(csv.reader([line], delimiter=sep, quotechar='"'), [])
+def _split(line: str, sep: str) -> list[str]:
+    """Fields of one line, separators inside double quotes not counted."""
+    fields: list[str] = []
+    cur: list[str] = []
+    quoted = False
+    for ch in line:
+        if ch == '"':
+            quoted = not quoted
+        elif ch == sep and not quoted:
+            fields.append("".join(cur))
+            cur = []
+            continue
+        cur.append(ch)
+    fields.append("".join(cur))
+    return [f.strip().strip('"').strip() for f in fields]
 
 
 def detect_csv_dialect(head: str) -> CsvDialect:
-    """Separator and decimal mark of a CSV table from its first lines.
+    """Separator and decimal mark of a CSV file from its first lines.
 
     Parameters
     ----------
     head : str
-        The start of the file (a few kB is plenty). Blank lines and comment lines
-        starting with ``#`` are skipped; a last line cut off mid-way is ignored.
+        The beginning of the file as text (a few kB is plenty; a last line cut short is
+        ignored). Blank lines and lines starting with ``#`` are skipped.
 
     Returns
     -------
     CsvDialect
-        ``(separator, decimal)``: the separator named by a ``sep=X`` first line (a
-        spreadsheet's hint; readers skip that line), else the one (``","``, ``";"`` or
-        tab) that splits the header into the most fields, every data line into as many
-        fields as the header (ties go to the comma); the decimal mark is ``","`` when
-        the separator is not a comma and the data fields hold more numbers like ``-1,5``
-        than like ``-1.5``.
-        A table of one column gives ``(",", ".")``.
+        ``(separator, decimal)``: the separator is the first of ``;``, tab, ``,`` that
+        splits the header and (at least 90 % of) the examined data lines into the same
+        number (> 1) of fields (``,`` when none does: a one-column file); the decimal
+        mark is ``","`` when numbers with a decimal comma (``-23,45``) appear, else
+        ``"."``.
+
+    Raises
+    ------
+    ValueError
+        Decimal commas in a comma-separated file (the header has fewer fields than the
+        data lines), or decimal commas and decimal points mixed in one file.
     """
     text = head.lstrip("\ufeff")
     lines = text.splitlines()
     if lines and not text.endswith(("\n", "\r")) and len(lines) > 1:
-        lines = lines[:-1]  # cut off mid-way
-    rows = [ln for ln in lines if ln.strip() and not ln.lstrip().startswith("#")][:50]
-    if not rows:
+        lines = lines[:-1]  # cut short by the size of the head
+    lines = [ln for ln in lines if ln.strip() and not ln.lstrip().startswith("#")]
+    if not lines:
         return CsvDialect(",", ".")
-    hint = SEP_HINT.match(rows[0])
-    if hint:  # a spreadsheet's "sep=;" line names the separator
-        sep = hint.group(1)
-        cells = [c for r in rows[2:] for c in _fields(r, sep)]
-        commas = sum(bool(_DECIMAL_COMMA.match(c)) for c in cells)
-        points = sum(bool(_DECIMAL_POINT.match(c)) for c in cells)
-        return CsvDialect(sep, "," if sep != "," and commas > points else ".")
-    best, best_n = ",", 1
-    for sep in SEPARATORS:
-        n = len(_fields(rows[0], sep))
-        consistent = all(len(_fields(r, sep)) == n for r in rows[1:])
-        if n > best_n and consistent:
-            best, best_n = sep, n
-    if best_n == 1:  # no separator splits the header consistently: the most frequent one
-        counts = {sep: len(_fields(rows[0], sep)) for sep in SEPARATORS}
-        sep = max(SEPARATORS, key=lambda s: counts[s])
-        best = sep if counts[sep] > 1 else ","
-    decimal = "."
-    if best != ",":
-        cells = [c for r in rows[1:] for c in _fields(r, best)]
-        commas = sum(bool(_DECIMAL_COMMA.match(c)) for c in cells)
-        points = sum(bool(_DECIMAL_POINT.match(c)) for c in cells)
-        if commas > points:
-            decimal = ","
-    return CsvDialect(best, decimal)
+    hint = SEP_HINT.match(lines[0])
+    if hint:  # a spreadsheet's "sep=;" line names the separator: no guessing
+        lines = lines[1:] or [""]
+    header, data = lines[0], lines[1 : 1 + MAX_DATA_LINES]
+    sep = hint.group(1) if hint else ","
+    found = bool(hint)
+    for cand in () if hint else SEPARATORS:
+        n = len(_split(header, cand))
+        same = sum(len(_split(ln, cand)) == n for ln in data)
+        # a stray ragged line is left to the parser, which names its line number
+        if n > 1 and same >= 0.9 * len(data):
+            sep, found = cand, True
+            break
+    if not found:
+        n_head = len(_split(header, ","))
+        longer = [i for i, ln in enumerate(data) if len(_split(ln, ",")) > n_head]
+        if longer:
+            i = longer[0]
+            fields = _split(data[i], ",")
+            raise ValueError(
+                f"data line {i + 1} ({data[i].strip()!r}) has {len(fields)} comma-separated "
+                f"fields but the header has {n_head}: decimal commas in a comma-separated "
+                "file cannot be read unambiguously; save it with decimal points, or as "
+                "semicolon-separated CSV (the European spreadsheet format: ';' between "
+                "fields, decimal commas)"
+            )
+    fields = [f for ln in data for f in _split(ln, sep)]
+    comma = next((f for f in fields if _COMMA_NUMBER.match(f)), None)
+    point = next((f for f in fields if _POINT_NUMBER.match(f)), None)
+    if comma is not None and sep == ",":
+        comma = None  # quoted "1,5" in a comma file: left to the number check of the reader
+    if comma is not None and point is not None:
+        raise ValueError(
+            f"the file mixes decimal commas ({comma!r}) and decimal points ({point!r}); "
+            "use one decimal mark throughout"
+        )
+    return CsvDialect(sep, "," if comma is not None else ".")

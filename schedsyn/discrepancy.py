@@ -34,6 +34,7 @@ from scipy.signal import lombscargle
 
 from .effects import EFFECTS, Effect, LinearEffectModel, ModelSpec
 from .errors import LogFormatError, ParameterError, SolverFailedError
+from .logs import thin_log
 from .model import affine_response, lag_foh
 from .programme import Programme
 
@@ -219,6 +220,12 @@ def _second_derivative(t: np.ndarray, f: np.ndarray) -> np.ndarray:
     out[1:-1] = 2.0 * (df[1:] / h2 - df[:-1] / h1) / (h1 + h2)
     out[0], out[-1] = out[1], out[-2]
     return out
+
+
+#: A log longer than this is thinned to every k-th row before the diagnosis: the fit runs
+#: on ~1500 block means anyway, and the full-resolution predictions and residuals cost
+#: memory per row (readings are kept as they are, so the per-sample noise is the sensor's).
+DIAGNOSE_MAX_ROWS = 100_000
 
 
 def _prepare(log, settings: DiagnoseSettings) -> tuple[_Data, dict]:
@@ -1207,9 +1214,14 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
         From :func:`schedsyn.logs.read_log` / :func:`~schedsyn.logs.log_from_frame`
         (needs ``tk_set_c``; uses ``tk_air_c`` when present).
     settings : DiagnoseSettings, optional
+
+    A log longer than ``DIAGNOSE_MAX_ROWS`` rows is diagnosed on every k-th row;
+    ``Diagnosis.info["row_stride"]`` is that k (1 when every row was used).
     """
     settings = DiagnoseSettings() if settings is None else settings
+    log, stride = thin_log(log, DIAGNOSE_MAX_ROWS)
     data, info = _prepare(log, settings)
+    info["row_stride"] = stride
     names = settings.effects if settings.effects is not None else tuple(EFFECTS)
     has_air = data.air_c is not None
     base = fit_base(data)

@@ -19,23 +19,35 @@ what the model misses::
 
     dT/dt = (Tk(t) + dT0 - T)/tau + d,   dd/dt = w(t),   g = (Tk + dT0 - T)/tau + d
 
-with ``Tk`` linear between samples; exactly, with ``e = exp(-h/tau)``::
+with ``Tk`` linear between samples. The model (:class:`schedsyn.model.FirstOrderLag`)
+gives its step response ``S(h) = 1 - e``, ``e = exp(-h/tau)``, and its unit-ramp
+response ``R(h) = h - tau S(h)``; exactly::
 
-    T' = e T + tau (1 - e) d + u,   u = (1 - e)(Tk_k + dT0) + s R(h)   (s: Tk slope)
-    Q11 = q tau^3 (x - 2(1 - e) + (1 - e^2)/2),  Q12 = q tau R(h),  Q22 = q h,  x = h/tau
+    T' = e T + tau S(h) d + u,   u = S(h)(Tk_k + dT0) + s R(h)      (s: Tk slope)
+    Q11 = q tau^3 (R/tau - S^2/2),  Q12 = q tau R(h),  Q22 = q h
 
-where ``R(h) = h - tau (1 - e)`` is the model's unit-ramp response
-(:meth:`schedsyn.model.FirstOrderLag.ramp`; ``u`` comes from the same model object).
+Both have ``F = [[a, b], [0, 1]]`` and measure the first state, so one filter serves
+both: :func:`predict`, :func:`update` and :func:`rts_step` are the only place the
+recursions are written. Every path calls them: the row-by-row loop with floats, and the
+steady-state fast path (constant step, converged covariance) with numpy arrays, where the
+mean recursions become linear time-invariant and are solved vectorised (:func:`_lti`).
 
-Both have ``F = [[a, b], [0, 1]]`` and measure the first state, so one scalar filter
-serves both. The noise levels ``(q, r)`` maximise the likelihood of the innovations
-(``r`` is at least the quantisation floor ``step^2/12``); a user may fix either. A NaN
-reading only skips the measurement update: the row still gets an estimate.
+Long logs are filtered and smoothed in chunks of :data:`CHUNK_ROWS` rows: a forward pass
+keeps only the filter's state at each chunk start (a checkpoint); the backward pass
+re-filters one chunk from its checkpoint and smooths it, so the working memory does not
+grow with the log (the results are the same as one pass over the whole log).
+
+The noise levels ``(q, r)`` maximise the likelihood of the innovations (``r`` is at least
+the quantisation floor ``step^2/12``); a user may fix either. A NaN reading only skips
+the measurement update: the row still gets an estimate.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from array import array
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,9 +60,11 @@ from .logs import MeasuredLog
 from .model import FirstOrderLag
 from .params import ThermalParams
 
-#: Initial (diffuse) standard deviations of the state: T (degC) and g or d (degC/min).
+#: Initial (diffuse) standard deviations of the state: T (degC), g or d (degC/min) and,
+#: in the order-3 kinematic model, g's rate (degC/min^2).
 PRIOR_T_STD_C = 10.0
 PRIOR_G_STD_C_PER_MIN = 3.0
+PRIOR_A_STD_C_PER_MIN2 = 1.0
 #: The first finite measurements mostly fix the diffuse prior; they are left out of the
 #: likelihood (their terms would depend on the prior, not on q and r).
 N_DIFFUSE = 2
@@ -59,9 +73,27 @@ FULL_RATE_ML_ROWS = 4000
 #: ... and on an evenly strided copy of about this many rows of longer logs (the strided
 #: search fits q, r within ~10 % of the full-rate search; see tests and the benchmark).
 MAX_ML_ROWS = 1500
-#: Bounds of the search, in natural log of q ((degC/min^2)^2/min) and of r (degC^2).
-LOG_Q_BOUNDS = (math.log(1e-14), math.log(1e4))
+#: Bounds of the search, in natural log of q (order 2 and model-based: (degC/min^2)^2/min;
+#: order 3: (degC/min^3)^2/min; a fast small heater needs ~1e6) and of r (degC^2).
+LOG_Q_BOUNDS = (math.log(1e-14), math.log(1e8))
 LOG_R_BOUNDS = (math.log(1e-12), math.log(1e2))
+#: Rows per chunk of the filter and smoother: the working memory (about 0.5 kB per chunk
+#: row) does not grow with the log.
+CHUNK_ROWS = 65_536
+#: The quantisation step of logs with more readings than this is detected on an evenly
+#: strided subset of about this many (every grid level a slow signal crosses is still seen).
+QUANT_SAMPLE_ROWS = 262_144
+#: Relative change of the filtered covariance below which the filter counts as steady.
+STEADY_RTOL = 1e-11
+#: Shortest run of equal steps with readings worth the vectorised steady-state path.
+MIN_STEADY_ROWS = 32
+#: Relative change below which the smoothed covariance of a steady stretch counts as
+#: settled (the remaining rows of the stretch take that value).
+SMOOTHED_RTOL = 1e-12
+
+#: ``progress(stage, done, total)``; stages "noise levels" (evaluations, total 0: open),
+#: "filter" and "smoother" (rows).
+Progress = Callable[[str, int, int], None]
 
 
 # -- discretisation (pure, vectorised) --------------------------------------------------
@@ -74,21 +106,43 @@ def kinematic_transition(h_min: np.ndarray, q: float):
     return np.ones_like(h), h, q * h**3 / 3.0, q * h**2 / 2.0, q * h
 
 
-def lag_transition(h_min: np.ndarray, tau_min: float, q: float):
-    """``(a, b, q11, q12, q22)`` of the first-order lag with a random-walk correction.
+def jerk_transition(h_min: np.ndarray, q: float):
+    """``(f, q)`` of the order-3 kinematic model over steps ``h_min``, as in :func:`predict`.
 
-    ``a = e = exp(-h/tau)``, ``b = tau (1 - e)``; ``Q`` as in the module docstring, with a
-    series for ``Q11`` at small ``x = h/tau`` (``x^3/3 - x^4/4 + 7 x^5/60``) where the
-    closed form cancels.
+    State ``(T, g, a)``, ``a = dg/dt`` a random walk (white jerk of density ``q``,
+    (degC/min^3)^2/min)::
+
+        F = [[1, h, h^2/2], [0, 1, h], [0, 0, 1]]
+        Q = q [[h^5/20, h^4/8, h^3/6], [h^4/8, h^3/3, h^2/2], [h^3/6, h^2/2, h]]
+
+    Returns ``f`` (5, n) ``= (1, h, h^2/2, 1, h)`` and ``q`` (6, n) ``= Q``'s upper
+    triangle ``(q11, q12, q13, q22, q23, q33)``.
     """
     h = np.asarray(h_min, dtype=float)
-    x = h / tau_min
-    one_minus_e = -np.expm1(-x)
-    closed = x - 2.0 * one_minus_e - 0.5 * np.expm1(-2.0 * x)
+    one = np.ones_like(h)
+    f = np.vstack([one, h, h * h / 2.0, one, h])
+    qq = q * np.vstack([h**5 / 20.0, h**4 / 8.0, h**3 / 6.0, h**3 / 3.0, h**2 / 2.0, h])
+    return f, qq
+
+
+def lag_transition(h_min: np.ndarray, model: FirstOrderLag, q: float):
+    """``(a, b, q11, q12, q22)`` of the first-order lag with a random-walk correction.
+
+    ``a = e = 1 - S(h)``, ``b = tau S(h)`` with the model's step response ``S`` and ramp
+    response ``R`` (:class:`~schedsyn.model.FirstOrderLag`); the noise integrals
+    ``Q11 = q tau^3 (R/tau - S^2/2)`` (a series ``x^3/3 - x^4/4 + 7 x^5/60`` at small
+    ``x = h/tau``, where the difference cancels), ``Q12 = q tau R``, ``Q22 = q h``.
+    """
+    h = np.asarray(h_min, dtype=float)
+    tau = model.tau_min
+    s = model.step(h)  # S(h) = 1 - e
+    ramp = model.ramp(h)  # R(h) = h - tau S(h)
+    x = h / tau
+    # (x - 2(1 - e) + (1 - e^2)/2) = x - S - S^2/2 = R/tau - S^2/2
+    closed = ramp / tau - 0.5 * s * s
     series = x**3 / 3.0 - x**4 / 4.0 + 7.0 * x**5 / 60.0
-    q11 = q * tau_min**3 * np.where(x < 1e-2, series, closed)
-    ramp = h - tau_min * one_minus_e  # R(h)
-    return 1.0 - one_minus_e, tau_min * one_minus_e, q11, q * tau_min * ramp, q * h
+    q11 = q * tau**3 * np.where(x < 1e-2, series, closed)
+    return 1.0 - s, tau * s, q11, q * tau * ramp, q * h
 
 
 def lag_input(
@@ -105,365 +159,548 @@ def lag_input(
     return free_t + model.gain * slope * model.ramp(h)
 
 
-# -- the filter and the smoother (scalar 2x2 maths; fast in plain Python) ----------------
-def kalman_filter(y, a, b, u, q11, q12, q22, r, x0, p0, *, store=True):
-    """Kalman filter for ``x' = [[a, b], [0, 1]] x + [u, 0] + w``, ``y = x[0] + v``.
+# -- one step of the filter and of the smoother ------------------------------------------
+# The only place the recursions are written. A state is the 9-tuple ``(x1, x2, x3, p11,
+# p12, p13, p22, p23, p33)`` (mean and symmetric covariance); a step's transition is
+# ``F = [[f11, f12, f13], [0, f22, f23], [0, 0, 1]]``, given as ``f = (f11, f12, f13, f22,
+# f23)``, with the input ``u`` on ``x1`` and process noise ``q = (q11, q12, q13, q22, q23,
+# q33)``; the reading measures ``x1``. A two-state model leaves ``x3`` inert (``f13 = f23
+# = 0``, no noise, prior variance 1: it stays uncorrelated and changes nothing). Plain
+# arithmetic, so the same functions run on floats (row by row; far cheaper in CPython
+# than numpy's per-call cost on 3x3 arrays) and on numpy arrays (the steady-state path).
+def predict(s, f, u, q):
+    """Time update over one step: ``x- = F x + (u, 0, 0)``, ``P- = F P F^T + Q``."""
+    x1, x2, x3, p11, p12, p13, p22, p23, p33 = s
+    f11, f12, f13, f22, f23 = f
+    # M = F P (rows 1, 2; row 3 of F P is P's row 3)
+    m11 = f11 * p11 + f12 * p12 + f13 * p13
+    m12 = f11 * p12 + f12 * p22 + f13 * p23
+    m13 = f11 * p13 + f12 * p23 + f13 * p33
+    m22 = f22 * p22 + f23 * p23
+    m23 = f22 * p23 + f23 * p33
+    # P- = M F^T + Q
+    return (
+        f11 * x1 + f12 * x2 + f13 * x3 + u,
+        f22 * x2 + f23 * x3,
+        x3,
+        m11 * f11 + m12 * f12 + m13 * f13 + q[0],
+        m12 * f22 + m13 * f23 + q[1],
+        m13 + q[2],
+        m22 * f22 + m23 * f23 + q[3],
+        m23 + q[4],
+        p33 + q[5],
+    )
 
-    Row ``k`` of ``a, b, u, q..`` (lists of floats) is the transition from row ``k-1`` to
-    ``k`` (row 0 is unused). ``x0 = (T, d)`` and ``p0 = (p11, p12, p22)`` are the prior at
-    row 0. A NaN ``y`` skips the update. Returns ``(filtered, predicted, innovations,
-    innovation variances, -2 log-likelihood)``; ``filtered``/``predicted`` are lists of
-    ``(x1, x2, p11, p12, p22)`` per row (empty when ``store`` is False: likelihood only).
 
-    Equations (``P`` symmetric)::
+def update(s, y, r):
+    """Measurement update with reading ``y = x1 + v``, ``var v = r``.
 
-        predict  x1- = a x1 + b x2 + u          P11- = a^2 P11 + 2ab P12 + b^2 P22 + Q11
-                 x2- = x2                       P12- = a P12 + b P22 + Q12
-                                                P22- = P22 + Q22
-        update   e = y - x1-,  S = P11- + r,  K = (P11-, P12-)/S
-                 x+ = x- + K e,  P+ = P- - K K^T S
-        -2 log L = sum over finite y (after the first N_DIFFUSE) of log(2 pi S) + e^2/S
-
-    Written with scalar floats over Python lists: a 2x2 step costs ~2 us, far less than
-    numpy's per-call overhead on 2x2 arrays.
+    Returns ``(state+, e, S)``: the filtered state, the innovation ``e = y - x1-`` and
+    its variance ``S = P11- + r``.
     """
-    n = len(y)
-    x1, x2 = float(x0[0]), float(x0[1])
-    p11, p12, p22 = (float(v) for v in p0)
-    filt: list[tuple[float, float, float, float, float]] = []
-    pred: list[tuple[float, float, float, float, float]] = []
-    innov = [math.nan] * n
-    svar = [math.nan] * n
-    m2ll = 0.0
-    seen = 0
-    log2pi = math.log(2.0 * math.pi)
-    log = math.log
-    keep_f, keep_p = filt.append, pred.append
-    for k in range(n):
-        if k:
-            ak, bk = a[k], b[k]
-            x1 = ak * x1 + bk * x2 + u[k]
-            t = ak * p12 + bk * p22
-            p11 = ak * (ak * p11 + bk * p12) + bk * t + q11[k]
-            p12 = t + q12[k]
-            p22 = p22 + q22[k]
-        if store:
-            keep_p((x1, x2, p11, p12, p22))
-        yk = y[k]
-        if yk == yk:  # not NaN
-            s = p11 + r
-            e = yk - x1
-            k1 = p11 / s
-            k2 = p12 / s
-            x1 += k1 * e
-            x2 += k2 * e
-            p22 -= k2 * p12
-            p12 -= k1 * p12
-            p11 -= k1 * p11
-            innov[k] = e
-            svar[k] = s
-            if seen >= N_DIFFUSE:
-                m2ll += log2pi + log(s) + e * e / s
-            seen += 1
-        if store:
-            keep_f((x1, x2, p11, p12, p22))
-    return filt, pred, innov, svar, m2ll
+    x1, x2, x3, p11, p12, p13, p22, p23, p33 = s
+    # K = P- H^T / S = (P11, P12, P13) / S;  x+ = x- + K e;  P+ = P- - K K^T S
+    sv = p11 + r
+    e = y - x1
+    k1, k2, k3 = p11 / sv, p12 / sv, p13 / sv
+    return (
+        (
+            x1 + k1 * e,
+            x2 + k2 * e,
+            x3 + k3 * e,
+            p11 - k1 * p11,
+            p12 - k1 * p12,
+            p13 - k1 * p13,
+            p22 - k2 * p12,
+            p23 - k2 * p13,
+            p33 - k3 * p13,
+        ),
+        e,
+        sv,
+    )
 
 
-def rts_smoother(filtered, predicted, a, b):
-    """Rauch-Tung-Striebel smoother over the output of :func:`kalman_filter`.
+def rts_step(sf, sp, ss, f):
+    """One Rauch-Tung-Striebel step backwards, from row ``k+1`` to row ``k``.
 
-    Backwards from the last row, with ``F = [[a, b], [0, 1]]`` of the step ``k -> k+1``::
-
-        C_k = P_k|k F^T (P_k+1|k)^-1
-        x_k|N = x_k|k + C_k (x_k+1|N - x_k+1|k)
-        P_k|N = P_k|k + C_k (P_k+1|N - P_k+1|k) C_k^T
-
-    Returns arrays ``(x1, x2, p11, p12, p22)`` of the smoothed states and covariances.
+    ``sf``: filtered state of row ``k``; ``sp``: predicted state of row ``k+1``; ``ss``:
+    smoothed state of row ``k+1``; ``f``: ``F`` of the step ``k -> k+1``. Returns the
+    smoothed state of row ``k``.
     """
-    n = len(filtered)
-    out = [filtered[-1]] * n
-    x1, x2, p11, p12, p22 = filtered[-1]
-    for k in range(n - 2, -1, -1):
-        ak, bk = a[k + 1], b[k + 1]
-        fx1, fx2, f11, f12, f22 = filtered[k]
-        px1, px2, q11_, q12_, q22_ = predicted[k + 1]
-        # M = P_k|k F^T
-        m11 = f11 * ak + f12 * bk
-        m21 = f12 * ak + f22 * bk
-        # C = M (P_k+1|k)^-1
-        det = q11_ * q22_ - q12_ * q12_
-        c11 = (m11 * q22_ - f12 * q12_) / det
-        c12 = (f12 * q11_ - m11 * q12_) / det
-        c21 = (m21 * q22_ - f22 * q12_) / det
-        c22 = (f22 * q11_ - m21 * q12_) / det
-        d1 = x1 - px1
-        d2 = x2 - px2
-        x1 = fx1 + c11 * d1 + c12 * d2
-        x2 = fx2 + c21 * d1 + c22 * d2
-        e11 = p11 - q11_
-        e12 = p12 - q12_
-        e22 = p22 - q22_
-        # P = P_k|k + C E C^T
-        t11 = c11 * e11 + c12 * e12
-        t12 = c11 * e12 + c12 * e22
-        t21 = c21 * e11 + c22 * e12
-        t22 = c21 * e12 + c22 * e22
-        p11 = f11 + t11 * c11 + t12 * c12
-        p12 = f12 + t11 * c21 + t12 * c22
-        p22 = f22 + t21 * c21 + t22 * c22
-        out[k] = (x1, x2, p11, p12, p22)
-    arr = np.array(out, dtype=float)
-    return tuple(arr[:, i].copy() for i in range(5))
+    fx1, fx2, fx3, a11, a12, a13, a22, a23, a33 = sf
+    px1, px2, px3, b11, b12, b13, b22, b23, b33 = sp
+    sx1, sx2, sx3, c11, c12, c13, c22, c23, c33 = ss
+    f11, f12, f13, f22, f23 = f
+    # N = P_k|k F^T (columns: F's rows)
+    n11 = a11 * f11 + a12 * f12 + a13 * f13
+    n21 = a12 * f11 + a22 * f12 + a23 * f13
+    n31 = a13 * f11 + a23 * f12 + a33 * f13
+    n12 = a12 * f22 + a13 * f23
+    n22 = a22 * f22 + a23 * f23
+    n32 = a23 * f22 + a33 * f23
+    # (P_k+1|k)^-1 = adj / det (symmetric)
+    i11 = b22 * b33 - b23 * b23
+    i12 = b13 * b23 - b12 * b33
+    i13 = b12 * b23 - b13 * b22
+    i22 = b11 * b33 - b13 * b13
+    i23 = b12 * b13 - b11 * b23
+    i33 = b11 * b22 - b12 * b12
+    det = b11 * i11 + b12 * i12 + b13 * i13
+    # C = N (P_k+1|k)^-1   (N's third column is P_k|k's: a13, a23, a33)
+    g11 = (n11 * i11 + n12 * i12 + a13 * i13) / det
+    g12 = (n11 * i12 + n12 * i22 + a13 * i23) / det
+    g13 = (n11 * i13 + n12 * i23 + a13 * i33) / det
+    g21 = (n21 * i11 + n22 * i12 + a23 * i13) / det
+    g22 = (n21 * i12 + n22 * i22 + a23 * i23) / det
+    g23 = (n21 * i13 + n22 * i23 + a23 * i33) / det
+    g31 = (n31 * i11 + n32 * i12 + a33 * i13) / det
+    g32 = (n31 * i12 + n32 * i22 + a33 * i23) / det
+    g33 = (n31 * i13 + n32 * i23 + a33 * i33) / det
+    # x_k|N = x_k|k + C (x_k+1|N - x_k+1|k)
+    d1, d2, d3 = sx1 - px1, sx2 - px2, sx3 - px3
+    # P_k|N = P_k|k + C E C^T,  E = P_k+1|N - P_k+1|k;  T = C E
+    e11, e12, e13, e22, e23, e33 = c11 - b11, c12 - b12, c13 - b13, c22 - b22, c23 - b23, c33 - b33
+    t11 = g11 * e11 + g12 * e12 + g13 * e13
+    t12 = g11 * e12 + g12 * e22 + g13 * e23
+    t13 = g11 * e13 + g12 * e23 + g13 * e33
+    t21 = g21 * e11 + g22 * e12 + g23 * e13
+    t22 = g21 * e12 + g22 * e22 + g23 * e23
+    t23 = g21 * e13 + g22 * e23 + g23 * e33
+    t31 = g31 * e11 + g32 * e12 + g33 * e13
+    t32 = g31 * e12 + g32 * e22 + g33 * e23
+    t33 = g31 * e13 + g32 * e23 + g33 * e33
+    return (
+        fx1 + g11 * d1 + g12 * d2 + g13 * d3,
+        fx2 + g21 * d1 + g22 * d2 + g23 * d3,
+        fx3 + g31 * d1 + g32 * d2 + g33 * d3,
+        a11 + t11 * g11 + t12 * g12 + t13 * g13,
+        a12 + t11 * g21 + t12 * g22 + t13 * g23,
+        a13 + t11 * g31 + t12 * g32 + t13 * g33,
+        a22 + t21 * g21 + t22 * g22 + t23 * g23,
+        a23 + t21 * g31 + t22 * g32 + t23 * g33,
+        a33 + t31 * g31 + t32 * g32 + t33 * g33,
+    )
 
 
-# -- steady-state fast path (same results as kalman_filter + rts_smoother) ---------------
-#: Relative change of the filtered covariance below which the filter counts as steady.
-STEADY_RTOL = 1e-11
-#: Shortest run of equal steps with readings worth the vectorised steady-state path.
-MIN_STEADY_ROWS = 32
-
-
-def _lti(m, w1, w2, x_init):
+# -- the recursions over rows ------------------------------------------------------------
+def _lti(m, w, x_init):
     """``x_j = M x_{j-1} + w_j`` for ``j = 0..n-1`` from ``x_{-1} = x_init``, vectorised.
 
-    ``(I - M z^-1)^-1 = adj(I - M z^-1) / det``: each state is a sum of second-order IIR
-    filters (``scipy.signal.lfilter``) with denominator ``1 - tr(M) z^-1 + det(M) z^-2``;
-    the initial state enters as ``M x_init`` added to ``w_0``.
+    ``M`` is d x d (d = len(w) <= 3). Each state is a sum of IIR filters
+    (``scipy.signal.lfilter``) of the inputs: ``(I - M z^-1)^-1 = sum_k B_k z^-k / p(z)``,
+    ``p(z) = 1 + c_1 z^-1 + ... + c_d z^-d``, by Faddeev-LeVerrier (``B_0 = I``,
+    ``c_k = -tr(M B_k-1)/k``, ``B_k = M B_k-1 + c_k I``). The initial state enters as
+    ``M x_init`` added to ``w_0``.
     """
-    (m11, m12), (m21, m22) = m
-    w1 = np.array(w1, dtype=float)
-    w2 = np.array(w2, dtype=float)
-    w1[0] += m11 * x_init[0] + m12 * x_init[1]
-    w2[0] += m21 * x_init[0] + m22 * x_init[1]
-    den = [1.0, -(m11 + m22), m11 * m22 - m12 * m21]
-    x1 = lfilter([1.0, -m22], den, w1) + lfilter([0.0, m12], den, w2)
-    x2 = lfilter([0.0, m21], den, w1) + lfilter([1.0, -m11], den, w2)
-    return x1, x2
+    mm = np.array(m, dtype=float)
+    d = mm.shape[0]
+    ws = [np.array(wi, dtype=float) for wi in w]
+    first = mm @ np.asarray(x_init, dtype=float)
+    for i in range(d):
+        ws[i][0] += first[i]
+    b_k = np.eye(d)
+    num = [b_k]
+    den = [1.0]
+    for k in range(1, d + 1):
+        mb = mm @ b_k
+        c = -np.trace(mb) / k
+        den.append(c)
+        b_k = mb + c * np.eye(d)
+        if k < d:
+            num.append(b_k)
+    coef = np.stack(num + [np.zeros((d, d))])  # (d + 1, d, d): z^-k coefficients
+    out = [np.zeros(ws[0].size) for _ in range(d)]
+    for o in range(d):
+        for i in range(d):
+            out[o] += lfilter(coef[:, o, i], den, ws[i])
+    return out
 
 
-def _run_ends(b: np.ndarray, finite: np.ndarray) -> np.ndarray:
+def _filter_map(p, f, u, q, y, r, dim):
+    """``(M, w)`` of the filtered mean ``x_j = update(predict(x_j-1))`` at a fixed
+    covariance ``p`` (6 entries), over the first ``dim`` states: ``M`` is the step with
+    no input and no reading, ``w`` the step from ``x = 0`` with the inputs ``u`` and
+    readings ``y`` (arrays: one ``w`` per row)."""
+
+    def step(x, uu, yy):
+        return update(predict((*x, *p), f, uu, q), yy, r)[0][:dim]
+
+    cols = [step(tuple(float(i == j) for i in range(3)), 0.0, 0.0) for j in range(dim)]
+    return [[cols[j][i] for j in range(dim)] for i in range(dim)], step((0.0, 0.0, 0.0), u, y)
+
+
+def _smoother_map(fa, pa, f_cov, p_cov, f, dim):
+    """``(M, w)`` of the smoothed mean ``x_k|N = rts_step(x_k+1|N)`` at fixed covariances,
+    ``x_k|N = C x_k+1|N + (x_k|k - C x_k+1|k)`` over the first ``dim`` states: ``M = C``
+    from the step with zero filtered and predicted means, ``w`` from ``x_k+1|N = 0`` with
+    the means ``fa``, ``pa`` (filtered and predicted, (3, n): one column per step)."""
+
+    def step(sx, fx, px):
+        return rts_step((*fx, *f_cov), (*px, *p_cov), (*sx, *p_cov), f)[:dim]
+
+    zero = (0.0, 0.0, 0.0)
+    cols = [step(tuple(float(i == j) for i in range(3)), zero, zero) for j in range(dim)]
+    m = [[cols[j][i] for j in range(dim)] for i in range(dim)]
+    return m, step(zero, tuple(fa), tuple(pa))
+
+
+def _same_step(b: np.ndarray) -> np.ndarray:
+    """``same[k]``: row ``k``'s transition equals row ``k-1``'s (``b`` monotone in the step)."""
+    same = np.zeros(b.size, dtype=bool)
+    same[1:] = np.abs(b[1:] - b[:-1]) <= 1e-9 * np.abs(b[1:])
+    return same
+
+
+def _run_ends(same: np.ndarray, finite: np.ndarray) -> np.ndarray:
     """``end[k]``: last row of the run starting at ``k`` in which every row has a reading
-    and the same transition as the row before (``b`` is monotone in the step)."""
-    n = b.size
-    ok = finite.copy()
-    ok[0] = False
-    ok[1:] &= np.abs(b[1:] - b[:-1]) <= 1e-9 * np.abs(b[1:])
+    and the same transition as the row before."""
+    n = same.size
+    ok = finite & same
     bad = np.flatnonzero(~ok)
+    if bad.size == 0:
+        return np.full(n, n - 1)
     pos = np.searchsorted(bad, np.arange(n), side="left")
     nxt = np.where(pos < bad.size, bad[np.minimum(pos, bad.size - 1)], n)
     return nxt - 1
 
 
+def _nan_columns(m: int, k: int = 9) -> list[array]:
+    """``k`` arrays of ``m`` doubles, NaN."""
+    return [array("d", [math.nan]) * m for _ in range(k)]
+
+
+def _settled(new, old, rtol: float) -> bool:
+    """Covariance ``new`` equals ``old`` to ``rtol``, each entry relative to its scale
+    (``|p_ii|`` on the diagonal, ``sqrt(|p_ii p_jj|)`` off it)."""
+    n11, n12, n13, n22, n23, n33 = new
+    o11, o12, o13, o22, o23, o33 = old
+    s1, s2, s3 = rtol * abs(n11), rtol * abs(n22), rtol * abs(n33)
+    return (
+        abs(n11 - o11) <= s1
+        and abs(n22 - o22) <= s2
+        and abs(n33 - o33) <= s3
+        and (n12 - o12) ** 2 <= s1 * s2
+        and (n13 - o13) ** 2 <= s1 * s3
+        and (n23 - o23) ** 2 <= s2 * s3
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class _Rows:
+    """Filter inputs of rows ``lo..hi-1`` (row ``k``: the step into it): readings ``y``,
+    ``same`` (the step equals the previous one), input ``u`` on ``x1``; the distinct
+    transitions ``f`` (5, nf) and process noise ``q`` (6, nf) as in :func:`predict`, row
+    ``k`` using column ``idx[k]`` (a log has few distinct steps); ``dim`` states are
+    active (a two-state model leaves ``x3`` inert)."""
+
+    y: np.ndarray
+    same: np.ndarray
+    u: np.ndarray
+    f: np.ndarray
+    q: np.ndarray
+    idx: np.ndarray
+    dim: int
+
+    def step_lists(self) -> tuple[list[tuple], list[tuple], list[int]]:
+        """``(f columns, q columns, idx)`` as Python tuples and ints (for the loops)."""
+        fl = list(zip(*self.f.tolist(), strict=True))
+        ql = list(zip(*self.q.tolist(), strict=True))
+        return fl, ql, self.idx.tolist()
+
+    def f_at(self, k: int) -> tuple[float, ...]:
+        return tuple(self.f[:, self.idx[k]].tolist())
+
+
+@dataclass(frozen=True, slots=True)
+class _Carry:
+    """The forward pass between two rows; restarting from it repeats the pass exactly."""
+
+    state: tuple[float, ...]  # filtered (x1, x2, x3, p11, p12, p13, p22, p23, p33)
+    seen: int = 0  # finite readings so far (the first `dim` are not in the likelihood)
+    steady: bool = False  # the filtered covariance has converged under the current step
+    last_p: tuple[float, ...] = (math.nan,) * 6  # previous row's filtered covariance
+
+
+@dataclass(frozen=True, slots=True)
+class _Forward:
+    """Output of :func:`_forward` over ``m`` rows."""
+
+    filt: np.ndarray | None  # (9, m) filtered states; None if not stored
+    pred: np.ndarray | None  # (9, m) predicted
+    innov: np.ndarray  # (m,) innovations, NaN without a reading
+    svar: np.ndarray  # (m,) their variances
+    m2ll: float  # -2 log L of these rows
+    stretches: tuple[tuple[int, int], ...]  # (first, last) rows solved in steady state
+    carry: _Carry  # the state after the last row
+    # the same as doubles for the smoother's row-by-row steps: (filt, pred) as nine arrays
+    # each, filled on the rows stepped one by one, at each stretch's first (pred) and
+    # last (filt) row
+    cols: tuple[list[array], list[array]] | None = None
+
+
+def _forward(
+    carry: _Carry, rows: _Rows, r: float, *, offset: int, store: bool, fast: bool
+) -> _Forward:
+    """Kalman filter over ``m`` rows: :func:`predict` then :func:`update` on each.
+
+    Row ``k``'s ``f, u, q`` is the transition from row ``k-1`` (the row before the chunk
+    for ``k = 0``); at the log's first row (``offset == 0``) ``carry.state`` is the prior
+    and there is no prediction. A NaN ``y`` skips the update. With ``fast``, runs of at
+    least ``MIN_STEADY_ROWS`` rows with readings and an unchanged step, once the
+    covariance has converged (relative change < ``STEADY_RTOL``), are solved vectorised.
+    ``-2 log L`` sums ``log(2 pi S) + e^2/S`` over readings after the first ``dim`` (they
+    fix the diffuse prior).
+    """
+    y, u, dim = rows.y, rows.u, rows.dim
+    m = len(y)
+    yl, ul, samel = y.tolist(), u.tolist(), rows.same.tolist()
+    fu, qu, idx = rows.step_lists()
+    end: list[int] = _run_ends(rows.same, np.isfinite(y)).tolist() if fast else []
+    st = carry.state
+    seen, steady, last_p = carry.seen, carry.steady, carry.last_p
+    # stored states: one preallocated array of doubles per component
+    fcols = _nan_columns(m if store else 0)
+    pcols = _nan_columns(m if store else 0)
+    f0, f1, f2, f3, f4, f5, f6, f7, f8 = fcols
+    g0, g1, g2, g3, g4, g5, g6, g7, g8 = pcols
+    stretch_states = []
+    # innovations and their variances (NaN: no reading), row by row into the doubles,
+    # stretches through numpy views of the same memory
+    innov_d, svar_d = array("d", [math.nan]) * m, array("d", [math.nan]) * m
+    innov, svar = np.frombuffer(innov_d), np.frombuffer(svar_d)
+    m2ll = 0.0
+    log2pi = math.log(2.0 * math.pi)
+    log = math.log
+    stretches = []
+    k = 0
+    while k < m:
+        if fast and steady and seen >= dim and end[k] - k + 1 >= MIN_STEADY_ROWS:
+            # steady state: P-, S, K and P+ are those of row k on every row to k1, so the
+            # means follow x_j = M x_j-1 + w_j with M and w from the same predict/update
+            k1 = end[k]
+            fk, qk = fu[idx[k]], qu[idx[k]]
+            ys, us = y[k : k1 + 1], u[k : k1 + 1]
+            p = st[3:]
+            mm, w = _filter_map(p, fk, us, qk, ys, r, dim)
+            xf = _lti(mm, w, st[:dim])
+            xf += [np.full(ys.size, st[i]) for i in range(dim, 3)]  # inert states stay
+            prev = [np.concatenate(([st[i]], xf[i][:-1])) for i in range(3)]
+            sp = predict((*prev, *p), fk, us, qk)
+            sf, e, s = update(sp, ys, r)
+            innov[k : k1 + 1] = e
+            svar[k : k1 + 1] = s
+            m2ll += float(np.sum(e * e)) / s + e.size * (log2pi + log(s))
+            seen += e.size
+            st = (*(float(v[-1]) for v in xf), *sf[3:])
+            if store:
+                stretch_states.append((k, k1, (*sp[:3], *sp[3:]), (*xf, *sf[3:])))
+                for i in range(9):
+                    pcols[i][k] = float(np.ravel(sp[i])[0])
+                    fcols[i][k1] = st[i]
+            last_p = st[3:]
+            stretches.append((k, k1))
+            k = k1 + 1
+            continue
+        if k or offset:
+            i = idx[k]
+            st = predict(st, fu[i], ul[k], qu[i])
+        if store:
+            (g0[k], g1[k], g2[k], g3[k], g4[k], g5[k], g6[k], g7[k], g8[k]) = st
+        yk = yl[k]
+        if yk == yk:  # not NaN
+            st, e, s = update(st, yk, r)
+            innov_d[k] = e
+            svar_d[k] = s
+            if seen >= dim:
+                m2ll += log2pi + log(s) + e * e / s
+            seen += 1
+            if not samel[k]:
+                steady = False
+            elif not (offset + k) & 15:  # test convergence every 16th row (<= 16 rows late)
+                steady = _settled(st[3:], last_p, STEADY_RTOL)
+            last_p = st[3:]
+        else:
+            steady = False
+            last_p = (math.nan,) * 6
+        if store:
+            (f0[k], f1[k], f2[k], f3[k], f4[k], f5[k], f6[k], f7[k], f8[k]) = st
+        k += 1
+    out = _Carry(tuple(st), seen, steady, tuple(last_p))
+    if not store:
+        return _Forward(None, None, innov, svar, m2ll, tuple(stretches), out)
+    filt = np.vstack([np.frombuffer(c) for c in fcols])
+    pred = np.vstack([np.frombuffer(c) for c in pcols])
+    for k, k1, ps, fs in stretch_states:
+        for i in range(9):
+            pred[i, k : k1 + 1] = ps[i]
+            filt[i, k : k1 + 1] = fs[i]
+    return _Forward(filt, pred, innov, svar, m2ll, tuple(stretches), out, (fcols, pcols))
+
+
+def _backward(filt, pred, cols, rows, stretches, nxt, *, fast) -> np.ndarray:
+    """RTS smoother over ``m`` rows: :func:`rts_step` from the last row back to the first.
+
+    ``filt``, ``pred`` (9, m) and ``cols`` come from :func:`_forward` (``cols``: the same
+    as doubles where the rows are stepped one by one); ``rows`` (:class:`_Rows`) gives
+    each row's step into it. ``nxt`` is None when the rows end the log (the last row's smoothed
+    state is its filtered one), else ``(smoothed, predicted, f)`` of the row after them.
+    With ``fast``, the rows of a steady stretch share ``P_k|k``, ``P_k+1|k`` and ``F``,
+    hence the gain ``C``: their means are solved vectorised, their covariance iterated
+    only until it stops changing. Returns (9, m) smoothed states.
+    """
+    m = filt.shape[1]
+    fcols, pcols = cols
+    f0, f1, f2, f3, f4, f5, f6, f7, f8 = fcols
+    g0, g1, g2, g3, g4, g5, g6, g7, g8 = pcols
+    fu, _, idx = rows.step_lists()
+    dim = rows.dim
+    ocols = _nan_columns(m)
+    o0, o1, o2, o3, o4, o5, o6, o7, o8 = ocols
+    stretch_out = []
+    k = m - 1
+    if nxt is None:
+        cur = tuple(c[k] for c in fcols)
+    else:  # the last row of a chunk is never inside a stretch's shared-gain range
+        s_next, p_next, f_next = nxt
+        cur = rts_step(tuple(c[k] for c in fcols), p_next, s_next, f_next)
+    for i in range(9):
+        ocols[i][k] = cur[i]
+    k -= 1
+    starts = {k1: k0 for k0, k1 in stretches} if fast else {}
+    while k >= 0:
+        k0 = starts.get(k + 1)
+        if k0 is None or k0 >= k:  # a plain row
+            j = k + 1
+            cur = rts_step(
+                (f0[k], f1[k], f2[k], f3[k], f4[k], f5[k], f6[k], f7[k], f8[k]),
+                (g0[j], g1[j], g2[j], g3[j], g4[j], g5[j], g6[j], g7[j], g8[j]),
+                cur,
+                fu[idx[j]],
+            )
+            (o0[k], o1[k], o2[k], o3[k], o4[k], o5[k], o6[k], o7[k], o8[k]) = cur
+            k -= 1
+            continue
+        # rows k0..k of a steady stretch: x_j|N = C x_j+1|N + (x_j|j - C x_j+1|j)
+        lo = k0
+        f_cov = tuple(filt[3:, k].tolist())
+        p_cov = tuple(pred[3:, k + 1].tolist())
+        fk = fu[idx[k + 1]]
+        fa = filt[:3, lo : k + 1][:, ::-1]  # rows k, k-1, ..., lo
+        pa = pred[:3, lo + 1 : k + 2][:, ::-1]  # rows k+1, ..., lo+1 (ends in its chunk)
+        mm, w = _smoother_map(fa, pa, f_cov, p_cov, fk, dim)
+        xs = _lti(mm, w, cur[:dim])
+        xs += [np.full(fa.shape[1], cur[i]) for i in range(dim, 3)]  # inert states stay
+        # covariance: P_j|N = P_j|j + C (P_j+1|N - P_j+1|j) C^T, constant once it settles
+        p_s = cur[3:]
+        covs = []
+        j = k
+        zero = (0.0, 0.0, 0.0)
+        while j >= lo:
+            new = rts_step((*zero, *f_cov), (*zero, *p_cov), (*zero, *p_s), fk)[3:]
+            fixed = _settled(new, p_s, SMOOTHED_RTOL)
+            p_s = new
+            covs.append(new)
+            j -= 1
+            if fixed:
+                break
+        stretch_out.append((lo, k, [v[::-1] for v in xs], j, covs[::-1], p_s))
+        cur = (*(float(v[-1]) for v in xs), *p_s)
+        k = lo - 1
+    out = np.vstack([np.frombuffer(c) for c in ocols])
+    for lo, k, xs, j, covs, settled in stretch_out:
+        for i in range(3):
+            out[i, lo : k + 1] = xs[i]
+        out[3:, j + 1 : k + 1] = np.array(covs).T  # rows j+1..k stepped one by one
+        if j >= lo:
+            out[3:, lo : j + 1] = np.array(settled)[:, None]  # the rest at the settled value
+    return out
+
+
+def _embed(a, b, u, q11, q12, q22):
+    """A two-state transition ``F = [[a, b], [0, 1]]``, ``Q = [[q11, q12], [q12, q22]]``
+    as the three-state ``(f, u, q)`` of :func:`predict` (``x3`` inert)."""
+    a = np.asarray(a, dtype=float)
+    zero, one = np.zeros_like(a), np.ones_like(a)
+    f = np.vstack([a, np.asarray(b, dtype=float), zero, one, zero])
+    qq = np.vstack([np.asarray(v, dtype=float) for v in (q11, q12, zero, q22, zero, zero)])
+    return f, np.asarray(u, dtype=float), qq
+
+
+def _two_state(arr: np.ndarray) -> np.ndarray:
+    """(x1, x2, p11, p12, p22) rows of (9, m) three-state results, as (m, 5)."""
+    return arr[[0, 1, 3, 4, 6]].T.copy()
+
+
+def _prior(x0, p0) -> _Carry:
+    """Prior of a two-state model (``x0 = (T, x2)``, ``p0 = (p11, p12, p22)``)."""
+    return _Carry(
+        (float(x0[0]), float(x0[1]), 0.0, float(p0[0]), float(p0[1]), 0.0, float(p0[2]), 0.0, 1.0)
+    )
+
+
+def kalman_filter(y, a, b, u, q11, q12, q22, r, x0, p0, *, store=True):
+    """Kalman filter for ``x' = [[a, b], [0, 1]] x + [u, 0] + w``, ``y = x[0] + v``.
+
+    The plain row-by-row path (:func:`predict`, :func:`update` on every row). Row ``k``
+    of ``a, b, u, q..`` is the transition from row ``k-1`` to ``k`` (row 0 is unused).
+    ``x0 = (T, d)`` and ``p0 = (p11, p12, p22)`` are the prior at row 0. A NaN ``y``
+    skips the update. Returns ``(filtered, predicted, innovations, innovation variances,
+    -2 log-likelihood)``; ``filtered``/``predicted`` are ``(n, 5)`` arrays of ``(x1, x2,
+    p11, p12, p22)`` per row (None when ``store`` is False: likelihood only).
+    """
+    yy = np.asarray(y, dtype=float)
+    f, uu, qq = _embed(a, b, u, q11, q12, q22)
+    rows = _Rows(yy, _same_step(f[1]), uu, f, qq, np.arange(yy.size), 2)
+    fwd = _forward(_prior(x0, p0), rows, r, offset=0, store=store, fast=False)
+    if fwd.filt is None or fwd.pred is None:
+        return None, None, fwd.innov, fwd.svar, fwd.m2ll
+    return _two_state(fwd.filt), _two_state(fwd.pred), fwd.innov, fwd.svar, fwd.m2ll
+
+
+def rts_smoother(filtered, predicted, a, b):
+    """Rauch-Tung-Striebel smoother over the output of :func:`kalman_filter`.
+
+    The plain path (:func:`rts_step` on every row). Returns arrays ``(x1, x2, p11, p12,
+    p22)`` of the smoothed states and covariances.
+    """
+
+    def three(two):
+        t = np.asarray(two, dtype=float).T
+        z, o = np.zeros(t.shape[1]), np.ones(t.shape[1])
+        return np.vstack([t[0], t[1], z, t[2], t[3], z, t[4], z, o])
+
+    filt, pred = three(filtered), three(predicted)
+    n = filt.shape[1]
+    f, u, qq = _embed(a, b, np.zeros(n), *(np.zeros(n),) * 3)
+    rows = _Rows(np.zeros(n), np.zeros(n, dtype=bool), u, f, qq, np.arange(n), 2)
+    cols = ([array("d", c.tobytes()) for c in filt], [array("d", c.tobytes()) for c in pred])
+    out = _backward(filt, pred, cols, rows, (), None, fast=False)
+    return tuple(out[i].copy() for i in (0, 1, 3, 4, 6))
+
+
 def filter_smooth(y, a, b, u, q11, q12, q22, r, x0, p0, *, smooth=True):
-    """:func:`kalman_filter` then :func:`rts_smoother`, with a steady-state fast path.
+    """:func:`kalman_filter` then :func:`rts_smoother`, with the steady-state fast path.
 
     Where the sampling step stays constant and every row has a reading, the filter's
     covariance converges; once its relative change is below ``STEADY_RTOL`` the gain,
     the covariances and the smoother gain ``C`` stay constant and the mean recursions are
-    linear time-invariant (forwards ``x_k = (I - K H) F x_k-1 + (I - K H)[u_k, 0] +
-    K y_k``, backwards ``x_k|N = C x_k+1|N + x_k|k - C x_k+1|k``), solved vectorised by
-    :func:`_lti`. Elsewhere (start-up, NaN rows, gaps, irregular steps) the plain scalar
-    recursions run. Results equal the plain path to ~1e-8 relative (tested).
+    linear time-invariant, solved vectorised by :func:`_lti` (with the same
+    :func:`predict`/:func:`update`/:func:`rts_step` evaluated on arrays). Elsewhere
+    (start-up, NaN rows, gaps, irregular steps) the rows are stepped one by one. Results
+    equal the plain path to ~1e-8 relative (tested).
 
     Arguments are numpy arrays (``y`` NaN where there is no reading). Returns
     ``(x1, x2, p11, p12, p22, innovations, innovation variances, -2 log L)`` as arrays
     (the first five None when ``smooth`` is False: the filter's likelihood only).
     """
-    y = np.asarray(y, dtype=float)
-    b = np.asarray(b, dtype=float)
-    n = y.size
-    end = _run_ends(b, np.isfinite(y)).tolist()
-    same = np.zeros(n, dtype=bool)
-    same[1:] = np.abs(b[1:] - b[:-1]) <= 1e-9 * np.abs(b[1:])
-    samel = same.tolist()
-    yl, al, bl, ul = y.tolist(), a.tolist(), b.tolist(), u.tolist()
-    q11l, q12l, q22l = q11.tolist(), q12.tolist(), q22.tolist()
-    x1, x2 = float(x0[0]), float(x0[1])
-    p11, p12, p22 = (float(v) for v in p0)
-    filt = np.empty((n, 5))
-    pred = np.empty((n, 5))
-    # plain rows are collected in lists and written into the arrays in bulk
-    rows_l: list[int] = []
-    filt_l: list[tuple] = []
-    pred_l: list[tuple] = []
-    innov_l: list[tuple] = []
-    innov = np.full(n, np.nan)
-    svar = np.full(n, np.nan)
-    m2ll = 0.0
-    seen = 0
-    log2pi = math.log(2.0 * math.pi)
-    steady = False  # the filtered covariance has converged under the current step
-    o11 = o12 = o22 = math.nan  # the previous row's filtered covariance
-    stretches = []  # (first_row, last_row) run in steady state
-    k = 0
-    while k < n:
-        if steady and end[k] - k + 1 >= MIN_STEADY_ROWS and seen >= N_DIFFUSE:
-            k1 = end[k]
-            ak, bk = al[k], bl[k]
-            t = ak * p12 + bk * p22
-            pp11 = ak * (ak * p11 + bk * p12) + bk * t + q11l[k]
-            pp12 = t + q12l[k]
-            pp22 = p22 + q22l[k]
-            s = pp11 + r
-            g1, g2 = pp11 / s, pp12 / s
-            m = ((1.0 - g1) * ak, (1.0 - g1) * bk), (-g2 * ak, 1.0 - g2 * bk)
-            ys, us = y[k : k1 + 1], u[k : k1 + 1]
-            # filtered means of the stretch: x_j = M x_j-1 + (I - K H)[u_j, 0] + K y_j
-            xf1, xf2 = _lti(m, (1.0 - g1) * us + g1 * ys, g2 * (ys - us), (x1, x2))
-            prev1 = np.concatenate(([x1], xf1[:-1]))
-            prev2 = np.concatenate(([x2], xf2[:-1]))
-            xp1 = ak * prev1 + bk * prev2 + us
-            e = ys - xp1
-            innov[k : k1 + 1] = e
-            svar[k : k1 + 1] = s
-            m2ll += float(np.sum(e * e)) / s + e.size * (log2pi + math.log(s))
-            seen += e.size
-            p11, p12, p22 = pp11 - g1 * pp11, pp12 - g1 * pp12, pp22 - g2 * pp12
-            if smooth:
-                pred[k : k1 + 1, 0] = xp1
-                pred[k : k1 + 1, 1] = prev2
-                pred[k : k1 + 1, 2:] = (pp11, pp12, pp22)
-                filt[k : k1 + 1, 0] = xf1
-                filt[k : k1 + 1, 1] = xf2
-                filt[k : k1 + 1, 2:] = (p11, p12, p22)
-            x1, x2 = float(xf1[-1]), float(xf2[-1])
-            o11, o12, o22 = p11, p12, p22
-            stretches.append((k, k1))
-            k = k1 + 1
-            continue
-        if k:
-            ak, bk = al[k], bl[k]
-            x1 = ak * x1 + bk * x2 + ul[k]
-            t = ak * p12 + bk * p22
-            p11 = ak * (ak * p11 + bk * p12) + bk * t + q11l[k]
-            p12 = t + q12l[k]
-            p22 = p22 + q22l[k]
-        if smooth:
-            pred_l.append((x1, x2, p11, p12, p22))
-        yk = yl[k]
-        if yk == yk:
-            s = p11 + r
-            e = yk - x1
-            g1 = p11 / s
-            g2 = p12 / s
-            x1 += g1 * e
-            x2 += g2 * e
-            p22 -= g2 * p12
-            p12 -= g1 * p12
-            p11 -= g1 * p11
-            innov_l.append((k, e, s))
-            if seen >= N_DIFFUSE:
-                m2ll += log2pi + math.log(s) + e * e / s
-            seen += 1
-            if not samel[k]:
-                steady = False
-            elif not k & 15:  # test convergence every 16th row (cheap, <= 16 rows late)
-                scale = STEADY_RTOL * (abs(p11) + abs(p22))
-                steady = (
-                    abs(p11 - o11) <= scale and abs(p12 - o12) <= scale and abs(p22 - o22) <= scale
-                )
-            o11, o12, o22 = p11, p12, p22
-        else:
-            steady = False
-            o11 = o12 = o22 = math.nan
-        if smooth:
-            filt_l.append((x1, x2, p11, p12, p22))
-            rows_l.append(k)
-        k += 1
-    if rows_l:
-        filt[rows_l] = filt_l
-        pred[rows_l] = pred_l
-    if innov_l:
-        ik, ie, isv = zip(*innov_l, strict=True)
-        innov[list(ik)] = ie
-        svar[list(ik)] = isv
-    if not smooth:
-        return None, None, None, None, None, innov, svar, m2ll
-    # -- backwards: rows k0 .. k1-1 of a stretch share P_k|k, P_k+1|k, F, hence C -------
-    starts = {k1: k0 for k0, k1 in stretches}
-    out = np.empty((n, 5))
-    out[-1] = filt[-1]
-    pos = np.full(n, -1, dtype=np.int64)
-    pos[rows_l] = np.arange(len(rows_l))
-    posl = pos.tolist()  # where a plain row sits in filt_l / pred_l (-1: a stretch row)
-    done_rows: list[int] = []
-    done_vals: list[tuple] = []
-    x1, x2, p11, p12, p22 = filt[-1].tolist()
-    k = n - 2
-    while k >= 0:
-        ak, bk = al[k + 1], bl[k + 1]
-        i = posl[k]
-        fx1, fx2, f11, f12, f22 = filt_l[i] if i >= 0 else filt[k].tolist()
-        i = posl[k + 1]
-        px1, px2, q11_, q12_, q22_ = pred_l[i] if i >= 0 else pred[k + 1].tolist()
-        m11 = f11 * ak + f12 * bk
-        m21 = f12 * ak + f22 * bk
-        det = q11_ * q22_ - q12_ * q12_
-        c11 = (m11 * q22_ - f12 * q12_) / det
-        c12 = (f12 * q11_ - m11 * q12_) / det
-        c21 = (m21 * q22_ - f22 * q12_) / det
-        c22 = (f22 * q11_ - m21 * q12_) / det
-        k0 = starts.get(k + 1)
-        lo = k if k0 is None or k0 > k else k0  # rows lo..k use this C
-        if lo < k:
-            fa = filt[lo : k + 1][::-1]  # rows k, k-1, ..., lo
-            pa = pred[lo + 1 : k + 2][::-1]  # rows k+1, ..., lo+1
-            r1 = fa[:, 0] - c11 * pa[:, 0] - c12 * pa[:, 1]
-            r2 = fa[:, 1] - c21 * pa[:, 0] - c22 * pa[:, 1]
-            s1, s2 = _lti(((c11, c12), (c21, c22)), r1, r2, (x1, x2))
-            out[lo : k + 1, 0] = s1[::-1]
-            out[lo : k + 1, 1] = s2[::-1]
-            x1, x2 = float(s1[-1]), float(s2[-1])
-        if lo == k:  # a plain row
-            e11, e12, e22 = p11 - q11_, p12 - q12_, p22 - q22_
-            t11 = c11 * e11 + c12 * e12
-            t12 = c11 * e12 + c12 * e22
-            t21 = c21 * e11 + c22 * e12
-            t22 = c21 * e12 + c22 * e22
-            p11 = f11 + t11 * c11 + t12 * c12
-            p12 = f12 + t11 * c21 + t12 * c22
-            p22 = f22 + t21 * c21 + t22 * c22
-            d1 = x1 - px1
-            d2 = x2 - px2
-            x1 = fx1 + c11 * d1 + c12 * d2
-            x2 = fx2 + c21 * d1 + c22 * d2
-            done_rows.append(k)
-            done_vals.append((x1, x2, p11, p12, p22))
-            k -= 1
-            continue
-        # covariance: P_j|N = P_f + C (P_j+1|N - P_p) C^T, constant once it stops changing
-        j = k
-        while j >= lo:
-            e11, e12, e22 = p11 - q11_, p12 - q12_, p22 - q22_
-            t11 = c11 * e11 + c12 * e12
-            t12 = c11 * e12 + c12 * e22
-            t21 = c21 * e11 + c22 * e12
-            t22 = c21 * e12 + c22 * e22
-            n11 = f11 + t11 * c11 + t12 * c12
-            n12 = f12 + t11 * c21 + t12 * c22
-            n22 = f22 + t21 * c21 + t22 * c22
-            scale = 1e-14 * (abs(n11) + abs(n22))
-            fixed = abs(n11 - p11) <= scale and abs(n12 - p12) <= scale and abs(n22 - p22) <= scale
-            p11, p12, p22 = n11, n12, n22
-            if fixed:
-                out[lo : j + 1, 2:] = (p11, p12, p22)
-                break
-            out[j, 2:] = (p11, p12, p22)
-            j -= 1
-        k = lo - 1
-    if done_rows:
-        out[done_rows] = done_vals
-    return (
-        out[:, 0].copy(),
-        out[:, 1].copy(),
-        out[:, 2].copy(),
-        out[:, 3].copy(),
-        out[:, 4].copy(),
-        innov,
-        svar,
-        m2ll,
-    )
+    yy = np.asarray(y, dtype=float)
+    f, uu, qq = _embed(a, b, u, q11, q12, q22)
+    rows = _Rows(yy, _same_step(f[1]), uu, f, qq, np.arange(yy.size), 2)
+    fwd = _forward(_prior(x0, p0), rows, r, offset=0, store=smooth, fast=True)
+    if not smooth or fwd.filt is None or fwd.pred is None or fwd.cols is None:
+        return None, None, None, None, None, fwd.innov, fwd.svar, fwd.m2ll
+    out = _backward(fwd.filt, fwd.pred, fwd.cols, rows, fwd.stretches, None, fast=True)
+    return (*(out[i].copy() for i in (0, 1, 3, 4, 6)), fwd.innov, fwd.svar, fwd.m2ll)
 
 
 # -- quantisation and noise levels ---------------------------------------------------------
@@ -519,69 +756,220 @@ def _check_level(name: str, value: float | None, unit: str) -> float | None:
     return v
 
 
-# -- the models as transition builders -----------------------------------------------------
+# -- the models as row sources --------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
 class _Setup:
-    """Everything the filter needs except the noise levels (time in minutes)."""
+    """Everything the filter needs except the noise levels, computed chunk by chunk.
 
-    t_min: np.ndarray
+    ``time_s``, ``y`` and ``chamber_c`` are the log's arrays (not copied); ``model`` is
+    None for a kinematic model of ``order`` 2 (gradient a random walk) or 3 (its rate a
+    random walk); ``u_merged`` replaces the chamber input of a strided copy (the exact
+    input over each merged step).
+    """
+
+    time_s: np.ndarray
     y: np.ndarray
-    h_min: np.ndarray  # h[k] = t[k] - t[k-1], h[0] = 0 (unused)
-    u: np.ndarray
-    tau_min: float | None  # None: kinematic model
-    x0: tuple[float, float]
+    model: FirstOrderLag | None
+    chamber_c: np.ndarray | None = None
+    u_merged: np.ndarray | None = None
+    order: int = 3
 
-    def transition(self, q: float):
-        if self.tau_min is None:
-            return kinematic_transition(self.h_min, q)
-        return lag_transition(self.h_min, self.tau_min, q)
+    @property
+    def n(self) -> int:
+        return int(self.y.size)
+
+    @property
+    def dim(self) -> int:
+        """Active states: 3 for the order-3 kinematic model, else 2."""
+        return 3 if self.model is None and self.order == 3 else 2
+
+    def prior(self) -> _Carry:
+        """Diffuse prior at the first row: T at the first reading, the rest 0."""
+        t0 = float(self.y[int(np.argmax(np.isfinite(self.y)))])
+        pt, pg, pa = PRIOR_T_STD_C**2, PRIOR_G_STD_C_PER_MIN**2, PRIOR_A_STD_C_PER_MIN2**2
+        p33 = pa if self.dim == 3 else 1.0  # an inert third state keeps variance 1
+        return _Carry((t0, 0.0, 0.0, pt, 0.0, 0.0, pg, 0.0, p33))
+
+    def steps(self, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(h_min, same, u)`` of rows ``lo..hi-1`` (``h = 0``, ``u = 0`` at row 0).
+
+        ``same[k]``: the step into row ``k`` equals the step into row ``k-1`` up to the
+        rounding of the logged times (the steady-state path may then share one transition).
+        """
+        a0 = max(lo - 1, 0)  # the steps of rows a0..hi-1 are needed for `same`
+        t = self.time_s[max(a0 - 1, 0) : hi] / 60.0
+        h_ext = np.diff(t) if a0 > 0 else np.concatenate(([0.0], np.diff(t)))
+        t_rows = self.time_s[a0 + 1 : hi] / 60.0
+        tol = 1e-9 * h_ext[1:] + 8.0 * np.finfo(float).eps * np.abs(t_rows)
+        same_ext = np.concatenate(([False], np.abs(np.diff(h_ext)) <= tol))
+        h, same = (h_ext[1:], same_ext[1:]) if lo > 0 else (h_ext, same_ext)
+        u = np.zeros(h.size)
+        if self.u_merged is not None:
+            u = self.u_merged[lo:hi].copy()
+        elif self.model is not None:
+            assert self.chamber_c is not None  # set with the model
+            first = 1 if lo == 0 else 0
+            tk = self.chamber_c
+            u[first:] = lag_input(
+                h[first:], tk[lo - 1 + first : hi - 1], tk[lo + first : hi], self.model
+            )
+        return h, same, u
+
+    def rows(self, lo: int, hi: int, q: float) -> _Rows:
+        h_rows, same, u = self.steps(lo, hi)
+        h, idx = np.unique(h_rows, return_inverse=True)  # the distinct steps
+        if self.model is not None:
+            a, b, q11, q12, q22 = lag_transition(h, self.model, q)
+            f, _, qq = _embed(a, b, 0.0, q11, q12, q22)
+        elif self.order == 2:
+            a, b, q11, q12, q22 = kinematic_transition(h, q)
+            f, _, qq = _embed(a, b, 0.0, q11, q12, q22)
+        else:
+            f, qq = jerk_transition(h, q)
+        return _Rows(self.y[lo:hi], same, u, f, qq, idx.reshape(-1), self.dim)
 
     def stride(self, step: int) -> _Setup:
         """Every ``step``-th row, with exact transitions over the merged steps."""
         if step <= 1:
             return self
-        idx = np.arange(0, self.t_min.size, step)
-        t = self.t_min[idx]
-        h = np.concatenate(([0.0], np.diff(t)))
-        u = np.zeros_like(t)
-        if self.tau_min is not None:
-            # compose T' = e T + u over the fine steps in each coarse step:
+        idx = np.arange(0, self.n, step)
+        u = None
+        if self.model is not None:
+            # compose T' = e T + u over the fine steps of each coarse step:
             # u_c = sum_j u_j prod_{i > j} e_i  (exact for the chamber-driven part)
-            cum = np.cumsum(-self.h_min / self.tau_min)  # log prod e_i
-            fine = np.arange(1, idx[-1] + 1)
-            chunk = np.searchsorted(idx, fine, side="left")  # coarse step of each fine one
-            w = self.u[fine] * np.exp(cum[idx[chunk]] - cum[fine])
-            u = np.bincount(chunk, weights=w, minlength=idx.size)
-        return _Setup(t, self.y[idx], h, u, self.tau_min, self.x0)
+            u = np.zeros(idx.size)
+            group = max(1, CHUNK_ROWS // step) * step  # whole coarse steps per chunk
+            for lo in range(1, int(idx[-1]) + 1, group):
+                hi = min(lo + group, int(idx[-1]) + 1)
+                h, _, uf = self.steps(lo, hi)
+                log_e = np.log1p(-self.model.step(h))  # log e_i
+                cum = np.cumsum(log_e)
+                rows = np.arange(lo, hi)
+                coarse = (rows + step - 1) // step  # coarse step of each fine row
+                last = coarse * step - lo  # its last fine row, local
+                w = uf * np.exp(cum[last] - cum[rows - lo])
+                u += np.bincount(coarse, weights=w, minlength=idx.size)[: idx.size]
+        return _Setup(self.time_s[idx], self.y[idx], self.model, None, u, self.order)
 
 
-def _prior(x0):
-    return x0, (PRIOR_T_STD_C**2, 0.0, PRIOR_G_STD_C_PER_MIN**2)
+def _chunks(n: int) -> list[tuple[int, int]]:
+    return [(lo, min(lo + CHUNK_ROWS, n)) for lo in range(0, n, CHUNK_ROWS)]
 
 
-def _run(setup: _Setup, q: float, r: float, smooth: bool):
-    """:func:`filter_smooth` of ``setup`` at noise levels ``(q, r)``."""
-    a, b, q11, q12, q22 = setup.transition(q)
-    x0, p0 = _prior(setup.x0)
-    return filter_smooth(setup.y, a, b, setup.u, q11, q12, q22, r, x0, p0, smooth=smooth)
+def _likelihood(setup: _Setup, q: float, r: float, unit: _Rows | None = None) -> float:
+    """``-2 log L`` of the innovations (the filter only, chunk by chunk). ``unit``: the
+    setup's rows at ``q = 1`` when it is one chunk (every model's ``Q`` is ``q`` times a
+    matrix of the steps alone, so the noise search builds the transitions once)."""
+    carry = setup.prior()
+    if unit is not None:
+        rows = dataclasses.replace(unit, q=q * unit.q)
+        return _forward(carry, rows, r, offset=0, store=False, fast=True).m2ll
+    m2ll = 0.0
+    for lo, hi in _chunks(setup.n):
+        fwd = _forward(carry, setup.rows(lo, hi, q), r, offset=lo, store=False, fast=True)
+        m2ll += fwd.m2ll
+        carry = fwd.carry
+    return m2ll
 
 
-def _fit_noise(setup: _Setup, q: float | None, r: float | None, quant_c: float) -> NoiseLevels:
+def _smooth(setup: _Setup, q: float, r: float, keep: np.ndarray | None, emit, progress):
+    """Filter and smooth ``setup`` in chunks; ``emit(rows, smoothed, innov, svar)`` gets
+    the kept rows (global indices or a slice) of each chunk, last chunk first. Returns
+    -2 log L.
+
+    Forward: the filter over every chunk, keeping its state at each chunk start.
+    Backward: each chunk re-filtered from its checkpoint (kept outright when the log is
+    one chunk), then smoothed from the next chunk's first smoothed row.
+    """
+    bounds = _chunks(setup.n)
+    single = len(bounds) == 1
+    carry = setup.prior()
+    checkpoints = []
+    kept_fwd: tuple[_Rows, _Forward] | None = None
+    innov_parts = []
+    m2ll = 0.0
+    for lo, hi in bounds:
+        rw = setup.rows(lo, hi, q)
+        checkpoints.append(carry)
+        fwd = _forward(carry, rw, r, offset=lo, store=single, fast=True)
+        if single:
+            kept_fwd = (rw, fwd)
+        sel = _kept(keep, lo, hi)
+        innov_parts.append((fwd.innov[sel], fwd.svar[sel]))
+        m2ll += fwd.m2ll
+        carry = fwd.carry
+        if progress is not None:
+            progress("filter", hi, setup.n)
+    nxt = None
+    for (lo, hi), cp, (inn, sv) in zip(
+        reversed(bounds), reversed(checkpoints), reversed(innov_parts), strict=True
+    ):
+        if kept_fwd is not None:
+            rw, fwd = kept_fwd
+        else:
+            rw = setup.rows(lo, hi, q)
+            fwd = _forward(cp, rw, r, offset=lo, store=True, fast=True)
+        assert fwd.filt is not None and fwd.pred is not None and fwd.cols is not None
+        sm = _backward(fwd.filt, fwd.pred, fwd.cols, rw, fwd.stretches, nxt, fast=True)
+        nxt = (tuple(sm[:, 0].tolist()), tuple(fwd.pred[:, 0].tolist()), rw.f_at(0))
+        sel = _kept(keep, lo, hi)
+        emit(_global(sel, lo), sm[:, sel], inn, sv)
+        if progress is not None:
+            progress("smoother", setup.n - lo, setup.n)
+    return m2ll
+
+
+def _kept(keep: np.ndarray | None, lo: int, hi: int) -> np.ndarray | slice:
+    """Local indices (within rows ``lo..hi-1``) of the kept rows; a slice when all are."""
+    if keep is None:
+        return slice(0, hi - lo)
+    return keep[np.searchsorted(keep, lo) : np.searchsorted(keep, hi)] - lo
+
+
+def _global(sel: np.ndarray | slice, lo: int) -> np.ndarray | slice:
+    if isinstance(sel, slice):
+        return slice(lo + sel.start, lo + sel.stop)
+    return sel + lo
+
+
+def _second_difference_var(y: np.ndarray) -> tuple[float, int]:
+    """Variance and count of the second differences of the finite readings (chunked)."""
+    tail = np.zeros(0)
+    n = 0
+    s1 = s2 = 0.0
+    for lo, hi in _chunks(y.size):
+        yf = y[lo:hi]
+        yf = np.concatenate((tail, yf[np.isfinite(yf)]))
+        d2 = np.diff(yf, 2)
+        n += d2.size
+        s1 += float(d2.sum())
+        s2 += float(np.sum(d2 * d2))
+        tail = yf[-2:]
+    if n == 0:
+        return 0.0, 0
+    mean = s1 / n
+    return max(s2 / n - mean * mean, 0.0), n
+
+
+def _fit_noise(
+    setup: _Setup, q: float | None, r: float | None, quant_c: float, progress=None
+) -> NoiseLevels:
     """Maximum likelihood of the innovations over the free levels (log-parametrised)."""
     floor = quant_c**2 / 12.0
     fitted = tuple(n for n, v in (("q", q), ("r", r)) if v is None)
     if q is not None and r is not None:
         return NoiseLevels(q, r, quant_c, ())
-    n_fin = int(np.isfinite(setup.y).sum())
-    n = setup.y.size
+    n = setup.n
     step = 1 if n <= FULL_RATE_ML_ROWS else int(math.ceil(n / MAX_ML_ROWS))
     coarse = setup.stride(step)
     if int(np.isfinite(coarse.y).sum()) < max(20, N_DIFFUSE + 3):
         coarse = setup
+    unit = coarse.rows(0, coarse.n, 1.0) if coarse.n <= CHUNK_ROWS else None
     # starting point: white noise dominates second differences, var(d2 y) ~ 6 r
-    yf = setup.y[np.isfinite(setup.y)]
-    r_start = max(float(np.var(np.diff(yf, 2))) / 6.0, 1e-8) if n_fin > 3 else 1e-4
+    var_d2, n_d2 = _second_difference_var(setup.y)
+    r_start = max(var_d2 / 6.0, 1e-8) if n_d2 > 1 else 1e-4
     r_extra_start = max(r_start - floor, 1e-3 * r_start)
+    calls = [0]
 
     def levels(theta):
         # clipped to the bounds: Nelder-Mead is unbounded, the filter needs r > 0
@@ -598,12 +986,15 @@ def _fit_noise(setup: _Setup, q: float | None, r: float | None, quant_c: float) 
 
     def cost(theta):
         qq, rr = levels(theta)
-        m2ll = _run(coarse, qq, rr, smooth=False)[-1]
+        m2ll = _likelihood(coarse, qq, rr, unit)
+        calls[0] += 1
+        if progress is not None:
+            progress("noise levels", calls[0], 0)
         return m2ll if math.isfinite(m2ll) else 1e300
 
     if q is None:
         # coarse scan of q (the likelihood is often flat far from the optimum)
-        grid = np.arange(-12.0, 3.0, 2.0) * math.log(10.0)
+        grid = np.arange(-12.0, 7.0, 2.0) * math.log(10.0)
         best: tuple[float, float] | None = None
         for lq in grid:
             theta = [lq] + ([] if r is not None else [math.log(r_extra_start)])
@@ -633,7 +1024,8 @@ def _fit_noise(setup: _Setup, q: float | None, r: float | None, quant_c: float) 
 # -- results --------------------------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
 class GradientEstimate:
-    """Smoothed internal temperature and gradient, one row per log row.
+    """Smoothed internal temperature and gradient, one row per log row (or per kept row
+    when the estimate was decimated with ``every_s``).
 
     Attributes
     ----------
@@ -649,11 +1041,16 @@ class GradientEstimate:
     noise : NoiseLevels
         ``q``, ``r`` and which of them were fitted.
     minus2_log_likelihood : float
-        ``-2 log L`` of the innovations at the chosen noise levels (full-rate pass).
+        ``-2 log L`` of the innovations at the chosen noise levels (full-rate pass over
+        every row, decimated or not).
     method : str
         ``"kinematic"`` or ``"model"`` (thermal model with the chamber as input).
     params : ThermalParams or None
         The thermal model of the model-based variant.
+    every_s : float or None
+        The decimation: one row every ``every_s`` seconds (None: every log row).
+    order : int or None
+        The kinematic model's order (2 or 3; None for the model-based variant).
     """
 
     time_s: np.ndarray
@@ -667,6 +1064,8 @@ class GradientEstimate:
     minus2_log_likelihood: float
     method: str
     params: ThermalParams | None = None
+    every_s: float | None = None
+    order: int | None = None
 
     @property
     def q(self) -> float:
@@ -681,6 +1080,10 @@ class GradientEstimate:
         return -0.5 * self.minus2_log_likelihood
 
     @property
+    def n_rows(self) -> int:
+        return int(self.time_s.size)
+
+    @property
     def time_min(self) -> np.ndarray:
         return self.time_s / 60.0
 
@@ -688,6 +1091,30 @@ class GradientEstimate:
     def normalised_innovations(self) -> np.ndarray:
         """``e_k / sqrt(S_k)``: about N(0, 1) when the model and noise levels are right."""
         return self.innovation_c / self.innovation_std_c
+
+    def take(self, rows: np.ndarray | slice) -> GradientEstimate:
+        """The estimate at a subset of its rows (e.g. ``slice(0, None, 10)`` for plots)."""
+        arrays = {
+            name: getattr(self, name)[rows]
+            for name in (
+                "time_s",
+                "t_est_c",
+                "t_std_c",
+                "g_est_c_per_min",
+                "g_std_c_per_min",
+                "innovation_c",
+                "innovation_std_c",
+            )
+        }
+        return GradientEstimate(
+            **arrays,
+            noise=self.noise,
+            minus2_log_likelihood=self.minus2_log_likelihood,
+            method=self.method,
+            params=self.params,
+            every_s=self.every_s,
+            order=self.order,
+        )
 
     def to_frame(self) -> pd.DataFrame:
         return pd.DataFrame(
@@ -706,51 +1133,97 @@ class GradientEstimate:
         fitted = ", ".join(self.noise.fitted) or "none"
         z = self.normalised_innovations
         z = z[np.isfinite(z)]
+        every = "" if self.every_s is None else f"; one row every {self.every_s:g} s"
+        name = self.method if self.order is None else f"{self.method} (order {self.order})"
+        q_unit = "(°C/min³)²/min" if self.order == 3 else "(°C/min²)²/min"
         return (
-            f"{self.method} Kalman smoother: q = {self.q:.3g} (degC/min^2)^2/min, "
-            f"r = {self.r:.3g} degC^2 (sigma {math.sqrt(self.r):.3g} degC; quantisation "
-            f"{self.noise.quant_c:g} degC; fitted by ML: {fitted}); median gradient std "
-            f"{np.nanmedian(self.g_std_c_per_min):.3g} degC/min; normalised innovations "
-            f"std {np.std(z):.2f} (1 if consistent)"
+            f"{name} Kalman smoother: q = {self.q:.3g} {q_unit}, "
+            f"r = {self.r:.3g} °C² (σ {math.sqrt(self.r):.3g} °C; quantisation "
+            f"{self.noise.quant_c:g} °C; fitted by ML: {fitted}); median gradient std "
+            f"{np.nanmedian(self.g_std_c_per_min):.3g} °C/min; normalised innovations "
+            f"std {np.std(z):.2f} (1 if consistent){every}"
         )
 
 
-def _setup_time(log: MeasuredLog) -> tuple[np.ndarray, np.ndarray]:
-    t = np.asarray(log.time_s, dtype=float) / 60.0
-    return t, np.concatenate(([0.0], np.diff(t)))
+def decimation_rows(time_s: np.ndarray, every_s: float) -> np.ndarray:
+    """Rows kept when a log is decimated to one row every ``every_s`` seconds.
 
-
-def _first_finite(y: np.ndarray) -> float:
-    return float(y[np.flatnonzero(np.isfinite(y))[0]])
-
-
-def _finish(
-    setup: _Setup, noise: NoiseLevels, method: str, grad, params, time_s: np.ndarray
-) -> GradientEstimate:
-    x1, x2, p11, p12, p22, innov, svar, m2ll = _run(setup, noise.q, noise.r, smooth=True)
-    g, g_var = grad(x1, x2, p11, p12, p22)
-    return GradientEstimate(
-        time_s=np.array(time_s, dtype=float),
-        t_est_c=x1,
-        t_std_c=np.sqrt(np.maximum(p11, 0.0)),
-        g_est_c_per_min=g,
-        g_std_c_per_min=np.sqrt(np.maximum(g_var, 0.0)),
-        innovation_c=innov,
-        innovation_std_c=np.sqrt(np.asarray(svar)),
-        noise=noise,
-        minus2_log_likelihood=float(m2ll),
-        method=method,
-        params=params,
-    )
+    The first row of each ``every_s``-wide time bin counted from the first row
+    (``floor((t - t_0) / every_s)`` changes), so irregular logs and gaps keep at most one
+    row per bin and every bin with a row keeps one.
+    """
+    if not (isinstance(every_s, int | float) and math.isfinite(every_s) and every_s > 0):
+        raise ParameterError(f"every_s must be a number of seconds > 0, got {every_s!r}")
+    t = np.asarray(time_s, dtype=float)
+    parts = []
+    prev = -1.0
+    for lo, hi in _chunks(t.size):
+        bins = np.floor((t[lo:hi] - t[0]) / every_s)
+        new = np.flatnonzero(np.diff(np.concatenate(([prev], bins))) > 0) + lo
+        parts.append(new)
+        prev = float(bins[-1])
+    return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
 
 
 def _resolve_quant(log: MeasuredLog, quant_c: float | None) -> float:
     if quant_c is None:
-        return quantisation_step(log.t_int_c)
+        y = log.t_int_c
+        stride = max(1, int(math.ceil(y.size / QUANT_SAMPLE_ROWS)))
+        return quantisation_step(y[::stride])
     v = float(quant_c)
     if not (math.isfinite(v) and v >= 0):
-        raise ParameterError(f"quant_c must be >= 0 degC, got {quant_c!r}")
+        raise ParameterError(f"quant_c must be >= 0 °C, got {quant_c!r}")
     return v
+
+
+def _estimate(
+    log: MeasuredLog,
+    setup: _Setup,
+    q: float | None,
+    r: float | None,
+    quant_c: float | None,
+    every_s: float | None,
+    grad,
+    method: str,
+    params: ThermalParams | None,
+    progress: Progress | None,
+) -> GradientEstimate:
+    """Noise levels, then the chunked smoother; the kept rows go straight to the output."""
+    q = _check_level("q", q, "(°C/min³)²/min" if setup.dim == 3 else "(°C/min²)²/min")
+    r = _check_level("r", r, "°C²")
+    keep = None if every_s is None else decimation_rows(log.time_s, every_s)
+    noise = _fit_noise(setup, q, r, _resolve_quant(log, quant_c), progress)
+    n_out = setup.n if keep is None else keep.size
+    cols = {n: np.empty(n_out) for n in ("t", "t_std", "g", "g_std", "innov", "innov_std")}
+
+    def emit(rows, sm, innov, svar):
+        # rows: global rows (a slice when every row is kept); i: their output positions
+        i = rows if keep is None else np.searchsorted(keep, rows)
+        # sm rows: x1, x2, x3, p11, p12, p13, p22, p23, p33
+        g, g_var = grad(rows, sm[0], sm[1], sm[3], sm[4], sm[6])
+        cols["t"][i] = sm[0]
+        cols["t_std"][i] = np.sqrt(np.maximum(sm[3], 0.0))
+        cols["g"][i] = g
+        cols["g_std"][i] = np.sqrt(np.maximum(g_var, 0.0))
+        cols["innov"][i] = innov
+        cols["innov_std"][i] = np.sqrt(svar)
+
+    m2ll = _smooth(setup, noise.q, noise.r, keep, emit, progress)
+    return GradientEstimate(
+        time_s=log.time_s if keep is None else log.time_s[keep],
+        t_est_c=cols["t"],
+        t_std_c=cols["t_std"],
+        g_est_c_per_min=cols["g"],
+        g_std_c_per_min=cols["g_std"],
+        innovation_c=cols["innov"],
+        innovation_std_c=cols["innov_std"],
+        noise=noise,
+        minus2_log_likelihood=float(m2ll),
+        method=method,
+        params=params,
+        every_s=None if every_s is None else float(every_s),
+        order=setup.order if setup.model is None else None,
+    )
 
 
 def estimate_gradient(
@@ -759,31 +1232,46 @@ def estimate_gradient(
     q: float | None = None,
     r: float | None = None,
     quant_c: float | None = None,
+    every_s: float | None = None,
+    progress: Progress | None = None,
+    order: int = 3,
 ) -> GradientEstimate:
-    """Kinematic Kalman smoother: ``(T, g)`` with the gradient a random walk.
+    """Kinematic Kalman smoother: no thermal model, the gradient a smooth random process.
+
+    ``order=3`` (default): state ``(T, g, a)``, ``a = dg/dt`` a random walk (white jerk).
+    A lagging device's gradient is smooth between the chamber's rate changes and bends at
+    them, which this model follows far better than ``order=2``: state ``(T, g)``, ``g``
+    itself a random walk (its likelihood-chosen ``q`` must cover the bends everywhere;
+    the gradient error is ~2x larger on the paper-like plans, see docs/estimate.md).
 
     Parameters
     ----------
     log : MeasuredLog
         The run (NaN readings are skipped, gaps handled exactly).
     q : float, optional
-        Gradient random-walk density, (degC/min^2)^2/min; fitted by ML when None.
+        Density of the random walk: of ``a`` (order 3), (degC/min^3)^2/min, or of ``g``
+        (order 2), (degC/min^2)^2/min; fitted by ML when None.
     r : float, optional
         Measurement variance, degC^2 (total, including quantisation); ML when None.
     quant_c : float, optional
         Sensor resolution, degC, for the floor ``r >= quant_c^2/12`` of the ML search;
         detected from the readings when None (see :func:`quantisation_step`).
+    every_s : float, optional
+        Keep one row every ``every_s`` seconds (:func:`decimation_rows`); every row is
+        still filtered, only the output is thinned (and its memory with it).
+    progress : callable(stage, done, total), optional
+        Told how far the noise search, the filter and the smoother are.
+    order : {3, 2}
+        The kinematic model (see above).
     """
-    q, r = _check_level("q", q, "(degC/min^2)^2/min"), _check_level("r", r, "degC^2")
-    t, h = _setup_time(log)
-    y = np.asarray(log.t_int_c, dtype=float)
-    setup = _Setup(t, y, h, np.zeros_like(t), None, (_first_finite(y), 0.0))
-    noise = _fit_noise(setup, q, r, _resolve_quant(log, quant_c))
+    if order not in (2, 3):
+        raise ParameterError(f"order must be 2 or 3, got {order!r}")
+    setup = _Setup(log.time_s, np.asarray(log.t_int_c, dtype=float), None, order=order)
 
-    def grad(x1, x2, p11, p12, p22):
+    def grad(rows, x1, x2, p11, p12, p22):
         return x2, p22
 
-    return _finish(setup, noise, "kinematic", grad, None, log.time_s)
+    return _estimate(log, setup, q, r, quant_c, every_s, grad, "kinematic", None, progress)
 
 
 def estimate_gradient_model(
@@ -794,6 +1282,8 @@ def estimate_gradient_model(
     q: float | None = None,
     r: float | None = None,
     quant_c: float | None = None,
+    every_s: float | None = None,
+    progress: Progress | None = None,
 ) -> GradientEstimate:
     """Model-based Kalman smoother: the thermal model driven by the logged chamber.
 
@@ -807,7 +1297,7 @@ def estimate_gradient_model(
         ``tau_s`` and ``dt0_c`` of the device (default :class:`ThermalParams`).
     chamber : {"tk_set_c", "tk_air_c"}
         Which logged chamber temperature drives the model (it must have no NaN).
-    q, r, quant_c
+    q, r, quant_c, every_s, progress
         As in :func:`estimate_gradient`; ``q`` is the density of the correction ``d``.
     """
     params = ThermalParams() if params is None else params
@@ -825,22 +1315,16 @@ def estimate_gradient_model(
             f"{log.source}: column {chamber} has {rows.size} NaN row(s) (first: row "
             f"{rows[0] + 1}); the model needs the chamber temperature on every row"
         )
-    q, r = _check_level("q", q, "(degC/min^2)^2/min"), _check_level("r", r, "degC^2")
     model = FirstOrderLag(params)
-    t, h = _setup_time(log)
-    u = np.zeros_like(t)
-    if t.size > 1:
-        u[1:] = lag_input(h[1:], tk[:-1], tk[1:], model)
-    y = np.asarray(log.t_int_c, dtype=float)
-    setup = _Setup(t, y, h, u, params.tau_min, (_first_finite(y), 0.0))
-    noise = _fit_noise(setup, q, r, _resolve_quant(log, quant_c))
-    tau, offset = params.tau_min, (tk + params.dt0_c) / params.tau_min
+    setup = _Setup(log.time_s, np.asarray(log.t_int_c, dtype=float), model, tk)
+    tau = params.tau_min
 
-    def grad(x1, x2, p11, p12, p22):
+    def grad(rows, x1, x2, p11, p12, p22):
         # g = (Tk + dT0 - T)/tau + d ;  var g = P11/tau^2 - 2 P12/tau + P22
-        return offset - x1 / tau + x2, p11 / tau**2 - 2.0 * p12 / tau + p22
+        g = (tk[rows] + params.dt0_c - x1) / tau + x2
+        return g, p11 / tau**2 - 2.0 * p12 / tau + p22
 
-    return _finish(setup, noise, "model", grad, params, log.time_s)
+    return _estimate(log, setup, q, r, quant_c, every_s, grad, "model", params, progress)
 
 
 def finite_difference_gradient(time_s: np.ndarray, t_c: np.ndarray) -> np.ndarray:

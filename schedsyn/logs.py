@@ -13,17 +13,25 @@ Any other column is kept in :attr:`MeasuredLog.extra` and ignored by the estimat
 Nothing is dropped or interpolated: a NaN in ``t_int_c`` stays in the arrays (the
 estimator skips its measurement update) and is counted in :attr:`MeasuredLog.report`
 together with the time spans where the sampling step is much longer than usual.
+
+:func:`read_log` parses the file in chunks and keeps only float arrays of the known
+columns (8 bytes per value; a 200 MB log of 5.8 M rows and four columns takes ~190 MB),
+validating every chunk as it arrives; comma-, semicolon- and tab-separated files with a
+decimal point or (European spreadsheets) a decimal comma are recognised.
 """
 
 from __future__ import annotations
 
+import re
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from .errors import LogFormatError
+from .csvdialect import detect_csv_dialect
+from .errors import LogFormatError, ParameterError
 
 REQUIRED_COLUMNS = ("time_s", "t_int_c")
 OPTIONAL_COLUMNS = ("tk_set_c", "tk_air_c", "drift_dph")
@@ -37,6 +45,15 @@ GAP_FACTOR = 3.0
 PLAUSIBLE_C = (-100.0, 150.0)
 #: All readings above this look like kelvin (the coldest chamber is ~ -75 degC = 198 K).
 KELVIN_FLOOR = 200.0
+#: Rows parsed at a time by :func:`read_log` (a chunk costs a few tens of MB at most).
+READ_CHUNK_ROWS = 262_144
+#: Bytes of the file's head that decide its CSV dialect.
+HEAD_BYTES = 65_536
+
+#: ``progress(stage, done, total)``: how far a long step is (``total`` 0 when unknown).
+Progress = Callable[[str, int, int], None]
+
+_DECIMAL_COMMA = re.compile(r"^[+-]?(\d+,\d*|,\d+)([eE][+-]?\d+)?$")
 
 
 @dataclass(frozen=True, slots=True)
@@ -146,8 +163,11 @@ class MeasuredLog:
         return pd.concat([frame, extra], axis=1) if extra.shape[1] else frame
 
 
-def _numeric_column(frame: pd.DataFrame, col: str, source: str) -> np.ndarray:
-    """Column as float; a value that is present but not a finite number is an error."""
+def _numeric_column(frame: pd.DataFrame, col: str, source: str, first_row: int = 0) -> np.ndarray:
+    """Column as float; a value that is present but not a finite number is an error.
+
+    ``first_row`` is the 0-based row of the frame's first row in the whole log (chunks).
+    """
     raw = frame[col]
     values = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=float, copy=True)
     blank = raw.isna().to_numpy()
@@ -156,34 +176,51 @@ def _numeric_column(frame: pd.DataFrame, col: str, source: str) -> np.ndarray:
         blank = blank | text.isin(["", "nan", "na", "none", "null"]).to_numpy()
     bad = ~np.isfinite(values) & ~blank
     if bad.any():
-        r = int(np.argmax(bad))
+        i = int(np.argmax(bad))
+        r = first_row + i
+        value = raw.iloc[i]
+        hint = ""
+        if isinstance(value, str) and _DECIMAL_COMMA.match(value.strip()):
+            hint = (
+                "; it has a decimal comma: save the log with decimal points, or as "
+                "semicolon-separated CSV with decimal commas (both are read)"
+            )
         raise LogFormatError(
-            f"{source}: row {r + 1} (line {r + 2}), column {col}: {raw.iloc[r]!r} is not a "
-            "finite number; fix or blank the value (a blank reading is kept as NaN)"
+            f"{source}: row {r + 1} (line {r + 2}), column {col}: {value!r} is not a "
+            f"finite number; fix or blank the value (a blank reading is kept as NaN){hint}"
         )
     values[blank] = np.nan
     return values
 
 
-def _check_time(t: np.ndarray, source: str) -> None:
+def _check_time(
+    t: np.ndarray, source: str, first_row: int = 0, previous_s: float | None = None
+) -> None:
+    """Times present and strictly increasing, also across the boundary with the previous
+    chunk (whose last time is ``previous_s``); rows named in the whole log."""
     if np.isnan(t).any():
-        r = int(np.argmax(np.isnan(t)))
+        r = first_row + int(np.argmax(np.isnan(t)))
         raise LogFormatError(
             f"{source}: row {r + 1} (line {r + 2}), column time_s: the time is missing; every "
             "row needs a time (delete the row if it has none)"
         )
+    if previous_s is not None and t.size:
+        t = np.concatenate(([previous_s], t))
+        first_row -= 1
     step = np.diff(t)
     if (step == 0).any():
-        r = int(np.argmax(step == 0)) + 1
+        i = int(np.argmax(step == 0)) + 1
+        r = first_row + i
         raise LogFormatError(
-            f"{source}: row {r + 1} (line {r + 2}), column time_s: time {t[r]:g} s duplicates "
+            f"{source}: row {r + 1} (line {r + 2}), column time_s: time {t[i]:g} s duplicates "
             "the previous row; remove the duplicate row"
         )
     if (step < 0).any():
-        r = int(np.argmax(step < 0)) + 1
+        i = int(np.argmax(step < 0)) + 1
+        r = first_row + i
         raise LogFormatError(
-            f"{source}: row {r + 1} (line {r + 2}), column time_s: time {t[r]:g} s is earlier "
-            f"than the previous row's {t[r - 1]:g} s; time_s must be strictly increasing "
+            f"{source}: row {r + 1} (line {r + 2}), column time_s: time {t[i]:g} s is earlier "
+            f"than the previous row's {t[i - 1]:g} s; time_s must be strictly increasing "
             "(sort the log or fix a clock reset)"
         )
 
@@ -196,7 +233,7 @@ def _check_temperature(v: np.ndarray, col: str, source: str) -> None:
     if lo > KELVIN_FLOOR and hi < 500.0:
         raise LogFormatError(
             f"{source}: column {col}: every value lies in {lo:g} .. {hi:g}, which looks like "
-            "kelvin; the log needs degC (subtract 273.15)"
+            "kelvin; the log needs °C (subtract 273.15)"
         )
     plo, phi = PLAUSIBLE_C
     if lo < plo or hi > phi:
@@ -207,7 +244,7 @@ def _check_temperature(v: np.ndarray, col: str, source: str) -> None:
             hint = "; if the log is in Fahrenheit convert with (F - 32) * 5 / 9"
         raise LogFormatError(
             f"{source}: row {r + 1} (line {r + 2}), column {col}: {v[r]:g} is not a plausible "
-            f"temperature in degC (expected {plo:g} .. {phi:g}){hint}"
+            f"temperature in °C (expected {plo:g} .. {phi:g}){hint}"
         )
 
 
@@ -228,13 +265,103 @@ def log_report(
 ) -> LogReport:
     """NaN counts, NaN runs of ``t_int_c`` and sampling gaps (step > ``gap_factor`` x median)."""
     t = np.asarray(time_s, dtype=float)
-    step = np.diff(t)
-    med = float(np.median(step)) if step.size else float("nan")
-    big = np.flatnonzero(step > gap_factor * med) if step.size else np.zeros(0, dtype=int)
+    # the steps twice rather than one array kept beside a sorted copy (long logs)
+    med = float(np.median(np.diff(t), overwrite_input=True)) if t.size > 1 else float("nan")
+    big = np.flatnonzero(np.diff(t) > gap_factor * med) if t.size > 1 else np.zeros(0, dtype=int)
     gaps = tuple((float(t[i]), float(t[i + 1])) for i in big)
     nan_counts = {k: int(np.isnan(v).sum()) for k, v in columns.items()}
     spans = _nan_spans(t, np.isnan(columns["t_int_c"]))
     return LogReport(int(t.size), nan_counts, spans, gaps, med)
+
+
+class _Collector:
+    """Validates a log chunk by chunk, in file order, and collects its known columns.
+
+    Numbers and times are checked as each chunk arrives (errors name the row in the whole
+    log, and time must also increase across chunk boundaries); the checks that need the
+    whole column (kelvin, plausible range, enough readings, NaN/gap report) run in
+    :meth:`finish`. One code path serves a DataFrame (one chunk) and a CSV file (many).
+    """
+
+    def __init__(
+        self, columns: Sequence[object], source: str, keep_extra: bool, expected_rows: int = 0
+    ) -> None:
+        cols = [str(c).strip() for c in columns]
+        if len(set(cols)) != len(cols):
+            dup = sorted({c for c in cols if cols.count(c) > 1})
+            raise LogFormatError(f"{source}: column(s) {', '.join(dup)} appear more than once")
+        missing = [c for c in REQUIRED_COLUMNS if c not in cols]
+        if missing:
+            raise LogFormatError(
+                f"{source}: missing required column(s) {', '.join(missing)}; a log needs "
+                f"{', '.join(REQUIRED_COLUMNS)} (optional: {', '.join(OPTIONAL_COLUMNS)}); "
+                f"found {', '.join(cols) or 'no columns'}"
+            )
+        self.source = source
+        self.columns = cols
+        self.known = [c for c in REQUIRED_COLUMNS + OPTIONAL_COLUMNS if c in cols]
+        self.extra_names = [c for c in cols if c not in self.known]
+        self.keep_extra = keep_extra
+        # the known columns, preallocated for the expected rows (grown if needed): no list
+        # of chunk arrays to join at the end, which would hold the log twice
+        self.values = {c: np.empty(max(expected_rows, 16)) for c in self.known}
+        self.extra_parts: list[pd.DataFrame] = []
+        self.n_rows = 0
+        self.last_time_s: float | None = None
+
+    def add(self, frame: pd.DataFrame) -> None:
+        frame = frame.set_axis(self.columns, axis=1).reset_index(drop=True)
+        values = {c: _numeric_column(frame, c, self.source, self.n_rows) for c in self.known}
+        _check_time(values["time_s"], self.source, self.n_rows, self.last_time_s)
+        lo, hi = self.n_rows, self.n_rows + len(frame)
+        for c, v in values.items():
+            if hi > self.values[c].size:
+                grown = np.empty(max(hi, 2 * self.values[c].size))
+                grown[:lo] = self.values[c][:lo]
+                self.values[c] = grown
+            self.values[c][lo:hi] = v
+        if self.keep_extra:
+            self.extra_parts.append(frame[self.extra_names].copy())
+        if len(frame):
+            self.last_time_s = float(values["time_s"][-1])
+        self.n_rows += len(frame)
+
+    def finish(self) -> MeasuredLog:
+        values: dict[str, np.ndarray] = {}
+        for c in self.known:
+            v = self.values[c]
+            # a view when the estimate was close; a copy frees a much too large buffer
+            v = v[: self.n_rows] if v.size <= 1.25 * self.n_rows + 16 else v[: self.n_rows].copy()
+            v.setflags(write=False)
+            values[c] = v
+        self.values = {}
+        for c in TEMPERATURE_COLUMNS:
+            if c in values:
+                _check_temperature(values[c], c, self.source)
+        n_finite = int(np.isfinite(values["t_int_c"]).sum())
+        if n_finite < MIN_FINITE_ROWS:
+            raise LogFormatError(
+                f"{self.source}: column t_int_c has {n_finite} finite reading(s) in "
+                f"{self.n_rows} rows; at least {MIN_FINITE_ROWS} are needed to estimate a "
+                "gradient"
+            )
+        report = log_report(values["time_s"], {c: values[c] for c in self.known if c != "time_s"})
+        if len(self.extra_parts) > 1:
+            extra = pd.concat(self.extra_parts, ignore_index=True)
+        elif self.extra_parts:
+            extra = self.extra_parts[0]
+        else:
+            extra = pd.DataFrame(index=pd.RangeIndex(self.n_rows))
+        return MeasuredLog(
+            time_s=values["time_s"],
+            t_int_c=values["t_int_c"],
+            tk_set_c=values.get("tk_set_c"),
+            tk_air_c=values.get("tk_air_c"),
+            drift_dph=values.get("drift_dph"),
+            extra=extra,
+            source=self.source,
+            report=report,
+        )
 
 
 def log_from_frame(frame: pd.DataFrame, source: str = "log") -> MeasuredLog:
@@ -250,54 +377,116 @@ def log_from_frame(frame: pd.DataFrame, source: str = "log") -> MeasuredLog:
     """
     if not isinstance(frame, pd.DataFrame):
         raise LogFormatError(f"{source}: expected a pandas DataFrame, got {type(frame).__name__}")
-    cols = [str(c).strip() for c in frame.columns]
-    if len(set(cols)) != len(cols):
-        dup = sorted({c for c in cols if cols.count(c) > 1})
-        raise LogFormatError(f"{source}: column(s) {', '.join(dup)} appear more than once")
-    frame = frame.set_axis(cols, axis=1).reset_index(drop=True)
-    missing = [c for c in REQUIRED_COLUMNS if c not in frame.columns]
-    if missing:
-        raise LogFormatError(
-            f"{source}: missing required column(s) {', '.join(missing)}; a log needs "
-            f"{', '.join(REQUIRED_COLUMNS)} (optional: {', '.join(OPTIONAL_COLUMNS)}); "
-            f"found {', '.join(cols) or 'no columns'}"
-        )
-    known = [c for c in REQUIRED_COLUMNS + OPTIONAL_COLUMNS if c in frame.columns]
-    values = {c: _numeric_column(frame, c, source) for c in known}
-    for v in values.values():
-        v.setflags(write=False)
-    _check_time(values["time_s"], source)
-    for c in TEMPERATURE_COLUMNS:
-        if c in values:
-            _check_temperature(values[c], c, source)
-    n_finite = int(np.isfinite(values["t_int_c"]).sum())
-    if n_finite < MIN_FINITE_ROWS:
-        raise LogFormatError(
-            f"{source}: column t_int_c has {n_finite} finite reading(s) in {len(frame)} rows; "
-            f"at least {MIN_FINITE_ROWS} are needed to estimate a gradient"
-        )
-    report = log_report(values["time_s"], {c: values[c] for c in known if c != "time_s"})
-    extra = frame[[c for c in frame.columns if c not in known]].copy()
-    return MeasuredLog(
-        time_s=values["time_s"],
-        t_int_c=values["t_int_c"],
-        tk_set_c=values.get("tk_set_c"),
-        tk_air_c=values.get("tk_air_c"),
-        drift_dph=values.get("drift_dph"),
-        extra=extra,
-        source=source,
-        report=report,
-    )
+    collector = _Collector(frame.columns, source, keep_extra=True, expected_rows=len(frame))
+    collector.add(frame)
+    return collector.finish()
 
 
-def read_log(path: Path | str) -> MeasuredLog:
-    """Read and validate a measured-log CSV (see :func:`log_from_frame`)."""
+def read_log(
+    path: Path | str,
+    *,
+    keep_extra: bool = True,
+    progress: Progress | None = None,
+    chunk_rows: int = READ_CHUNK_ROWS,
+) -> MeasuredLog:
+    """Read and validate a measured-log CSV in chunks (see :func:`log_from_frame`).
+
+    The file is parsed ``chunk_rows`` rows at a time and only the known columns are kept
+    as float arrays (8 bytes per value, less than the CSV text), so memory stays near the
+    size of those columns however long the log is. Every check of :func:`log_from_frame`
+    applies, with rows numbered in the whole file. Comma-separated files with decimal
+    points and the European spreadsheet format (semicolons, decimal commas) are read;
+    tab-separated files too (:func:`schedsyn.csvdialect.detect_csv_dialect`).
+
+    Parameters
+    ----------
+    path : path-like
+        The CSV log.
+    keep_extra : bool
+        Keep the columns the estimator does not use in :attr:`MeasuredLog.extra` (False
+        saves their memory on big logs; they are still parsed).
+    progress : callable(stage, done, total), optional
+        Called after each chunk with ``("reading", bytes read, file size in bytes)``.
+    chunk_rows : int
+        Rows parsed at a time (>= 1).
+    """
     path = Path(path)
     if not path.is_file():
         raise LogFormatError(f"log {path} does not exist or is not a file")
-    try:
-        frame = pd.read_csv(path)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise LogFormatError(f"{path}: not a readable CSV log ({first})") from None
-    return log_from_frame(frame, source=str(path))
+    if not (isinstance(chunk_rows, int) and chunk_rows >= 1):
+        raise ParameterError(f"chunk_rows must be an integer >= 1, got {chunk_rows!r}")
+    size = path.stat().st_size
+    with path.open("rb") as fh:
+        head = fh.read(HEAD_BYTES).decode("utf-8-sig", errors="replace")
+        fh.seek(0)
+        try:
+            dialect = detect_csv_dialect(head)
+        except ValueError as exc:
+            raise LogFormatError(f"{path}: {exc}") from None
+        try:
+            with pd.read_csv(
+                fh,
+                sep=dialect.separator,
+                decimal=dialect.decimal,
+                chunksize=chunk_rows,
+                encoding="utf-8-sig",
+                encoding_errors="replace",
+                index_col=False,
+            ) as reader:
+                collector: _Collector | None = None
+                for chunk in reader:
+                    if collector is None:
+                        expected = _count_lines(path)
+                        collector = _Collector(chunk.columns, str(path), keep_extra, expected)
+                    collector.add(chunk)
+                    if progress is not None:
+                        progress("reading", min(fh.tell(), size), size)
+        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise LogFormatError(
+                f"{path}: not a readable CSV log ({first}; read as {dialect.describe()})"
+            ) from None
+    if collector is None:
+        raise LogFormatError(f"{path}: not a readable CSV log (no header line)")
+    return collector.finish()
+
+
+def _count_lines(path: Path, block_bytes: int = 1 << 20) -> int:
+    """Newlines in the file (an upper bound of its data rows, plus one)."""
+    n = 0
+    with path.open("rb") as fh:
+        while block := fh.read(block_bytes):
+            n += block.count(b"\n")
+    return n + 1
+
+
+def thin_log(log: MeasuredLog, max_rows: int) -> tuple[MeasuredLog, int]:
+    """Every ``k``-th row of a log longer than ``max_rows`` (``k = ceil(n / max_rows)``).
+
+    Returns ``(log, k)``; ``k = 1`` and the log itself when it is short enough. The thinned
+    log keeps each kept row as it is (readings are not averaged, so the per-sample noise
+    stays that of the sensor); its report is recomputed for the kept rows.
+    """
+    if not (isinstance(max_rows, int) and max_rows >= MIN_FINITE_ROWS):
+        raise ParameterError(f"max_rows must be an integer >= {MIN_FINITE_ROWS}, got {max_rows!r}")
+    k = -(-log.n_rows // max_rows)
+    if k <= 1:
+        return log, 1
+    cols: dict[str, np.ndarray] = {}
+    for name in ("time_s", "t_int_c", *OPTIONAL_COLUMNS):
+        v = getattr(log, name)
+        if v is not None:
+            cols[name] = v[::k].copy()
+            cols[name].setflags(write=False)
+    report = log_report(cols["time_s"], {c: v for c, v in cols.items() if c != "time_s"})
+    thin = MeasuredLog(
+        time_s=cols["time_s"],
+        t_int_c=cols["t_int_c"],
+        tk_set_c=cols.get("tk_set_c"),
+        tk_air_c=cols.get("tk_air_c"),
+        drift_dph=cols.get("drift_dph"),
+        extra=log.extra.iloc[::k].reset_index(drop=True),
+        source=log.source,
+        report=report,
+    )
+    return thin, k

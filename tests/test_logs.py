@@ -170,3 +170,159 @@ def test_synth_log_matches_simulation_within_noise():
     assert not np.array_equal(df["t_int_c"], synth_log(prog, seed=4)["t_int_c"])
     with pytest.raises(ParameterError, match="sample_s"):
         synth_log(prog, sample_s=0.0)
+
+
+# -- chunked reading ---------------------------------------------------------------------
+def _messy_frame(n=200, seed=0):
+    """A log with NaN runs, a gap, irregular steps, an extra text column."""
+    rng = np.random.default_rng(seed)
+    t = np.cumsum(rng.uniform(5.0, 15.0, n))
+    t[n * 3 // 5 :] += 600.0
+    f = pd.DataFrame(
+        {
+            "time_s": np.round(t, 3),
+            "t_int_c": np.round(20.0 + np.sin(t / 300.0), 4),
+            "tk_set_c": np.round(25.0 - t / 100.0, 3),
+            "note": [f"n{i}" for i in range(n)],
+        }
+    )
+    f.loc[[i for i in (3, 4, 5, 63, 64, 199) if i < n], "t_int_c"] = np.nan
+    return f
+
+
+@pytest.mark.parametrize("chunk_rows", [1, 7, 64, 10_000])
+def test_chunked_read_equals_the_whole_frame(tmp_path, chunk_rows):
+    f = _messy_frame()
+    path = tmp_path / "log.csv"
+    f.to_csv(path, index=False)
+    whole = log_from_frame(f, source=str(path))
+    seen = []
+    log = read_log(path, chunk_rows=chunk_rows, progress=lambda *a: seen.append(a))
+    for name in ("time_s", "t_int_c", "tk_set_c"):
+        np.testing.assert_array_equal(getattr(log, name), getattr(whole, name))
+    assert log.report == whole.report
+    pd.testing.assert_frame_equal(log.extra, whole.extra)
+    # progress: bytes read, non-decreasing, ending at the file size
+    size = path.stat().st_size
+    assert seen and all(s == "reading" and tot == size for s, _, tot in seen)
+    done = [d for _, d, _ in seen]
+    assert done == sorted(done) and done[-1] == size
+    lean = read_log(path, chunk_rows=chunk_rows, keep_extra=False)
+    assert lean.extra.shape == (len(f), 0)
+    np.testing.assert_array_equal(lean.t_int_c, whole.t_int_c)
+
+
+@pytest.mark.parametrize(
+    ("row", "value", "pattern"),
+    [
+        # row is 0-based; the chunk boundary is at row 50 (chunk_rows = 50)
+        (50, "dup", r"row 51 \(line 52\), column time_s: time 490 s duplicates"),
+        (
+            50,
+            "back",
+            r"row 51 \(line 52\), column time_s: time 400 s is earlier than the "
+            r"previous row's 490 s",
+        ),
+        (120, "text", r"row 121 \(line 122\), column t_int_c: 'x1' is not a finite number"),
+        (130, "hot", r"row 131 \(line 132\), column t_int_c: 500 is not a plausible"),
+        (170, "no time", r"row 171 \(line 172\), column time_s: the time is missing"),
+    ],
+)
+def test_errors_name_the_row_in_the_whole_file(tmp_path, row, value, pattern):
+    n = 200
+    t = 10.0 * np.arange(n)
+    temp = np.full(n, 20.0).astype(object)
+    times = t.astype(object)
+    if value == "dup":
+        times[row] = t[row - 1]
+    elif value == "back":
+        times[row] = 400.0
+    elif value == "text":
+        temp[row] = "x1"
+    elif value == "hot":
+        temp[row] = 500.0
+    else:
+        times[row] = ""
+    path = tmp_path / "bad.csv"
+    pd.DataFrame({"time_s": times, "t_int_c": temp}).to_csv(path, index=False)
+    with pytest.raises(LogFormatError, match=pattern):
+        read_log(path, chunk_rows=50)
+    # the same message as the one-shot reader
+    with pytest.raises(LogFormatError, match=pattern):
+        read_log(path, chunk_rows=10_000)
+
+
+def test_kelvin_spread_over_chunks_is_still_kelvin(tmp_path):
+    path = tmp_path / "k.csv"
+    t = np.arange(100.0)
+    pd.DataFrame({"time_s": t, "t_int_c": 250.0 + t}).to_csv(path, index=False)
+    with pytest.raises(LogFormatError, match=r"t_int_c: every value lies in 250 \.\. 349.*kelvin"):
+        read_log(path, chunk_rows=10)
+
+
+def test_european_spreadsheet_log_is_read(tmp_path):
+    f = _messy_frame(n=40)
+    ref = tmp_path / "ref.csv"
+    f.to_csv(ref, index=False)
+    euro = tmp_path / "euro.csv"
+    f.to_csv(euro, index=False, sep=";", decimal=",", encoding="utf-8-sig")
+    assert ";" in euro.read_text(encoding="utf-8-sig").splitlines()[1]
+    a, b = read_log(ref), read_log(euro, chunk_rows=9)
+    for name in ("time_s", "t_int_c", "tk_set_c"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert list(b.extra.columns) == ["note"]
+    tab = tmp_path / "tab.csv"
+    f.to_csv(tab, index=False, sep="\t")
+    np.testing.assert_array_equal(read_log(tab).t_int_c, a.t_int_c)
+
+
+def test_decimal_commas_in_a_comma_file_are_named(tmp_path):
+    path = tmp_path / "c.csv"
+    path.write_text("time_s,t_int_c\n0,20,5\n10,20,75\n20,21,0\n")
+    with pytest.raises(LogFormatError, match=r"c\.csv: .*decimal commas in a comma-separated"):
+        read_log(path)
+    quoted = tmp_path / "q.csv"
+    quoted.write_text('time_s,t_int_c\n0,"20,5"\n10,"20,75"\n')
+    with pytest.raises(LogFormatError, match=r"row 1 .*'20,5'.*decimal comma"):
+        read_log(quoted)
+
+
+def test_ragged_line_deep_in_the_file_is_named(tmp_path):
+    path = tmp_path / "r.csv"
+    lines = ["time_s,t_int_c"] + [f"{10 * i},20.0" for i in range(300)]
+    lines[250] = "2490,20.0,7"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(LogFormatError, match=r"r\.csv: not a readable CSV log.*line 251"):
+        read_log(path, chunk_rows=64)
+
+
+def test_thin_log_keeps_every_kth_row():
+    from schedsyn.logs import thin_log
+
+    f = _messy_frame(n=200)
+    log = log_from_frame(f)
+    same, k = thin_log(log, 500)
+    assert k == 1 and same is log
+    thin, k = thin_log(log, 60)
+    assert k == 4 and thin.n_rows == 50
+    np.testing.assert_array_equal(thin.time_s, log.time_s[::4])
+    np.testing.assert_array_equal(thin.t_int_c, log.t_int_c[::4], strict=False)
+    np.testing.assert_array_equal(thin.tk_set_c, log.tk_set_c[::4])
+    assert thin.nan_counts["t_int_c"] == int(np.isnan(log.t_int_c[::4]).sum())
+    assert list(thin.extra["note"]) == list(f["note"][::4])
+    with pytest.raises(ParameterError, match="max_rows"):
+        thin_log(log, 2)
+
+
+def test_collector_grows_past_a_low_row_estimate():
+    """The reader preallocates from a line count; if that is ever low it grows."""
+    from schedsyn.logs import _Collector
+
+    f = _messy_frame(n=100)
+    col = _Collector(f.columns, "x", keep_extra=False, expected_rows=3)
+    for lo in range(0, 100, 30):
+        col.add(f.iloc[lo : lo + 30])
+    log = col.finish()
+    np.testing.assert_array_equal(log.time_s, f["time_s"].to_numpy())
+    np.testing.assert_array_equal(log.t_int_c, f["t_int_c"].to_numpy())
+    assert log.report == log_from_frame(f).report

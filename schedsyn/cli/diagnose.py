@@ -11,9 +11,9 @@ import json
 
 import numpy as np
 
-from ..discrepancy import DiagnoseSettings, diagnose
+from ..discrepancy import DIAGNOSE_MAX_ROWS, DiagnoseSettings, diagnose
 from ..io import write_frame_atomic, write_json_atomic
-from ..logs import read_log
+from ..logs import read_log, thin_log
 from ..models_io import write_model
 from . import _common
 
@@ -94,7 +94,11 @@ def run(args: argparse.Namespace) -> int:
     progress = _common.progress_of(args)
     names = TABLES + (() if args.no_plots else PLOTS)
     out = _common.output_dir(args.out, "out/diagnose", [args.log], names)
-    log = read_log(args.log)
+    full = read_log(args.log, keep_extra=False)
+    n_rows = full.n_rows
+    # a long log is diagnosed on every k-th row (bounded memory); the full one is freed
+    log, stride = thin_log(full, DIAGNOSE_MAX_ROWS)
+    del full
     settings = DiagnoseSettings(
         fit_step_s=args.fit_step_s,
         effects=tuple(args.effects) if args.effects is not None else None,
@@ -111,6 +115,15 @@ def run(args: argparse.Namespace) -> int:
         _plots(d, log, out, args.log)
     out.commit()
     wrote = f"wrote {out.target}/" + ", ".join(names)
+    if stride > 1:  # on stdout with the findings; on stderr when stdout is the JSON
+        note = (
+            f"note: the log has {n_rows} rows; diagnosed on every {stride}th row "
+            f"({log.n_rows} rows)"
+        )
+        if args.json:
+            _common.stderr(note)
+        else:
+            print(note)
     if args.json:
         print(json.dumps(d.to_json_dict()))
         _common.stderr(wrote)

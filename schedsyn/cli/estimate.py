@@ -1,14 +1,27 @@
-"""``schedsyn estimate LOG.csv``: Kalman-smoothed gradient of a measured run, and its plots."""
+"""``schedsyn estimate LOG.csv``: Kalman-smoothed gradient of a measured run, and its plots.
+
+Logs of any length: the log is read and filtered in chunks (memory grows with the log at
+~32 bytes per row plus ~48 per row written), with progress on stderr; ``--every S``
+writes one row every S seconds.
+"""
 
 from __future__ import annotations
 
 import argparse
+import math
+from pathlib import Path
 
 from ..compare import resample_run
-from ..estimate import estimate_gradient, estimate_gradient_model
-from ..io import write_frame_atomic
+from ..estimate import GradientEstimate, estimate_gradient, estimate_gradient_model
+from ..io import write_atomic
 from ..logs import read_log
 from . import _common
+from ._progress import StderrProgress
+
+#: Rows of gradient.csv formatted at a time.
+WRITE_ROWS = 200_000
+#: The plots draw at most about this many rows of the estimate.
+PLOT_ROWS = 20_000
 
 
 def add_estimator_options(p: argparse.ArgumentParser) -> None:
@@ -62,7 +75,38 @@ def register(sub) -> None:
         default=None,
         help="working region to shade in the phase portrait, °C",
     )
+    p.add_argument(
+        "--every",
+        type=float,
+        default=None,
+        metavar="S",
+        help="write one row every S seconds to gradient.csv (default: every log row; "
+        "every row is filtered either way)",
+    )
+    p.add_argument(
+        "--order",
+        type=int,
+        choices=(2, 3),
+        default=3,
+        help="kinematic model: 3 = the gradient's rate a random walk (default; smooth "
+        "gradients that bend where the chamber changes rate), 2 = the gradient a random walk",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress messages on stderr")
     p.set_defaults(func=run)
+
+
+def write_gradient_csv(path: Path, est: GradientEstimate, inputs, progress=None) -> None:
+    """``est.to_frame()`` as CSV, formatted ``WRITE_ROWS`` rows at a time (atomically)."""
+
+    def writer(tmp: Path) -> None:
+        with tmp.open("w", newline="") as fh:
+            for lo in range(0, est.n_rows, WRITE_ROWS):
+                hi = min(lo + WRITE_ROWS, est.n_rows)
+                est.take(slice(lo, hi)).to_frame().to_csv(fh, header=lo == 0, index=False)
+                if progress is not None:
+                    progress("writing", hi, est.n_rows)
+
+    write_atomic(path, writer, inputs)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -70,16 +114,31 @@ def run(args: argparse.Namespace) -> int:
 
     names = ("gradient.csv", "phase.png", "gradient.png")
     out = _common.output_dir(args.out, "out/estimate", [args.log], names)
-    log = read_log(args.log)
+    progress = None if args.quiet else StderrProgress("estimate")
+    log = read_log(args.log, keep_extra=False, progress=progress)
     print_log_report(log)
     if args.method == "model":
         params = _common.thermal_params(args)
-        est = estimate_gradient_model(log, params, chamber=args.chamber, q=args.q, r=args.r)
+        est = estimate_gradient_model(
+            log,
+            params,
+            chamber=args.chamber,
+            q=args.q,
+            r=args.r,
+            every_s=args.every,
+            progress=progress,
+        )
     else:
-        est = estimate_gradient(log, q=args.q, r=args.r)
-    write_frame_atomic(out.path("gradient.csv"), est.to_frame())
+        est = estimate_gradient(
+            log, q=args.q, r=args.r, every_s=args.every, progress=progress, order=args.order
+        )
+    write_gradient_csv(out.path("gradient.csv"), est, [args.log], progress)
+    if progress is not None:
+        progress.close()
     region = tuple(args.region) if args.region else None
-    dense = resample_run(log, est)  # the same estimate, with the line broken at gaps
+    # plots of at most ~PLOT_ROWS rows (the smoothed estimate changes slowly)
+    view = est.take(slice(None, None, max(1, math.ceil(est.n_rows / PLOT_ROWS))))
+    dense = resample_run(log, view)  # the same estimate, with the line broken at gaps
     plots.save_figure(
         plots.phase_plot(
             dense.t_c,
@@ -92,8 +151,12 @@ def run(args: argparse.Namespace) -> int:
         out.path("phase.png"),
     )
     plots.save_figure(
-        plots.gradient_plot(est, title="estimated gradient"), out.path("gradient.png")
+        plots.gradient_plot(view, title="estimated gradient"), out.path("gradient.png")
     )
     out.commit()
-    _common.say(est.summary(), f"wrote {out.target}/" + ", ".join(names))
+    every = "" if args.every is None else f", one every {args.every:g} s"
+    _common.say(
+        est.summary(),
+        f"wrote {out.target}/gradient.csv ({est.n_rows} rows{every}), phase.png, gradient.png",
+    )
     return 0
