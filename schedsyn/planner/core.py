@@ -17,6 +17,7 @@ from ..errors import InfeasiblePlanError, ParameterError
 from ..model import FirstOrderLag, LinearThermalModel
 from ..params import Limits, ThermalParams
 from ..programme import Programme
+from .bound import duration_lower_bound
 from .check import Plan, check_programme
 from .continuation import plan_continuation
 from .explain import explain_shortfall
@@ -258,6 +259,15 @@ def plan_experiment(
             "(counted apart from infeasible ones; see plan.json 'lp')"
         )
     status = "complete" if complete else ("incomplete" if not problems else "limits violated")
+    bound = None
+    if model is None:  # the proof is for the first-order lag; a robust plan meets every scenario
+        bound = max(duration_lower_bound(spec, p, limits).lower_bound_min for p in params_list)
+        if bound > limits.duration_max_min:
+            notes.append(
+                f"no complete plan exists within {limits.duration_max_min:g} min: any plan "
+                f"whose sweeps cross the whole region needs at least {bound:.0f} min "
+                "(proven lower bound)"
+            )
     plan = Plan(
         spec=spec,
         params=params,
@@ -278,6 +288,7 @@ def plan_experiment(
         t_min_c=t_lo,
         t_max_c=t_hi,
         box_check=box_check,
+        duration_lower_bound_min=bound,
     )
     if require_complete and not complete:
         raise InfeasiblePlanError(
