@@ -10,6 +10,10 @@ The data flow (one module per stage)::
 ``import schedsyn`` never loads matplotlib: plots live in :mod:`schedsyn.plots` and the
 command line in :mod:`schedsyn.cli`. The planner and the campaign (which import cvxpy,
 slow to load) and the discrepancy workflow are loaded on first use of their names.
+
+``__all__`` is what users need; helpers for tests, benchmarks and the command line stay
+in their modules (e.g. :func:`schedsyn.synth.blind_case`, :func:`schedsyn.sweep.parse_grid`,
+:func:`schedsyn.sweep.run_map`).
 """
 
 from importlib import import_module
@@ -37,18 +41,10 @@ from .model import AffineResponse, FirstOrderLag, affine_response
 from .params import Limits, ThermalParams
 from .programme import Programme, programme_from_frame, read_steps
 from .simulate import Trajectory, simulate
-from .sweep import (
-    ReplanResult,
-    SweepResult,
-    parse_grid,
-    parse_range,
-    run_map,
-    sweep_fixed,
-    sweep_replan,
-    verify_box,
-)
+from .sweep import ReplanResult, SweepResult, sweep_fixed, sweep_replan, verify_box
 from .synth import synth_log
 
+#: The one place the version is written (pyproject.toml reads it from here).
 __version__ = "0.1.0"
 
 #: Names loaded lazily: name -> module.
@@ -56,6 +52,7 @@ _LAZY = {
     "ExperimentSpec": "planner",
     "Plan": "planner",
     "plan_experiment": "planner",
+    "check_programme": "planner",
     "robustness_price": "planner",
     "CampaignConfig": "campaign",
     "CampaignResult": "campaign",
@@ -71,8 +68,6 @@ _LAZY = {
     "EFFECTS": "effects",
     "LinearEffectModel": "effects",
     "simulate_effect": "models_io",
-    "synth_effect_log": "synth",
-    "blind_case": "synth",
     "load_model": "models_io",
     "write_model": "models_io",
 }
@@ -115,13 +110,10 @@ __all__ = [
     "estimate_gradient_model",
     "finite_difference_gradient",
     "log_from_frame",
-    "parse_grid",
-    "parse_range",
     "programme_from_frame",
     "read_log",
     "read_steps",
     "resample_run",
-    "run_map",
     "simulate",
     "sweep_fixed",
     "sweep_replan",

@@ -1,8 +1,9 @@
 """A campaign: several experiments planned with one model and one chamber.
 
 The paper splits -50 .. +60 degC into four working regions, one 9-hour experiment each
-(:func:`default_campaign`). A campaign is described by a TOML file (the paper's one is
-``data/paper_campaign.toml``; copy and edit it)::
+(:func:`default_campaign`). A campaign is described by a TOML file (the paper's one ships
+with the package, :data:`PAPER_CAMPAIGN_TOML`, and is ``data/paper_campaign.toml`` in the
+repository; copy and edit it)::
 
     [model]        tau_s, dt0_c                        (ThermalParams)
     [limits]       chamber_min_c, duration_max_min ... (Limits; any field)
@@ -27,14 +28,16 @@ of the chamber floor and ceiling.
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import dataclasses
 import math
-import sys
 import time
 import tomllib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import partial
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -48,13 +51,39 @@ from .export import ExportSettings
 from .params import Limits, ThermalParams
 from .planner import ExperimentSpec, Plan, plan_experiment, planning_effort
 from .programme import read_steps
+from .progress import Progress
 from .simulate import simulate
 from .sweep import run_map
 
-#: The repository's data folder (the paper campaign and the paper-like baseline).
-DATA_DIR = Path(__file__).resolve().parents[1] / "data"
-PAPER_CAMPAIGN_TOML = DATA_DIR / "paper_campaign.toml"
-PAPER_BASELINE_EXP1 = DATA_DIR / "baseline_exp1_steps.csv"
+#: Files the package ships in ``schedsyn/data`` (installed with the wheel; the
+#: repository's top-level ``data/`` keeps identical copies for the examples).
+_EXTRACTED = contextlib.ExitStack()
+atexit.register(_EXTRACTED.close)
+
+
+def package_data(name: str) -> Path:
+    """Filesystem path of ``schedsyn/data/<name>``, found with :mod:`importlib.resources`.
+
+    An ordinary installation (a wheel, an editable install, a checkout) has the file on
+    disk; from a zipped installation it is extracted once, for the life of the process.
+    """
+    resource = resources.files("schedsyn").joinpath("data").joinpath(name)
+    if not resource.is_file():
+        raise SchedsynError(
+            f"package data file {name} is missing from the schedsyn installation; "
+            "reinstall schedsyn (pip install --force-reinstall schedsyn)"
+        )
+    if isinstance(resource, Path):
+        return resource.resolve()
+    return _EXTRACTED.enter_context(resources.as_file(resource))
+
+
+#: The paper's campaign (copy it to start your own) and the paper-like baseline of
+#: experiment 1 that the campaign names; both inside the installed package.
+PAPER_CAMPAIGN_TOML = package_data("paper_campaign.toml")
+PAPER_BASELINE_EXP1 = package_data("baseline_exp1_steps.csv")
+#: The folder holding them.
+DATA_DIR = PAPER_CAMPAIGN_TOML.parent
 
 #: The paper's regions: (name, working lo, working hi, approximation lo, approximation hi).
 PAPER_REGIONS_C = (
@@ -138,7 +167,8 @@ class CampaignConfig:
 def default_campaign() -> CampaignConfig:
     """The paper's four experiments W1..W4 with the default model, limits and settings.
 
-    Experiment W1 is compared with the paper-like baseline ``data/baseline_exp1_steps.csv``.
+    Experiment W1 is compared with the paper-like baseline :data:`PAPER_BASELINE_EXP1`
+    (``baseline_exp1_steps.csv``, shipped in the package).
     """
     exps = tuple(ExperimentSpec(n, wl, wh, al, ah) for n, wl, wh, al, ah in PAPER_REGIONS_C)
     return CampaignConfig(experiments=exps, baseline_steps=(PAPER_BASELINE_EXP1, None, None, None))
@@ -343,8 +373,9 @@ def load_campaign(path: Path | str) -> CampaignConfig:
 # planning
 # ---------------------------------------------------------------------------------------
 def stderr_progress(message: str) -> None:
-    """A picklable progress callable: one line on stderr."""
-    print(message, file=sys.stderr, flush=True)
+    """A picklable progress callable: one line on stderr (timestamped when stderr is a
+    file or pipe; see :class:`schedsyn.progress.Progress`)."""
+    Progress()(message)
 
 
 @dataclass(frozen=True, slots=True)
@@ -628,7 +659,7 @@ def chamber_plans(
         try:
             lim = dataclasses.replace(limits, chamber_min_c=f, chamber_max_c=c)
         except ParameterError as exc:
-            raise ParameterError(f"chamber floor {f:g} / ceiling {c:g} degC: {exc}") from None
+            raise ParameterError(f"chamber floor {f:g} / ceiling {c:g} °C: {exc}") from None
         jobs.append(_ChamberJob(spec, params, lim, robust_tau_s, robust_dt0_c))
     out = run_map(
         partial(_chamber_job, progress=progress),

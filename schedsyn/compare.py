@@ -130,11 +130,11 @@ class RunComparison:
         t = self.log.t_int_c
         return "\n".join(
             [
-                f"measured T {np.nanmin(t):.2f} .. {np.nanmax(t):.2f} degC; simulated "
-                f"{self.simulated.t_c.min():.2f} .. {self.simulated.t_c.max():.2f} degC "
-                f"(tau {self.params.tau_s:g} s, dT0 {self.params.dt0_c:g} degC)",
-                f"measured - simulated T: RMS {self.rms_residual_c:.3f} degC, max "
-                f"{self.max_abs_residual_c:.3f} degC",
+                f"measured T {np.nanmin(t):.2f} .. {np.nanmax(t):.2f} °C; simulated "
+                f"{self.simulated.t_c.min():.2f} .. {self.simulated.t_c.max():.2f} °C "
+                f"(tau {self.params.tau_s:g} s, dT0 {self.params.dt0_c:g} °C)",
+                f"measured - simulated T: RMS {self.rms_residual_c:.3f} °C, max "
+                f"{self.max_abs_residual_c:.3f} °C",
                 "planned: " + self.planned_coverage.summary(),
                 "run:     " + self.run_coverage.summary(),
             ]

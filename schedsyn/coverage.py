@@ -63,6 +63,35 @@ def distinct_levels(gradients: np.ndarray, delta_c_per_min: float) -> int:
     return count
 
 
+def level_separation(gradients: np.ndarray, levels_required: int) -> float:
+    """The widest separation at which ``gradients`` still hold ``levels_required`` levels.
+
+    ``max d`` such that ``distinct_levels(gradients, d) >= levels_required``: how far
+    apart the bin's best ``levels_required`` passes are, in degC/min. Compared with the
+    required ``delta`` it says how thin the margin is (``separation / delta`` just above
+    1: one slightly different gradient and the bin falls short). NaN when the bin has
+    fewer passes than ``levels_required``; ``inf`` when one level is required.
+
+    The optimum is one of the pairwise differences (the greedy count only changes
+    there), found by bisection over them.
+    """
+    g = np.sort(np.asarray(gradients, dtype=float))
+    k = int(levels_required)
+    if g.size < k:
+        return float("nan")
+    if k <= 1:
+        return float("inf")
+    cand = np.unique((g[None, :] - g[:, None])[np.triu_indices(g.size, 1)])
+    lo, hi = 0, cand.size - 1  # distinct_levels(g, cand[0]) >= k always holds
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if distinct_levels(g, float(cand[mid])) >= k:
+            lo = mid
+        else:
+            hi = mid - 1
+    return float(cand[lo])
+
+
 @dataclass(frozen=True, slots=True)
 class CoverageReport:
     """Per-bin pass counts, distinct levels and gradients for one working region."""
@@ -86,6 +115,12 @@ class CoverageReport:
     @property
     def min_levels(self) -> int:
         return int(self.levels.min())
+
+    @property
+    def separations_c_per_min(self) -> np.ndarray:
+        """Per bin, the widest separation of ``levels_required`` of its passes, degC/min
+        (:func:`level_separation`; NaN where a bin has fewer passes)."""
+        return np.array([level_separation(g, self.levels_required) for g in self.gradients])
 
     @property
     def complete(self) -> bool:
@@ -117,9 +152,9 @@ class CoverageReport:
     def summary(self) -> str:
         short = self.short_bins()
         text = (
-            f"coverage of [{self.grid.lo_c:g}, {self.grid.hi_c:g}] degC: {self.coverage:.1%} "
+            f"coverage of [{self.grid.lo_c:g}, {self.grid.hi_c:g}] °C: {self.coverage:.1%} "
             f"({int(self.covered.sum())}/{self.grid.n_bins} bins with >= {self.levels_required} "
-            f"gradient levels {self.delta_c_per_min:g} degC/min apart; min {self.min_levels})"
+            f"gradient levels {self.delta_c_per_min:g} °C/min apart; min {self.min_levels})"
         )
         if short:
             text += "; short: " + ", ".join(f"[{a:g},{b:g}):{n}" for a, b, n in short[:8])
@@ -139,7 +174,7 @@ def coverage_report(
     if int(levels_required) != levels_required or levels_required < 1:
         raise ParameterError(f"levels_required must be a whole number >= 1, got {levels_required}")
     if not (np.isfinite(delta_c_per_min) and delta_c_per_min > 0):
-        raise ParameterError(f"delta_c_per_min must be > 0 degC/min, got {delta_c_per_min}")
+        raise ParameterError(f"delta_c_per_min must be > 0 °C/min, got {delta_c_per_min}")
     kb, mg, _, _ = passes(temps_c, grads_c_per_min, grid)
     order = np.argsort(kb, kind="stable")
     kb, mg = kb[order], mg[order]

@@ -30,11 +30,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 from scipy import optimize, stats
-from scipy.signal import lfilter, lombscargle
+from scipy.signal import lombscargle
 
 from .effects import EFFECTS, Effect, LinearEffectModel, ModelSpec
 from .errors import LogFormatError, ParameterError, SolverFailedError
-from .model import affine_response
+from .model import affine_response, lag_foh
 from .programme import Programme
 
 #: Chamber-side effects that only the chamber-air channel can tell from device-side ones.
@@ -85,6 +85,13 @@ class DiagnoseSettings:
     effects: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
+        from .params import real_number
+
+        for name in ("fit_step_s", "bic_margin", "min_rel_improvement", "ambiguity_bic"):
+            if getattr(self, name) is not None:  # a string fails here, not inside a fit
+                real_number(name, getattr(self, name))
+        for name in ("holdout_fraction", "setpoint_tol_c"):
+            real_number(name, getattr(self, name))
         if self.fit_step_s is not None and not (
             math.isfinite(self.fit_step_s) and self.fit_step_s > 0
         ):
@@ -498,11 +505,8 @@ def _periodic_start(base: CandidateFit, data: _Data) -> list[tuple[float, float,
         w = 2.0 * np.pi * 60.0 / p_s
         cols_t, cols_a = [], []
         for fn in (np.sin, np.cos):
-            v = fn(w * grid)
-            a_ = math.exp(-h / tau_min)
-            beta = 1.0 - tau_min * (1.0 - a_) / h
-            c = (1.0 - a_) * v[:-1] + beta * np.diff(v)
-            y = np.concatenate(([0.0], lfilter([1.0], [1.0, -a_], c)))
+            # the lag of the unit sinusoid from rest (first-order hold on the fit grid)
+            y = lag_foh(fn(w * grid), 0.0, tau_min, h)
             cols_t.append(np.interp(data.time_min, grid, y))
             if r_a is not None and air_t is not None:
                 cols_a.append(fn(w * air_t))

@@ -25,7 +25,7 @@ Linear effects keep the model linear and time invariant, so they are
   tau/(1-s)``.
 
 Nonlinear effects are simulated by an exact per-step update on a uniform grid (the
-chamber air is linear within a step; first-order hold)::
+chamber air is linear within a step; first-order hold, :func:`schedsyn.model.lag_foh`)::
 
     T[k+1] = a T[k] + (1-a) v[k] + (v[k+1] - v[k]) (1 - tau (1-a)/h),  a = exp(-h/tau)
 
@@ -48,10 +48,9 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 
 import numpy as np
-from scipy.signal import lfilter
 
 from .errors import ParameterError
-from .model import affine_response
+from .model import affine_response, lag_foh, lag_free, lag_ramp, lag_step
 from .params import Limits, ThermalParams
 from .programme import Programme
 
@@ -125,7 +124,7 @@ class LinearEffectModel:
         x = self._shift(x_min)
         a, b = self._poles()
         if b == 0.0:
-            return -np.expm1(-x / a)  # S = 1 - e^{-x/a}
+            return lag_step(x, a)  # one pole: S = 1 - e^{-x/a}, the first-order lag's
         # S = 1 - (a e^{-x/a} - b e^{-x/b})/(a - b)
         return 1.0 - (a * np.exp(-x / a) - b * np.exp(-x / b)) / (a - b)
 
@@ -133,7 +132,7 @@ class LinearEffectModel:
         x = self._shift(x_min)
         a, b = self._poles()
         if b == 0.0:
-            return x + a * np.expm1(-x / a)  # R = x - a (1 - e^{-x/a})
+            return lag_ramp(x, a)  # one pole: R = x - a (1 - e^{-x/a}), the first-order lag's
         # R = x - (a + b) + (a^2 e^{-x/a} - b^2 e^{-x/b})/(a - b), written to avoid
         # cancellation at small x: (a^2 (e^{-x/a} - 1) - b^2 (e^{-x/b} - 1))/(a - b) + x
         return x + (a * a * np.expm1(-x / a) - b * b * np.expm1(-x / b)) / (a - b)
@@ -141,12 +140,10 @@ class LinearEffectModel:
     def free(
         self, t_min: np.ndarray, tk0_c: float | np.ndarray, t0_c: float
     ) -> tuple[np.ndarray, np.ndarray]:
-        # constant chamber Tk0 (second state starts and stays at Tk0):
-        # target = K (Tk0 + dt0 - 20 s); T = e T0 + (1 - e) target; g = e (target - T0)/tau_eff
-        tau = self.tau_eff_min
-        e = np.exp(-np.asarray(t_min, dtype=float) / tau)
+        # constant chamber Tk0 (second state starts and stays at Tk0): the first-order lag
+        # towards target = K (Tk0 + dt0 - 20 s) with tau_eff
         target = self.gain * (tk0_c + self.dt0_c - SLOPE_REF_C * self.dt0_slope_c_per_c)
-        return e * t0_c + (1.0 - e) * target, e * (target - t0_c) / tau
+        return lag_free(t_min, target, t0_c, self.tau_eff_min)
 
 
 # --------------------------------------------------------------------------------------
@@ -156,19 +153,6 @@ def uniform_grid_min(end_min: float, step_min: float) -> np.ndarray:
     """``0, h, 2h, ...`` covering ``end_min`` (the last point is >= end_min)."""
     n = max(1, int(math.ceil(end_min / step_min - 1e-9)))
     return step_min * np.arange(n + 1)
-
-
-def lag_foh(v_c: np.ndarray, t0_c: float, tau_min: float, h_min: float) -> np.ndarray:
-    """Exact first-order lag of an input linear between grid points (first-order hold).
-
-    ``T[k+1] = a T[k] + (1-a) v[k] + (v[k+1] - v[k]) (1 - tau (1-a)/h)``, ``a = e^{-h/tau}``.
-    """
-    v = np.asarray(v_c, dtype=float)
-    a = math.exp(-h_min / tau_min)
-    beta = 1.0 - tau_min * (1.0 - a) / h_min
-    c = (1.0 - a) * v[:-1] + beta * np.diff(v)
-    y, _ = lfilter([1.0], [1.0, -a], c, zi=[a * t0_c])
-    return np.concatenate(([t0_c], y))
 
 
 def lag_foh_asymmetric(

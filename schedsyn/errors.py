@@ -37,3 +37,8 @@ class InfeasiblePlanError(SchedsynError):
 
 class SolverFailedError(SchedsynError):
     """A numerical solver failed for a reason other than infeasibility."""
+
+
+class EnvironmentFaultError(SchedsynError):
+    """The environment failed, not the input: an output cannot be written (permissions,
+    disk full), a worker process was killed. The command line exits with code 3."""

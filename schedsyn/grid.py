@@ -29,7 +29,7 @@ class BinGrid:
     def __post_init__(self) -> None:
         for name in ("lo_c", "hi_c", "bin_c"):
             v = getattr(self, name)
-            if not isinstance(v, int | float) or not math.isfinite(v):
+            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
                 raise ParameterError(f"{name} must be a finite number, got {v!r}")
         if not self.lo_c < self.hi_c:
             raise ParameterError(

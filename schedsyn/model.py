@@ -22,16 +22,82 @@ For the first-order lag ``tau dT/dt + T = Tk + dT0`` (tau in minutes here)::
     R(x) = x - tau * (1 - exp(-x/tau))
     T_free(t) = e T0 + (1 - e) (Tk0 + dT0),   g_free(t) = e (Tk0 + dT0 - T0) / tau,
     e = exp(-t/tau)
+
+These are the pure functions :func:`lag_step`, :func:`lag_ramp` and :func:`lag_free`, the
+one copy of the first-order lag: :class:`FirstOrderLag` is made of them, and so is the
+one-pole case of :class:`schedsyn.effects.LinearEffectModel`. :func:`lag_foh` is the same
+lag on a uniform grid for an input linear between grid points (first-order hold), used by
+the nonlinear effects and the diagnosis.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+from scipy.signal import lfilter
 
 from .params import ThermalParams
+
+
+# --------------------------------------------------------------------------------------
+# the first-order lag: tau dT/dt + T = v(t)   (times in minutes)
+# --------------------------------------------------------------------------------------
+def lag_step(x_min: np.ndarray, tau_min: float) -> np.ndarray:
+    """Unit-step response of the lag, ``S(x) = 1 - e^{-x/tau}`` (0 for ``x <= 0``)."""
+    x = np.maximum(np.asarray(x_min, dtype=float), 0.0)
+    return -np.expm1(-x / tau_min)
+
+
+def lag_ramp(x_min: np.ndarray, tau_min: float) -> np.ndarray:
+    """Unit-ramp response of the lag, ``R(x) = x - tau (1 - e^{-x/tau})`` (0 for ``x <= 0``).
+
+    ``R`` is the integral of :func:`lag_step`; written with ``expm1`` so that small ``x``
+    (where ``R ~ x^2 / (2 tau)``) keeps its precision.
+    """
+    x = np.maximum(np.asarray(x_min, dtype=float), 0.0)
+    return x + tau_min * np.expm1(-x / tau_min)
+
+
+def lag_free(
+    t_min: np.ndarray, target_c: float | np.ndarray, t0_c: float, tau_min: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Lag from ``T(0) = t0_c`` towards a constant ``target_c``: temperature and gradient.
+
+    ``T = e T0 + (1 - e) target``, ``g = dT/dt = e (target - T0) / tau``, ``e = e^{-t/tau}``.
+    """
+    e = np.exp(-np.asarray(t_min, dtype=float) / tau_min)
+    return e * t0_c + (1.0 - e) * target_c, e * (target_c - t0_c) / tau_min
+
+
+def lag_foh(v_c: np.ndarray, t0_c: float, tau_min: float, h_min: float) -> np.ndarray:
+    """Exact lag of an input linear between the points of a uniform grid (first-order hold).
+
+    ``T[k+1] = a T[k] + (1-a) v[k] + (v[k+1] - v[k]) (1 - tau (1-a)/h)``, ``a = e^{-h/tau}``
+    (the step of :func:`lag_free` plus the ramp response ``R(h)/h`` of the input's slope).
+
+    Parameters
+    ----------
+    v_c : array (n,)
+        Input (the right-hand side ``v`` of ``tau dT/dt + T = v``) at ``0, h, 2h, ...``, degC.
+    t0_c : float
+        ``T`` at the first grid point, degC.
+    tau_min, h_min : float
+        Time constant and grid step, min, both > 0.
+
+    Returns
+    -------
+    array (n,)
+        ``T`` at the grid points (the first is ``t0_c``).
+    """
+    v = np.asarray(v_c, dtype=float)
+    a = math.exp(-h_min / tau_min)
+    beta = 1.0 - tau_min * (1.0 - a) / h_min
+    c = (1.0 - a) * v[:-1] + beta * np.diff(v)
+    y, _ = lfilter([1.0], [1.0, -a], c, zi=[a * t0_c])
+    return np.concatenate(([t0_c], y))
 
 
 class LinearThermalModel(Protocol):
@@ -54,7 +120,7 @@ class LinearThermalModel(Protocol):
 
 @dataclass(frozen=True, slots=True)
 class FirstOrderLag:
-    """The paper's planning model ``tau_s dT/dt + T = Tk + dt0_c``."""
+    """The paper's planning model ``tau_s dT/dt + T = Tk + dt0_c`` (see :func:`lag_step`)."""
 
     params: ThermalParams = ThermalParams()
 
@@ -68,21 +134,17 @@ class FirstOrderLag:
 
     def step(self, x_min: np.ndarray) -> np.ndarray:
         # S(x) = 1 - exp(-x/tau) for x > 0
-        x = np.maximum(np.asarray(x_min, dtype=float), 0.0)
-        return -np.expm1(-x / self.tau_min)
+        return lag_step(x_min, self.tau_min)
 
     def ramp(self, x_min: np.ndarray) -> np.ndarray:
         # R(x) = x - tau (1 - exp(-x/tau)) for x > 0
-        x = np.maximum(np.asarray(x_min, dtype=float), 0.0)
-        return x + self.tau_min * np.expm1(-x / self.tau_min)
+        return lag_ramp(x_min, self.tau_min)
 
     def free(
         self, t_min: np.ndarray, tk0_c: float | np.ndarray, t0_c: float
     ) -> tuple[np.ndarray, np.ndarray]:
         # T_free = e T0 + (1 - e)(Tk0 + dT0); g_free = e (Tk0 + dT0 - T0)/tau
-        e = np.exp(-np.asarray(t_min, dtype=float) / self.tau_min)
-        target = tk0_c + self.params.dt0_c
-        return e * t0_c + (1.0 - e) * target, e * (target - t0_c) / self.tau_min
+        return lag_free(t_min, tk0_c + self.params.dt0_c, t0_c, self.tau_min)
 
 
 @dataclass(frozen=True, slots=True)

@@ -9,19 +9,37 @@ The planning model (paper, eq. 1)::
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass, fields
 
 from .errors import ParameterError
 
 
-def _finite(name: str, value: float) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ParameterError(f"{name} must be a number, got {value!r}") from None
+def real_number(name: str, value: object) -> float:
+    """``value`` as a finite float, or a :class:`ParameterError` naming ``name``.
+
+    Only real numbers are accepted (Python or numpy ints and floats): a string such as
+    ``"3"`` or a bool is refused here, at construction, rather than failing later inside
+    a computation.
+    """
+    if isinstance(value, bool | str | bytes) or not isinstance(value, numbers.Real):
+        raise ParameterError(
+            f"{name} must be a number (int or float), got {value!r} of type {type(value).__name__}"
+        )
+    v = float(value)
     if not math.isfinite(v):
         raise ParameterError(f"{name} must be finite, got {value!r}")
     return v
+
+
+def _finite(name: str, value: float) -> float:
+    return real_number(name, value)
+
+
+def _store_floats(obj) -> None:
+    """Check every field of a frozen parameter dataclass is a real number; store floats."""
+    for f in fields(obj):
+        object.__setattr__(obj, f.name, real_number(f.name, getattr(obj, f.name)))
 
 
 def _check_range(name: str, value: float, lo: float | None, hi: float | None, unit: str) -> None:
@@ -54,7 +72,8 @@ class ThermalParams:
         _check_range("tau_s", self.tau_s, 0.0, 1e6, "s")
         v = _finite("dt0_c", self.dt0_c)
         if abs(v) > 50:
-            raise ParameterError(f"dt0_c must be within -50 .. 50 degC, got {self.dt0_c!r}")
+            raise ParameterError(f"dt0_c must be within -50 .. 50 °C, got {self.dt0_c!r}")
+        _store_floats(self)
 
     @property
     def tau_min(self) -> float:
@@ -88,36 +107,35 @@ class Limits:
     t_init_c: float = 20.0
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            _finite(f.name, getattr(self, f.name))
+        _store_floats(self)
         if not self.rate_min_c_per_min < self.rate_max_c_per_min:
             raise ParameterError(
                 "rate_min_c_per_min must be < rate_max_c_per_min, got "
-                f"{self.rate_min_c_per_min} .. {self.rate_max_c_per_min} degC/min"
+                f"{self.rate_min_c_per_min} .. {self.rate_max_c_per_min} °C/min"
             )
         if not (self.rate_min_c_per_min <= 0.0 <= self.rate_max_c_per_min):
             raise ParameterError(
-                "the rate limits must include 0 degC/min (a hold), got "
-                f"{self.rate_min_c_per_min} .. {self.rate_max_c_per_min} degC/min"
+                "the rate limits must include 0 °C/min (a hold), got "
+                f"{self.rate_min_c_per_min} .. {self.rate_max_c_per_min} °C/min"
             )
         if not self.chamber_min_c < self.chamber_max_c:
             raise ParameterError(
                 f"chamber_min_c must be < chamber_max_c, got {self.chamber_min_c} .. "
-                f"{self.chamber_max_c} degC"
+                f"{self.chamber_max_c} °C"
             )
         if not self.device_min_c < self.device_max_c:
             raise ParameterError(
                 f"device_min_c must be < device_max_c, got {self.device_min_c} .. "
-                f"{self.device_max_c} degC"
+                f"{self.device_max_c} °C"
             )
         _check_range("duration_max_min", self.duration_max_min, 0.0, 10080.0, "min")
-        _check_range("end_tol_c", self.end_tol_c, 0.0, 50.0, "degC")
+        _check_range("end_tol_c", self.end_tol_c, 0.0, 50.0, "°C")
         for name in ("start_c", "end_c"):
             v = getattr(self, name)
             if not self.chamber_min_c <= v <= self.chamber_max_c:
                 raise ParameterError(
-                    f"{name} = {v} degC lies outside the chamber limits "
-                    f"{self.chamber_min_c} .. {self.chamber_max_c} degC"
+                    f"{name} = {v} °C lies outside the chamber limits "
+                    f"{self.chamber_min_c} .. {self.chamber_max_c} °C"
                 )
 
     def to_dict(self) -> dict[str, float]:

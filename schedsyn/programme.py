@@ -6,19 +6,43 @@ rate_c_per_min)``. Its step table has exactly these first columns::
     step, start_min, duration_min, tk_start_c, tk_end_c, rate_c_per_min
 
 followed by operator aids: ``duration_hhmm`` and ``segment_type`` (RAMP/HOLD).
+
+A table written by schedsyn for a plan starts with its metadata, one comment line per
+key (:class:`StepTableMeta`)::
+
+    # schedsyn_version: 0.1.0
+    # experiment: W3
+    # working_lo_c: 0.0
+    # working_hi_c: 30.0
+    # tau_s: 2400.0
+    ...
+    step,start_min,duration_min,tk_start_c,tk_end_c,rate_c_per_min,duration_hhmm,segment_type
+
+so that ``schedsyn simulate``, ``compare`` and ``sweep`` know the working region and the
+model it was planned for. A table without comment lines (e.g. one a spreadsheet saved
+without them) still reads, as a table with no metadata. Read it with pandas as
+``pd.read_csv(path, comment="#")``. Semicolon-separated tables with decimal commas (a
+spreadsheet in a European locale) are recognised (:mod:`schedsyn.csvdialect`).
 """
 
 from __future__ import annotations
 
+import dataclasses
+import io
+import json
 import math
-from dataclasses import dataclass
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field, fields
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from .errors import StepTableError
-from .params import Limits
+from .csvdialect import SEP_HINT, detect_csv_dialect
+from .errors import ParameterError, StepTableError
+from .params import Limits, ThermalParams
 
 STEP_COLUMNS = ("step", "start_min", "duration_min", "tk_start_c", "tk_end_c", "rate_c_per_min")
 OPERATOR_COLUMNS = ("duration_hhmm", "segment_type")
@@ -27,6 +51,287 @@ OPERATOR_COLUMNS = ("duration_hhmm", "segment_type")
 TEMP_TOL_C = 0.05 + 1e-9
 #: Rates are checked against limits with this slack (floating-point only).
 RATE_TOL_C_PER_MIN = 1e-6
+
+
+# ---------------------------------------------------------------------------------------
+# metadata of a step table
+# ---------------------------------------------------------------------------------------
+_LIMIT_KEYS = tuple(f.name for f in fields(Limits))
+_TEXT_KEYS = ("schedsyn_version", "experiment", "model")
+_INT_KEYS = ("levels_required",)
+_KEY = re.compile(r"^#\s*([A-Za-z_][A-Za-z0-9_]*)\s*:\s?(.*)$")
+
+
+@dataclass(frozen=True, slots=True)
+class StepTableMeta:
+    """What a step table was planned for, written as ``# key: value`` lines at its top.
+
+    Every field is optional (None: not recorded). Units are in the names.
+
+    Attributes
+    ----------
+    schedsyn_version : str
+        Version of schedsyn that wrote the table.
+    experiment : str
+        Experiment name (e.g. ``W3``).
+    working_lo_c, working_hi_c : float
+        Working region, degC: the region whose coverage the table was planned for.
+    approx_lo_c, approx_hi_c : float
+        Approximation region, degC.
+    tau_s, dt0_c : float
+        Nominal model: time constant, s, and self-heating offset, degC.
+    levels_required : int
+        Distinct gradient levels per 1 degC bin (the paper's 6).
+    delta_c_per_min : float
+        Minimum difference between two levels, degC/min.
+    rate_min_c_per_min ... t_init_c : float
+        The chamber, device and duration limits (the fields of
+        :class:`~schedsyn.params.Limits`, same names).
+    robust_tau_lo_s, robust_tau_hi_s : float
+        Robust box of time constants the plan was made for, s.
+    robust_dt0_lo_c, robust_dt0_hi_c : float
+        Robust box of self-heating offsets, degC.
+    end_soak_min : float
+        Minutes the device needs after the last step, with the chamber held at its end
+        temperature, to come within ``end_tol_c`` of the temperature it settles at there
+        (``end_c + dt0_c`` for the running device).
+    end_soak_included_min : float
+        Length of the hold at the end that the table already contains for that purpose,
+        min (``schedsyn plan --end-soak``), else None.
+    model : str
+        An augmented model the plan was made with, as the JSON of a model file
+        (``schedsyn diagnose``), or None for the first-order lag of ``tau_s``, ``dt0_c``.
+    extra : tuple of (key, value)
+        Keys this version does not know, kept verbatim (written back unchanged).
+    """
+
+    schedsyn_version: str | None = None
+    experiment: str | None = None
+    working_lo_c: float | None = None
+    working_hi_c: float | None = None
+    approx_lo_c: float | None = None
+    approx_hi_c: float | None = None
+    tau_s: float | None = None
+    dt0_c: float | None = None
+    levels_required: int | None = None
+    delta_c_per_min: float | None = None
+    rate_min_c_per_min: float | None = None
+    rate_max_c_per_min: float | None = None
+    chamber_min_c: float | None = None
+    chamber_max_c: float | None = None
+    device_min_c: float | None = None
+    device_max_c: float | None = None
+    duration_max_min: float | None = None
+    start_c: float | None = None
+    end_c: float | None = None
+    end_tol_c: float | None = None
+    t_init_c: float | None = None
+    robust_tau_lo_s: float | None = None
+    robust_tau_hi_s: float | None = None
+    robust_dt0_lo_c: float | None = None
+    robust_dt0_hi_c: float | None = None
+    end_soak_min: float | None = None
+    end_soak_included_min: float | None = None
+    model: str | None = None
+    extra: tuple[tuple[str, str], ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        from .params import real_number
+
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if v is None or f.name == "extra":
+                continue
+            if f.name in _TEXT_KEYS:
+                if not isinstance(v, str) or "\n" in v or "\r" in v:
+                    raise ParameterError(f"{f.name} must be one line of text, got {v!r}")
+            elif f.name in _INT_KEYS:
+                x = real_number(f.name, v)
+                if x != int(x):
+                    raise ParameterError(f"{f.name} must be a whole number, got {v!r}")
+                object.__setattr__(self, f.name, int(x))
+            else:
+                object.__setattr__(self, f.name, real_number(f.name, v))
+        extra = tuple((str(k), str(v)) for k, v in self.extra)
+        for k, v in extra:
+            if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", k) or "\n" in v:
+                raise ParameterError(f"metadata key {k!r} must be a name and its value one line")
+        object.__setattr__(self, "extra", extra)
+
+    # -- views ------------------------------------------------------------------------
+    @property
+    def working_region_c(self) -> tuple[float, float] | None:
+        """``(lo, hi)`` of the working region, degC, or None when not recorded."""
+        if self.working_lo_c is None or self.working_hi_c is None:
+            return None
+        return (self.working_lo_c, self.working_hi_c)
+
+    @property
+    def has_model(self) -> bool:
+        """Whether the table records the model (``tau_s`` and ``dt0_c``)."""
+        return self.tau_s is not None and self.dt0_c is not None
+
+    def params(self, base: ThermalParams | None = None) -> ThermalParams | None:
+        """The recorded model over ``base`` (default :class:`ThermalParams`), or None
+        when the table records neither ``tau_s`` nor ``dt0_c``."""
+        if self.tau_s is None and self.dt0_c is None:
+            return None
+        base = ThermalParams() if base is None else base
+        changes = {k: getattr(self, k) for k in ("tau_s", "dt0_c") if getattr(self, k) is not None}
+        return dataclasses.replace(base, **changes)
+
+    def limits(self, base: Limits | None = None) -> Limits | None:
+        """The recorded limits over ``base`` (default :class:`Limits`), or None when the
+        table records none."""
+        changes = {k: getattr(self, k) for k in _LIMIT_KEYS if getattr(self, k) is not None}
+        if not changes:
+            return None
+        return dataclasses.replace(Limits() if base is None else base, **changes)
+
+    @property
+    def robust_box(self) -> tuple[tuple[float, float] | None, tuple[float, float] | None]:
+        """``(tau_s_range, dt0_c_range)`` of a robust plan (each None when not robust)."""
+        tau = (self.robust_tau_lo_s, self.robust_tau_hi_s)
+        dt0 = (self.robust_dt0_lo_c, self.robust_dt0_hi_c)
+        return (
+            tau if None not in tau else None,  # type: ignore[return-value]
+            dt0 if None not in dt0 else None,
+        )
+
+    def model_json(self) -> dict | None:
+        """The recorded augmented model file content (a dict), or None."""
+        if self.model is None:
+            return None
+        try:
+            obj = json.loads(self.model)
+        except json.JSONDecodeError as exc:
+            raise StepTableError(f"metadata model is not valid JSON ({exc})") from None
+        if not isinstance(obj, dict):
+            raise StepTableError("metadata model must be a JSON object (a model file)")
+        return obj
+
+    # -- text form --------------------------------------------------------------------
+    def to_lines(self) -> list[str]:
+        """The comment lines, ``# key: value``, in field order (unknown keys last)."""
+        out = []
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if v is None or f.name == "extra":
+                continue
+            out.append(f"# {f.name}: {v if isinstance(v, str | int) else repr(float(v))}")
+        out += [f"# {k}: {v}" for k, v in self.extra]
+        return out
+
+    @classmethod
+    def from_lines(cls, lines: Sequence[str], source: str = "step table") -> StepTableMeta:
+        """Parse ``# key: value`` lines (others are free comments and ignored).
+
+        Spreadsheet damage is tolerated: surrounding quotes, trailing separators
+        (``# tau_s: 2400.0,,,,``) and a decimal comma (``# dt0_c: 3,5``). A value that is
+        not a number where one is needed, or a key given twice, is an error naming the
+        line.
+        """
+        known = {f.name for f in fields(cls)} - {"extra"}
+        values: dict[str, Any] = {}
+        extra: list[tuple[str, str]] = []
+        where: dict[str, int] = {}
+        for lineno, raw in enumerate(lines, start=1):
+            text = _clean_comment(raw)
+            m = _KEY.match(text)
+            if not m:
+                continue
+            key, value = m.group(1), m.group(2).strip()
+            if key in where:
+                raise StepTableError(
+                    f"{source}: line {lineno}: metadata key {key!r} is given twice "
+                    f"(also on line {where[key]}); delete one of the lines"
+                )
+            where[key] = lineno
+            if key not in known:
+                extra.append((key, value))
+            elif key in _TEXT_KEYS:
+                values[key] = value
+            else:
+                values[key] = _meta_number(value, key, f"{source}: line {lineno}")
+        try:
+            return cls(**values, extra=tuple(extra))
+        except ParameterError as exc:
+            raise StepTableError(f"{source}: metadata: {exc}") from None
+
+    @classmethod
+    def from_plan(
+        cls,
+        plan: Any,
+        *,
+        end_soak_min: float | None = None,
+        end_soak_included_min: float | None = None,
+        model_json: dict | None = None,
+    ) -> StepTableMeta:
+        """The metadata of a planned experiment (a :class:`schedsyn.planner.Plan`).
+
+        Takes the experiment's name, regions, levels and delta from ``plan.spec``, the
+        model from ``plan.params``, the limits from ``plan.limits`` and, for a robust
+        plan (several ``plan.scenarios``), the box they span.
+        """
+        spec, params, limits = plan.spec, plan.params, plan.limits
+        scen = tuple(getattr(plan, "scenarios", ()) or ())
+        box: dict[str, Any] = {}
+        if len(scen) > 1:
+            taus = [p.tau_s for p in scen]
+            dt0s = [p.dt0_c for p in scen]
+            box = {
+                "robust_tau_lo_s": min(taus),
+                "robust_tau_hi_s": max(taus),
+                "robust_dt0_lo_c": min(dt0s),
+                "robust_dt0_hi_c": max(dt0s),
+            }
+        return cls(
+            schedsyn_version=_version(),
+            experiment=str(spec.name),
+            working_lo_c=spec.working_lo_c,
+            working_hi_c=spec.working_hi_c,
+            approx_lo_c=spec.approx_lo_c,
+            approx_hi_c=spec.approx_hi_c,
+            tau_s=params.tau_s,
+            dt0_c=params.dt0_c,
+            levels_required=spec.levels_required,
+            delta_c_per_min=spec.delta_c_per_min,
+            **{k: getattr(limits, k) for k in _LIMIT_KEYS},
+            **box,
+            end_soak_min=end_soak_min,
+            end_soak_included_min=end_soak_included_min,
+            model=None if model_json is None else json.dumps(model_json, sort_keys=True),
+        )
+
+
+def _version() -> str:
+    from . import __version__
+
+    return str(__version__)
+
+
+def _clean_comment(raw: str) -> str:
+    """A comment line as written, undoing what a spreadsheet adds around it."""
+    text = raw.strip().lstrip("\ufeff")
+    text = re.sub(r"[,;\t]+$", "", text).strip()  # empty cells after it
+    if len(text) >= 2 and text[0] == '"' and text[-1] == '"':
+        text = text[1:-1].replace('""', '"')
+    return text.strip()
+
+
+def _meta_number(value: str, key: str, where: str) -> float:
+    text = value.strip()
+    if re.fullmatch(r"[+-]?\d+,\d+", text):  # a decimal comma
+        text = text.replace(",", ".")
+    try:
+        v = float(text)
+    except ValueError:
+        raise StepTableError(
+            f"{where}: metadata {key} is {value!r}, not a number; fix the value or delete the line"
+        ) from None
+    if not math.isfinite(v):
+        raise StepTableError(f"{where}: metadata {key} must be finite, got {value!r}")
+    return v
 
 
 @dataclass(frozen=True, slots=True)
@@ -41,11 +346,15 @@ class Programme:
         Chamber ramp rate of each segment, degC/min (0 = hold).
     start_c : float
         Chamber temperature at t = 0, degC.
+    meta : StepTableMeta, optional
+        What the programme was planned for (region, model, limits, ...); written at the
+        top of its step table and read back by :func:`read_steps`.
     """
 
     durations_min: np.ndarray
     rates_c_per_min: np.ndarray
     start_c: float = 20.0
+    meta: StepTableMeta | None = None
 
     def __post_init__(self) -> None:
         d = np.atleast_1d(np.asarray(self.durations_min, dtype=float)).copy()
@@ -60,8 +369,12 @@ class Programme:
         if np.any(d <= 0):
             i = int(np.argmax(d <= 0))
             raise StepTableError(f"segment {i + 1}: duration_min must be > 0, got {d[i]}")
+        if isinstance(self.start_c, bool) or not isinstance(self.start_c, int | float | np.number):
+            raise StepTableError(f"start_c must be a number, got {self.start_c!r}")
         if not math.isfinite(self.start_c):
             raise StepTableError(f"start_c must be finite, got {self.start_c}")
+        if self.meta is not None and not isinstance(self.meta, StepTableMeta):
+            raise StepTableError(f"meta must be a StepTableMeta, got {type(self.meta).__name__}")
         d.setflags(write=False)
         u.setflags(write=False)
         object.__setattr__(self, "durations_min", d)
@@ -105,24 +418,24 @@ class Programme:
         lo, hi = limits.rate_min_c_per_min, limits.rate_max_c_per_min
         for i in np.flatnonzero((u < lo - RATE_TOL_C_PER_MIN) | (u > hi + RATE_TOL_C_PER_MIN)):
             out.append(
-                f"step {i + 1}: rate {u[i]:.4f} degC/min outside the chamber limits "
-                f"{lo} .. {hi} degC/min"
+                f"step {i + 1}: rate {u[i]:.4f} °C/min outside the chamber limits "
+                f"{lo} .. {hi} °C/min"
             )
         tk = self.boundary_temps_c
         for i in np.flatnonzero(
             (tk < limits.chamber_min_c - TEMP_TOL_C) | (tk > limits.chamber_max_c + TEMP_TOL_C)
         ):
             out.append(
-                f"chamber temperature {tk[i]:.2f} degC at the "
+                f"chamber temperature {tk[i]:.2f} °C at the "
                 f"{'start' if i == 0 else f'end of step {i}'} lies outside the chamber limits "
-                f"{limits.chamber_min_c} .. {limits.chamber_max_c} degC"
+                f"{limits.chamber_min_c} .. {limits.chamber_max_c} °C"
             )
         if abs(self.start_c - limits.start_c) > TEMP_TOL_C:
-            out.append(f"the programme starts at {self.start_c:.2f} degC, not {limits.start_c}")
+            out.append(f"the programme starts at {self.start_c:.2f} °C, not {limits.start_c}")
         if abs(self.end_c - limits.end_c) > limits.end_tol_c + 1e-9:
             out.append(
-                f"the programme ends at {self.end_c:.2f} degC, more than {limits.end_tol_c} "
-                f"degC from {limits.end_c} degC"
+                f"the programme ends at {self.end_c:.2f} °C, more than {limits.end_tol_c} "
+                f"°C from {limits.end_c} °C"
             )
         if self.total_min > limits.duration_max_min + 1e-9:
             out.append(
@@ -145,7 +458,7 @@ class Programme:
             else:
                 keep_d.append(float(di))
                 keep_u.append(float(ui))
-        return Programme(np.array(keep_d), np.array(keep_u), self.start_c)
+        return Programme(np.array(keep_d), np.array(keep_u), self.start_c, self.meta)
 
     def rounded(self, limits: Limits, exact_start: bool = False) -> Programme:
         """What an operator types: whole minutes, boundary temperatures to 0.1 degC.
@@ -176,7 +489,7 @@ class Programme:
             bot = math.ceil(round((tk[i] + lo * dur[i]) * 10, 6)) / 10
             tk[i + 1] = min(max(want, bot), top)
         rates = np.diff(tk) / dur
-        return Programme(dur, rates, float(tk[0])).merged(rate_tol_c_per_min=1e-9)
+        return Programme(dur, rates, float(tk[0]), self.meta).merged(rate_tol_c_per_min=1e-9)
 
     # -- step table --------------------------------------------------------------------
     def to_frame(self) -> pd.DataFrame:
@@ -198,8 +511,12 @@ class Programme:
             }
         )
 
-    def to_csv(self, path: Path | str, inputs=()) -> Path:
-        """Write the step table atomically. Temperatures to 0.01 degC, rates to 1e-6."""
+    def to_csv(self, path: Path | str, inputs: Iterable[Path | str] = ()) -> Path:
+        """Write the step table atomically: the metadata lines (if ``meta``), then the table.
+
+        Temperatures and times to 0.001, rates to 1e-6. The metadata records the schedsyn
+        version that wrote it. ``inputs`` are paths that must not be overwritten.
+        """
         from .io import write_atomic
 
         frame = self.to_frame()
@@ -208,17 +525,73 @@ class Programme:
         frame["tk_start_c"] = frame["tk_start_c"].round(3)
         frame["tk_end_c"] = frame["tk_end_c"].round(3)
         frame["rate_c_per_min"] = frame["rate_c_per_min"].round(6)
-        return write_atomic(path, lambda p: frame.to_csv(p, index=False), inputs)
+        header = ""
+        if self.meta is not None:
+            meta = dataclasses.replace(self.meta, schedsyn_version=_version())
+            header = "".join(line + "\n" for line in meta.to_lines())
+
+        def write(p: Path) -> None:
+            with open(p, "w", encoding="utf-8", newline="") as fh:
+                fh.write(header)
+                frame.to_csv(fh, index=False, lineterminator="\n")
+
+        return write_atomic(path, write, inputs)
+
+    def with_meta(self, meta: StepTableMeta | None) -> Programme:
+        """The same programme with other metadata."""
+        return dataclasses.replace(self, meta=meta)
+
+    def with_end_soak(self, soak_min: float, limits: Limits | None = None) -> Programme:
+        """Append a hold at the end temperature for ``soak_min`` (rounded up to whole min).
+
+        Re-validated against ``limits.duration_max_min``: a soak that does not fit raises
+        :class:`~schedsyn.errors.ParameterError` saying by how much. A final hold step is
+        lengthened rather than followed by a second one. The metadata (if any) records the
+        included soak as ``end_soak_included_min``.
+        """
+        from .params import real_number
+
+        limits = Limits() if limits is None else limits
+        soak = real_number("soak_min", soak_min)
+        if soak < 0:
+            raise ParameterError(f"the end soak must be >= 0 min, got {soak:g} min")
+        soak = float(math.ceil(soak - 1e-9))
+        if soak == 0:
+            return self
+        total = self.total_min + soak
+        if total > limits.duration_max_min + 1e-9:
+            raise ParameterError(
+                f"the end soak of {soak:g} min does not fit: the programme lasts "
+                f"{self.total_min:g} min, {total:g} min with the soak, over the limit of "
+                f"{limits.duration_max_min:g} min by {total - limits.duration_max_min:g} min; "
+                "raise the duration limit (--duration-max-min) or hold the chamber at "
+                "the end temperature outside the programme"
+            )
+        meta = self.meta
+        if meta is not None:
+            meta = dataclasses.replace(
+                meta, end_soak_included_min=(meta.end_soak_included_min or 0.0) + soak
+            )
+        return Programme(
+            np.append(self.durations_min, soak),
+            np.append(self.rates_c_per_min, 0.0),
+            self.start_c,
+            meta,
+        ).merged()
 
 
 def programme_from_frame(
-    frame: pd.DataFrame, limits: Limits | None = None, source: str = "step table"
+    frame: pd.DataFrame,
+    limits: Limits | None = None,
+    source: str = "step table",
+    *,
+    meta: StepTableMeta | None = None,
 ) -> Programme:
     """Validate a step table and build its :class:`Programme`.
 
     The chamber path is taken from what an operator types (``tk_start_c``, ``tk_end_c``,
     ``duration_min``); ``rate_c_per_min`` must agree with it. Every problem names the row
-    (1-based step) and what to change.
+    (1-based step) and what to change. ``meta`` is attached to the programme as is.
     """
     limits = Limits() if limits is None else limits
     missing = [c for c in STEP_COLUMNS if c not in frame.columns]
@@ -262,18 +635,18 @@ def programme_from_frame(
             )
         if r == 0 and abs(tk0[0] - limits.start_c) > TEMP_TOL_C:
             raise StepTableError(
-                f"{where}: the programme starts at {tk0[0]:g} degC, not at the required "
-                f"{limits.start_c:g} degC"
+                f"{where}: the programme starts at {tk0[0]:g} °C, not at the required "
+                f"{limits.start_c:g} °C"
             )
         if r > 0 and abs(tk0[r] - tk1[r - 1]) > TEMP_TOL_C:
             raise StepTableError(
-                f"{where}: tk_start_c {tk0[r]:g} degC does not continue the previous step's "
-                f"tk_end_c {tk1[r - 1]:g} degC (the chamber programme must be continuous)"
+                f"{where}: tk_start_c {tk0[r]:g} °C does not continue the previous step's "
+                f"tk_end_c {tk1[r - 1]:g} °C (the chamber programme must be continuous)"
             )
         if abs(tk0[r] + rate[r] * dur[r] - tk1[r]) > 2 * TEMP_TOL_C:
             raise StepTableError(
                 f"{where}: rate_c_per_min {rate[r]:g} over {dur[r]:g} min goes from "
-                f"{tk0[r]:g} to {tk0[r] + rate[r] * dur[r]:.2f} degC, not to tk_end_c "
+                f"{tk0[r]:g} to {tk0[r] + rate[r] * dur[r]:.2f} °C, not to tk_end_c "
                 f"{tk1[r]:g}; fix the rate or the end temperature"
             )
     # the chamber path as typed: continuous through the typed end temperatures
@@ -283,14 +656,14 @@ def programme_from_frame(
     for r in range(n):
         if not lo - RATE_TOL_C_PER_MIN <= rates[r] <= hi + RATE_TOL_C_PER_MIN:
             raise StepTableError(
-                f"{source}: step {r + 1}: rate {rates[r]:.4f} degC/min is outside the chamber "
-                f"limits {lo:g} .. {hi:g} degC/min; lengthen the step or lower its change"
+                f"{source}: step {r + 1}: rate {rates[r]:.4f} °C/min is outside the chamber "
+                f"limits {lo:g} .. {hi:g} °C/min; lengthen the step or lower its change"
             )
     for r in range(n + 1):
         if not limits.chamber_min_c - TEMP_TOL_C <= temps[r] <= limits.chamber_max_c + TEMP_TOL_C:
             raise StepTableError(
-                f"{source}: step {max(r, 1)}: chamber temperature {temps[r]:g} degC is outside "
-                f"the chamber limits {limits.chamber_min_c:g} .. {limits.chamber_max_c:g} degC"
+                f"{source}: step {max(r, 1)}: chamber temperature {temps[r]:g} °C is outside "
+                f"the chamber limits {limits.chamber_min_c:g} .. {limits.chamber_max_c:g} °C"
             )
     total = float(dur.sum())
     if total > limits.duration_max_min + 1e-6:
@@ -298,17 +671,83 @@ def programme_from_frame(
             f"{source}: the programme lasts {total:g} min, more than the limit "
             f"{limits.duration_max_min:g} min; shorten it or raise duration_max_min"
         )
-    return Programme(dur, rates, float(temps[0]))
+    return Programme(dur, rates, float(temps[0]), meta)
 
 
 def read_steps(path: Path | str, limits: Limits | None = None) -> Programme:
-    """Read and validate a step-table CSV (see :func:`programme_from_frame`)."""
+    """Read and validate a step-table CSV (see :func:`programme_from_frame`).
+
+    Leading ``# key: value`` lines are the table's metadata (:class:`StepTableMeta`,
+    available as ``programme.meta``; None when the table has none). Comma-separated
+    tables with decimal points and semicolon- or tab-separated ones with decimal commas
+    are recognised. Without ``limits`` the table is validated against the limits its
+    metadata records, else against the default :class:`Limits`.
+    """
     path = Path(path)
     if not path.is_file():
         raise StepTableError(f"step table {path} does not exist or is not a file")
+    meta, body, dialect = _split_table(path)
+    if limits is None and meta is not None:
+        limits = meta.limits()
     try:
-        frame = pd.read_csv(path)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        frame = pd.read_csv(
+            io.StringIO(body),
+            sep=dialect.separator,
+            decimal=dialect.decimal,
+            skipinitialspace=True,
+        )
+    except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise StepTableError(f"{path}: not a readable CSV step table ({first})") from None
-    return programme_from_frame(frame, limits, source=str(path))
+        raise StepTableError(
+            f"{path}: not a readable CSV step table ({first}; read as {dialect.describe()})"
+        ) from None
+    frame.columns = [str(c).strip() for c in frame.columns]
+    missing = [c for c in STEP_COLUMNS if c not in frame.columns]
+    if missing:
+        header = body.splitlines()[0] if body.strip() else ""
+        raise StepTableError(
+            f"{path}: missing column(s) {', '.join(missing)}; a step table needs "
+            f"{', '.join(STEP_COLUMNS)} (the file was read as {dialect.describe()}, its "
+            f"header is {header[:120]!r})"
+        )
+    return programme_from_frame(frame, limits, source=str(path), meta=meta)
+
+
+def read_step_meta(path: Path | str) -> StepTableMeta | None:
+    """Only the metadata of a step table (None when it has none); the table is not read."""
+    path = Path(path)
+    if not path.is_file():
+        raise StepTableError(f"step table {path} does not exist or is not a file")
+    return _split_table(path)[0]
+
+
+def _read_text(path: Path) -> str:
+    raw = path.read_bytes()
+    for encoding in ("utf-8-sig", "cp1252"):  # cp1252: an older spreadsheet's export
+        try:
+            text = raw.decode(encoding)
+        except UnicodeDecodeError:
+            continue
+        if "\x00" not in text:
+            return text
+    raise StepTableError(
+        f"{path}: not a readable CSV step table (not UTF-8 text); save it as CSV (UTF-8)"
+    )
+
+
+def _split_table(path: Path):
+    """``(meta or None, table text, dialect)``: leading comment lines are the metadata."""
+    text = _read_text(path)
+    lines = text.splitlines(keepends=True)
+    k = 0
+    while k < len(lines) and (not lines[k].strip() or _clean_comment(lines[k]).startswith("#")):
+        k += 1
+    comments = [ln for ln in lines[:k] if ln.strip()]
+    body = "".join(lines[k:])
+    dialect = detect_csv_dialect(body[:16384])
+    if SEP_HINT.match(body.split("\n", 1)[0]):  # "sep=;": a hint, not the header
+        body = body.split("\n", 1)[1] if "\n" in body else ""
+    meta = StepTableMeta.from_lines(comments, str(path)) if comments else None
+    if meta is not None and meta == StepTableMeta(extra=meta.extra) and not meta.extra:
+        meta = None  # free comments only
+    return meta, body, dialect

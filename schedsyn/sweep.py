@@ -41,11 +41,12 @@ import numpy as np
 import pandas as pd
 
 from .coverage import coverage_report
-from .errors import InfeasiblePlanError, ParameterError, SchedsynError
+from .errors import EnvironmentFaultError, InfeasiblePlanError, ParameterError, SchedsynError
 from .grid import BinGrid
 from .model import FirstOrderLag, affine_response
 from .params import ThermalParams
 from .programme import Programme
+from .progress import Progress
 from .simulate import dense_times
 
 #: The issue's minimum density of a verification sweep over a box (tau x dT0 points).
@@ -158,10 +159,10 @@ def _check_params(tau_s_values: np.ndarray, dt0_c_values: np.ndarray) -> None:
 def _deltas(deltas_c_per_min) -> tuple[float, ...]:
     d = tuple(float(x) for x in np.atleast_1d(np.asarray(deltas_c_per_min, dtype=float)))
     if not d:
-        raise ParameterError("deltas_c_per_min needs at least one gradient separation, degC/min")
+        raise ParameterError("deltas_c_per_min needs at least one gradient separation, °C/min")
     for x in d:
         if not (math.isfinite(x) and x > 0):
-            raise ParameterError(f"every delta_c_per_min must be > 0 degC/min, got {x}")
+            raise ParameterError(f"every delta_c_per_min must be > 0 °C/min, got {x}")
     if len(set(d)) != len(d):
         raise ParameterError(f"deltas_c_per_min has repeated values: {d}")
     return d
@@ -175,10 +176,67 @@ def delta_tag(delta_c_per_min: float) -> str:
 # ---------------------------------------------------------------------------------------
 # backends
 # ---------------------------------------------------------------------------------------
-def _progress_bar(total: int, progress: bool, desc: str | None):
-    from tqdm import tqdm
+def _progress_bar(total: int, progress: bool | Progress, desc: str | None):
+    """A tqdm bar on a terminal, periodic lines in a log, nothing when ``progress`` is off."""
+    reporter = progress if isinstance(progress, Progress) else Progress(enabled=bool(progress))
+    return reporter.bar(total, desc or "")
 
-    return tqdm(total=total, disable=not progress, file=sys.stderr, desc=desc, leave=False)
+
+def _die_with_parent(main_pid: int) -> None:
+    """Initializer of the local pool's workers: exit as soon as the pool's owner is gone.
+
+    A worker busy planning would otherwise outlive a killed ``schedsyn campaign`` by
+    minutes. A daemon thread waits on the pipe multiprocessing keeps open between the
+    worker and the process that started it (``multiprocessing.parent_process()``): the
+    kernel closes it when that process dies, even before its exit is collected, and the
+    worker exits at once. Without that pipe the thread checks every 0.5 s that
+    ``main_pid`` is alive. On Linux the worker also asks the kernel for SIGKILL when its
+    own parent dies (``prctl(PR_SET_PDEATHSIG)``; the parent is the owner itself with the
+    fork and spawn start methods).
+    """
+    import multiprocessing
+    import threading
+
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+            import signal
+
+            pr_set_pdeathsig = 1
+            ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, int(signal.SIGKILL))
+        except (OSError, AttributeError):  # no libc prctl: the thread below still works
+            pass
+    parent = multiprocessing.parent_process()
+    threading.Thread(
+        target=_watch_parent, args=(parent, main_pid), daemon=True, name="schedsyn-watch-parent"
+    ).start()
+
+
+def _watch_parent(parent, main_pid: int) -> None:
+    import time
+
+    if parent is not None and getattr(parent, "_sentinel", None) is not None:
+        parent.join()  # returns when the owner's end of the pipe closes: it died
+        os._exit(1)
+    while _alive(main_pid):
+        time.sleep(0.5)
+    os._exit(1)
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie, dead but not yet collected, does not)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii", errors="replace") as fh:
+            state = fh.read().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return True
+    return state not in ("Z", "X")
 
 
 def _is_dask_address(backend: str) -> bool:
@@ -203,7 +261,7 @@ def run_map(
     backend: Any = "local",
     *,
     workers: int | None = None,
-    progress: bool = True,
+    progress: bool | Progress = True,
     desc: str | None = None,
 ) -> list[Any]:
     """``[func(x) for x in items]`` on a backend, in the order of ``items``.
@@ -223,8 +281,9 @@ def run_map(
     workers : int, optional
         Process count of the local pool (default: the number of cores, at most
         ``len(items)``). Ignored by the other backends.
-    progress : bool
-        Show a tqdm progress bar on stderr.
+    progress : bool or Progress
+        Count finished items on stderr: a tqdm bar on a terminal, timestamped lines in a
+        log (see :class:`schedsyn.progress.Progress`); False: silent.
 
     Raises
     ------
@@ -233,6 +292,13 @@ def run_map(
     SchedsynError
         The Dask backend without ``dask[distributed]`` installed, or an unreachable
         scheduler. Exceptions raised by ``func`` propagate unchanged.
+    EnvironmentFaultError
+        A worker process of the local pool died (killed, out of memory).
+
+    Notes
+    -----
+    The local pool's workers die with the process that started them (see
+    :func:`_die_with_parent`), so a killed caller leaves no worker running.
     """
     items = list(items)
     if workers is not None and (int(workers) != workers or workers < 1):
@@ -268,7 +334,12 @@ def _run_local(func, items, workers, progress, desc) -> list[Any]:
 
     n = min(int(workers) if workers else (os.cpu_count() or 1), len(items))
     out: list[Any] = [None] * len(items)
-    pool = ProcessPoolExecutor(max_workers=n, mp_context=_local_context())
+    pool = ProcessPoolExecutor(
+        max_workers=n,
+        mp_context=_local_context(),
+        initializer=_die_with_parent,
+        initargs=(os.getpid(),),
+    )
     try:
         futures = {pool.submit(func, x): i for i, x in enumerate(items)}
         with _progress_bar(len(items), progress, desc) as bar:
@@ -277,10 +348,10 @@ def _run_local(func, items, workers, progress, desc) -> list[Any]:
                 bar.update(1)
     except BrokenProcessPool as exc:
         pool.shutdown(wait=True, cancel_futures=True)
-        raise SchedsynError(
-            f"a worker process of the local pool died ({exc}); when calling schedsyn from a "
-            "script, guard its entry point with `if __name__ == '__main__':`, or use the "
-            "serial backend"
+        raise EnvironmentFaultError(
+            f"a worker process of the local pool died ({exc}): killed, or out of memory; "
+            "when calling schedsyn from a script, guard its entry point with "
+            "`if __name__ == '__main__':`, or use the serial backend"
         ) from None
     except BaseException:
         pool.shutdown(wait=True, cancel_futures=True)
@@ -532,12 +603,12 @@ class SweepResult:
         cov = self.coverage_grid
         lo, hi = self.region_c
         return (
-            f"sweep of [{lo:g}, {hi:g}] degC over tau {self.tau_s_values[0]:g} .. "
+            f"sweep of [{lo:g}, {hi:g}] °C over tau {self.tau_s_values[0]:g} .. "
             f"{self.tau_s_values[-1]:g} s x dT0 {self.dt0_c_values[0]:g} .. "
-            f"{self.dt0_c_values[-1]:g} degC ({cov.size} points, >= {self.levels_required} "
-            f"levels {self.deltas_c_per_min[0]:g} degC/min apart): coverage "
+            f"{self.dt0_c_values[-1]:g} °C ({cov.size} points, >= {self.levels_required} "
+            f"levels {self.deltas_c_per_min[0]:g} °C/min apart): coverage "
             f"{cov.min():.1%} .. {cov.max():.1%}; worst at tau {w['tau_s']:g} s, dT0 "
-            f"{w['dt0_c']:g} degC ({w['coverage']:.1%}, min {w['min_levels']} levels); full "
+            f"{w['dt0_c']:g} °C ({w['coverage']:.1%}, min {w['min_levels']} levels); full "
             f"coverage on {self.full_share:.1%} of the grid"
         )
 
@@ -555,7 +626,7 @@ def sweep_fixed(
     t0_c: float = 20.0,
     backend: Any = "serial",
     workers: int | None = None,
-    progress: bool = False,
+    progress: bool | Progress = False,
 ) -> SweepResult:
     """Coverage of a fixed ``programme`` at every ``(tau_s, dt0_c)`` grid point.
 
@@ -639,7 +710,7 @@ def verify_box(
     t0_c: float = 20.0,
     backend: Any = "serial",
     workers: int | None = None,
-    progress: bool = False,
+    progress: bool | Progress = False,
 ) -> SweepResult:
     """Dense fixed-plan sweep over the box ``tau_s_range`` x ``dt0_c_range`` (ends included).
 
@@ -652,7 +723,7 @@ def verify_box(
     axes = []
     for name, rng, n, n_min, unit in (
         ("tau_s_range", tau_s_range, n_tau, MIN_VERIFY_N_TAU, "s"),
-        ("dt0_c_range", dt0_c_range, n_dt0, MIN_VERIFY_N_DT0, "degC"),
+        ("dt0_c_range", dt0_c_range, n_dt0, MIN_VERIFY_N_DT0, "°C"),
     ):
         try:
             lo, hi = (float(x) for x in rng)
@@ -754,7 +825,7 @@ def sweep_replan(
     *,
     backend: Any = "serial",
     workers: int | None = None,
-    progress: bool = False,
+    progress: bool | Progress = False,
 ) -> ReplanResult:
     """Call ``plan_fn(ThermalParams(tau, dt0))`` at every grid point through :func:`run_map`.
 

@@ -40,7 +40,7 @@ def levels_per_bin(temp_c, grad, lo_c, hi_c, delta):
 def check(
     steps_csv: Path, tau_s: float, dt0_c: float, lo_c: float, hi_c: float, levels: int, delta: float
 ) -> dict:
-    df = pd.read_csv(steps_csv)
+    df = pd.read_csv(steps_csv, comment="#")  # the metadata lines at the top
     start = df["start_min"].to_numpy(float)
     dur = df["duration_min"].to_numpy(float)
     tk0, tk1 = df["tk_start_c"].to_numpy(float), df["tk_end_c"].to_numpy(float)

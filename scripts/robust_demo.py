@@ -15,9 +15,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from schedsyn import parse_range, plan_experiment, sweep_fixed
+from schedsyn import plan_experiment, sweep_fixed
 from schedsyn.io import write_frame_atomic
 from schedsyn.planner import ExperimentSpec
+from schedsyn.sweep import parse_range
 
 
 def main() -> None:

@@ -1,4 +1,4 @@
-"""Run `diagnose` on the real TCLab logs in ../shared/data/tclab/ (see its README).
+"""Run `diagnose` on the real TCLab logs in tests/data/tclab/ (see its README).
 
 Mapping: time_s = Time, t_int_c = T1 (quantised 0.32 degC), and the heater acts as a
 pseudo chamber setpoint tk_set_c = Ta + K * Q1 with Ta = T1 at t = 0 and the gain K
@@ -26,7 +26,7 @@ from schedsyn.logs import log_from_frame
 from schedsyn.model import affine_response
 
 ROOT = Path(__file__).resolve().parents[1]
-DEFAULT = ROOT.parent / "shared" / "data" / "tclab"
+DEFAULT = ROOT / "tests" / "data" / "tclab"
 #: 5 s blocks (tau ~ 150 s); the pseudo setpoint reconstructed to 0.2 degC (T1 steps 0.32)
 SETTINGS = DiagnoseSettings(fit_step_s=5.0, setpoint_tol_c=0.2)
 

@@ -1,4 +1,4 @@
-"""Run the gradient estimator on the real TCLab logs in ../shared/data/tclab/.
+"""Run the gradient estimator on the real TCLab logs in tests/data/tclab/.
 
 Each file (columns Time, T1, T2, Q1, Q2) becomes a log with time_s = Time and
 t_int_c = T1 (the heated thermistor, quantised in ~0.32 degC steps). Prints one row per
@@ -24,7 +24,7 @@ from schedsyn.logs import log_from_frame
 from schedsyn.params import ThermalParams
 
 ROOT = Path(__file__).resolve().parents[1]
-DEFAULT = ROOT.parent / "shared" / "data" / "tclab"
+DEFAULT = ROOT / "tests" / "data" / "tclab"
 
 
 HEATER_GAIN_C_PER_PCT = 0.78

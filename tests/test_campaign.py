@@ -1,8 +1,9 @@
 """Campaign config (TOML), plan_campaign/`schedsyn campaign` outputs, chamber_requirement.
 
 The planner is slow: only small cases are planned (a 10 degC region with 2 levels), each
-once per module. Coverage claims are checked by re-reading the exported step table and
-simulating it densely here, independently of the planner's own check.
+once per module. The small campaign must be complete, and that claim is checked with
+separate code: the exported step table integrated by scipy and its levels counted plainly
+(tests/independent.py), not with schedsyn's simulator or coverage metric.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import re
 import numpy as np
 import pandas as pd
 import pytest
+from independent import table_check
 
 from schedsyn.campaign import (
     PAPER_BASELINE_EXP1,
@@ -199,11 +201,12 @@ def test_campaign_writes_every_output(small_campaign):
     for name in ("steps.csv", "plan.json", "program.png", "phase.png", "coverage.png"):
         assert (out / "S" / name).stat().st_size > 0, name
     row = summary.iloc[0]
-    # exit code 0 exactly when every experiment is complete, 1 otherwise
-    assert rc == (0 if bool(row["complete"]) else 1)
+    # this small request is easily met: complete, exit code 0 (1 means incomplete)
+    assert rc == 0 and bool(row["complete"]) and row["status"] == "complete"
+    assert row["coverage"] == 1.0 and row["min_levels"] >= 2
     plan = json.loads((out / "S" / "plan.json").read_text())
     assert plan["tau_s"] == 2400.0 and plan["dt0_c"] == 3.0
-    assert plan["complete"] == bool(row["complete"])
+    assert plan["complete"] is True and plan["violations"] == []
     assert plan["coverage"] == pytest.approx(row["coverage"])
     assert plan["spec"]["levels_required"] == 2
     assert math.isfinite(plan["solve_s"]) and plan["solve_s"] > 0
@@ -211,7 +214,11 @@ def test_campaign_writes_every_output(small_campaign):
 
 def test_campaign_reports_progress_with_experiment_and_solver_time(small_campaign):
     *_, err = small_campaign
-    lines = [ln for ln in err.splitlines() if ln.startswith("S [")]
+    # stderr is not a terminal here: plain lines, each with a timestamp
+    stamp = re.compile(r"^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d ")
+    assert all(stamp.match(ln) for ln in err.splitlines()), err
+    lines = [stamp.sub("", ln) for ln in err.splitlines()]
+    lines = [ln for ln in lines if ln.startswith("S [")]
     assert lines, err
     times = [float(re.match(r"S \[\s*([0-9.]+) s\]", ln).group(1)) for ln in lines]
     assert times == sorted(times) and times[-1] > 0
@@ -219,28 +226,30 @@ def test_campaign_reports_progress_with_experiment_and_solver_time(small_campaig
 
 
 def test_exported_table_gives_the_reported_coverage(small_campaign):
-    """Independent check: re-read steps.csv, simulate densely, recompute coverage."""
+    """Independent check of steps.csv: scipy's ODE solver and plain counting give every
+    bin at least 2 distinct levels, the summary's figures, and every limit met."""
     _, out, _, _ = small_campaign
     row = pd.read_csv(out / "summary.csv").iloc[0]
     limits = Limits()
-    prog = read_steps(out / "S" / "steps.csv", limits)
-    traj = simulate(prog, ThermalParams(), dt_min=0.1, t0_c=limits.t_init_c)
-    rep = trajectory_coverage(traj, -10, 0, levels_required=2, delta_c_per_min=0.05)
-    rep01 = trajectory_coverage(traj, -10, 0, levels_required=2, delta_c_per_min=0.1)
-    assert rep.coverage == pytest.approx(row["coverage"])
-    assert rep.min_levels == row["min_levels"]
-    assert rep01.coverage == pytest.approx(row["coverage_delta_0p1"])
-    assert prog.total_min == pytest.approx(row["duration_min"])
-    assert prog.n_segments == row["steps"]
-    if row["complete"]:
-        # a complete plan meets every limit: rates, chamber range, 20 degC at both ends,
-        # time limit, device range
-        assert prog.violations(limits) == []
-        assert prog.start_c == pytest.approx(20.0) and abs(prog.end_c - 20.0) <= 0.5
-        assert limits.device_min_c <= traj.t_c.min() and traj.t_c.max() <= limits.device_max_c
-        # whole minutes and 0.1 degC, as an operator types them
-        assert np.allclose(prog.durations_min, np.round(prog.durations_min))
-        assert np.allclose(prog.boundary_temps_c * 10, np.round(prog.boundary_temps_c * 10))
+    steps = out / "S" / "steps.csv"
+    ind = table_check(steps, (-10.0, 0.0), 2)
+    assert ind["coverage"] == 1.0 and ind["min_levels"] >= 2, ind["levels"]
+    assert ind["min_levels"] == row["min_levels"]
+    assert table_check(steps, (-10.0, 0.0), 2, delta=0.1)["coverage"] == pytest.approx(
+        row["coverage_delta_0p1"]
+    )
+    assert ind["duration_min"] == pytest.approx(row["duration_min"])
+    # every limit: rates, chamber range, 20 degC at both ends, time limit, device range
+    assert limits.rate_min_c_per_min - 1e-9 <= ind["rates_c_per_min"].min()
+    assert ind["rates_c_per_min"].max() <= limits.rate_max_c_per_min + 1e-9
+    assert ind["chamber_start_c"] == 20.0 and abs(ind["chamber_end_c"] - 20.0) <= 0.5
+    assert ind["duration_min"] <= limits.duration_max_min
+    assert limits.device_min_c <= ind["device_min_c"] <= ind["device_max_c"] <= 62.0
+    # the table reads back (validation) with whole minutes and 0.1 degC, as typed
+    prog = read_steps(steps, limits)
+    assert prog.n_segments == row["steps"] and prog.violations(limits) == []
+    assert np.allclose(prog.durations_min, np.round(prog.durations_min))
+    assert np.allclose(prog.boundary_temps_c * 10, np.round(prog.boundary_temps_c * 10))
 
 
 def test_baseline_sits_next_to_the_plan(small_campaign):
@@ -282,4 +291,4 @@ def test_chamber_requirement_coverage_grows_as_the_floor_is_lowered():
     assert np.all(np.isfinite(cov)) and np.all((cov >= 0) & (cov <= 1))
     assert cov[1] >= cov[0]
     assert cov[0] < 1.0 and not frame["complete"].iloc[0]  # the -52 floor cannot reach -50
-    assert frame["complete"].iloc[1] == (cov[1] == 1.0)
+    assert frame["complete"].iloc[1] and cov[1] == 1.0  # -70 degC is floor enough

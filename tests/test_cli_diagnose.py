@@ -70,6 +70,9 @@ def test_diagnose_json_model_file_and_simulate(rate_limited_log, tmp_path, capsy
                 str(sim),
                 "--dt-min",
                 "1",
+                "--region",
+                "-10",
+                "0",
             ]
         )
         == 0
@@ -98,5 +101,6 @@ def test_simulate_rejects_a_bad_model_file(rate_limited_log, tmp_path, capsys):
     _, steps = rate_limited_log
     model = tmp_path / "m.json"
     model.write_text(json.dumps({"tau_s": 2400, "dt0_c": 3, "effect": "gremlins"}))
-    assert main(["simulate", str(steps), "--model", str(model), "--out", str(tmp_path)]) == 2
+    argv = ["simulate", str(steps), "--model", str(model), "--region", "-10", "0"]
+    assert main([*argv, "--out", str(tmp_path)]) == 2
     assert "unknown effect" in capsys.readouterr().err

@@ -124,7 +124,7 @@ def test_compare_refuses_to_overwrite_inputs(tmp_path, capsys, clean_log_path):
     log = tmp_path / "compare.csv"
     shutil.copy(clean_log_path, log)
     before = log.read_bytes()
-    assert main(["compare", str(log), STEPS, "--out", str(tmp_path)]) == 2
+    assert main(["compare", str(log), STEPS, "--region", "-50", "-30", "--out", str(tmp_path)]) == 2
     assert "refusing to overwrite" in capsys.readouterr().err
     assert log.read_bytes() == before
 
@@ -188,6 +188,9 @@ def test_compare_with_the_model_based_estimator(clean_log_path, tmp_path, capsys
             "model",
             "--chamber",
             "tk_air_c",
+            "--region",
+            "-50",
+            "-30",
             "--out",
             str(tmp_path / "m"),
         ]

@@ -1,7 +1,11 @@
 """The coverage metric on hand-built trajectories whose answer is known by construction."""
 
+import itertools
+
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from schedsyn import BinGrid, coverage_report, read_steps, simulate
 from schedsyn.coverage import distinct_levels, passes
@@ -99,3 +103,50 @@ def test_report_frame_has_per_bin_columns():
         "covered",
     ]
     assert frame["passes"].tolist() == [1, 1, 1]
+
+
+# ---------------------------------------------------------------------------------------
+# the distinct-level threshold, from its definition
+# ---------------------------------------------------------------------------------------
+def _passes_at(grads, lo=0.0, hi=4.0):
+    """One monotone sweep over [lo - 1, hi + 1] per gradient (one pass per bin each)."""
+    segs = [_sweep(lo - 1.0, hi + 1.0, g) for g in grads]
+    return np.concatenate([s[0] for s in segs]), np.concatenate([s[1] for s in segs])
+
+
+def test_levels_exactly_delta_apart_count_and_closer_ones_do_not():
+    """Six passes exactly delta apart are six levels; six passes 0.95 delta apart are three
+    (a level needs a full delta from the previous one: 0, 1.9 delta, 3.8 delta)."""
+    delta = 0.05
+    grid = BinGrid(0, 4)
+    at = 0.1 + delta * np.arange(6)
+    rep = coverage_report(*_passes_at(at), grid, levels_required=6, delta_c_per_min=delta)
+    assert rep.pass_counts.tolist() == [6] * 4
+    assert rep.levels.tolist() == [6] * 4 and rep.complete
+    close = 0.1 + 0.95 * delta * np.arange(6)
+    rep = coverage_report(*_passes_at(close), grid, levels_required=6, delta_c_per_min=delta)
+    assert rep.pass_counts.tolist() == [6] * 4
+    assert rep.levels.tolist() == [3] * 4 and rep.coverage == 0.0
+    # the same passes, judged with a threshold they all meet
+    rep = coverage_report(*_passes_at(close), grid, 6, delta_c_per_min=0.9 * delta)
+    assert rep.levels.tolist() == [6] * 4
+
+
+def _largest_separated_subset(units, min_gap):
+    """Brute force over every subset: the largest whose members differ pairwise by at
+    least ``min_gap`` (integers, so the comparison is exact)."""
+    for size in range(len(units), 0, -1):
+        for sub in itertools.combinations(units, size):
+            if all(abs(a - b) >= min_gap for a, b in itertools.combinations(sub, 2)):
+                return size
+    return 0
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.integers(0, 120), min_size=0, max_size=9))
+def test_distinct_levels_is_the_largest_separated_subset(units):
+    """Gradients on a lattice of delta/20: pairs 18 or 19 steps apart are closer than delta,
+    pairs 20 apart are exactly delta apart; brute force decides the true answer."""
+    delta = 0.05
+    grads = np.array(units, dtype=float) * (delta / 20)
+    assert distinct_levels(grads, delta) == _largest_separated_subset(units, 20)

@@ -32,7 +32,7 @@ from schedsyn.params import ThermalParams
 from schedsyn.programme import read_steps
 from schedsyn.synth import synth_log
 
-TCLAB = Path(__file__).resolve().parents[2] / "shared" / "data" / "tclab"
+TCLAB = Path(__file__).resolve().parent / "data" / "tclab"  # real logs, BSD-3 (README)
 BASELINE = "data/baseline_exp1_steps.csv"
 
 

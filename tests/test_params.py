@@ -35,3 +35,47 @@ def test_frozen():
 def test_invalid_limits_name_the_parameter(changes, name):
     with pytest.raises(ParameterError, match=name):
         Limits(**changes)
+
+
+@pytest.mark.parametrize(
+    ("build", "name"),
+    [
+        (lambda: ThermalParams(2400, "3"), "dt0_c"),
+        (lambda: ThermalParams("2400", 3.0), "tau_s"),
+        (lambda: ThermalParams(True, 3.0), "tau_s"),
+        (lambda: ThermalParams(2400.0, None), "dt0_c"),
+        (lambda: Limits(chamber_min_c="-70"), "chamber_min_c"),
+        (lambda: Limits(duration_max_min=True), "duration_max_min"),
+        (lambda: Limits(end_tol_c=[0.5]), "end_tol_c"),
+    ],
+)
+def test_non_numbers_are_refused_at_construction(build, name):
+    """A string or bool must fail here, not later with a TypeError inside simulate."""
+    with pytest.raises(ParameterError, match=f"{name} must be a number"):
+        build()
+
+
+def test_numbers_of_any_real_type_are_stored_as_floats():
+    import numpy as np
+
+    p = ThermalParams(np.int64(2400), np.float32(3.0))
+    assert type(p.tau_s) is float and type(p.dt0_c) is float
+    assert p == ThermalParams(2400.0, 3.0)
+    lim = Limits(chamber_min_c=-60)
+    assert type(lim.chamber_min_c) is float
+
+
+def test_bin_grid_refuses_bools():
+    from schedsyn.grid import BinGrid
+
+    with pytest.raises(ParameterError, match="lo_c"):
+        BinGrid(True, 5)
+
+
+def test_diagnose_settings_refuse_strings():
+    from schedsyn.discrepancy import DiagnoseSettings
+
+    with pytest.raises(ParameterError, match="fit_step_s must be a number"):
+        DiagnoseSettings(fit_step_s="3")
+    with pytest.raises(ParameterError, match="bic_margin must be a number"):
+        DiagnoseSettings(bic_margin="15")

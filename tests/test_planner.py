@@ -2,14 +2,24 @@
 
 import numpy as np
 import pytest
+from independent import chamber_knots, levels_per_bin, ode_trajectories
 from scipy.integrate import solve_ivp
 
-from schedsyn import BinGrid, Limits, ThermalParams, coverage_report, read_steps, simulate
+from schedsyn import (
+    BinGrid,
+    Limits,
+    Programme,
+    ThermalParams,
+    coverage_report,
+    read_steps,
+    simulate,
+)
 from schedsyn.errors import InfeasiblePlanError, ParameterError
 from schedsyn.planner import (
     BAND_SAFETY_C_PER_MIN,
     DESIGNS,
     ExperimentSpec,
+    check_programme,
     explain_shortfall,
     make_bands,
     plan_experiment,
@@ -221,33 +231,41 @@ def test_robust_plan_reports_its_scenarios_and_spaces_levels_wider(small_plan, s
 def test_too_wide_a_robust_box_says_which_part_is_covered(tmp_path):
     """A box too wide for the time limit: the planner falls back (inner half or quarter of
     the box, else the nominal point), never calls the plan complete, and names the part
-    of the box it covers -- which an independent sweep of the exported table confirms."""
-    from schedsyn.sweep import verify_box
-
+    of the box it covers. Its box figures are re-made with separate code: the exported
+    table integrated by scipy at every point of the 9 x 7 box grid and counted plainly
+    (tests/independent.py), not with the planner's own sweep."""
     limits = Limits(duration_max_min=240.0)
     box = dict(robust_tau_s=(1800.0, 3000.0), robust_dt0_c=(0.0, 6.0))
     plan = plan_experiment(ExperimentSpec(**SMALL), limits=limits, **box)
     assert not plan.complete
     assert any("inner" in n or "nominal point" in n for n in plan.notes), plan.notes
     check = plan.box_check
-    assert not check["holds"] and check["grid_points"] >= 63
-    res = verify_box(
-        read_steps(plan.programme.to_csv(tmp_path / "s.csv"), limits),
-        (-10.0, 0.0),
-        box["robust_tau_s"],
-        box["robust_dt0_c"],
-        levels_required=3,
+    assert not check["holds"] and check["grid_points"] == 63
+    # every (tau, dT0) of the 9 x 7 grid (ends included), integrated together
+    taus, dt0s = np.meshgrid(
+        np.linspace(*box["robust_tau_s"], 9), np.linspace(*box["robust_dt0_c"], 7), indexing="ij"
     )
-    assert res.full_share == pytest.approx(check["full_share"])
-    assert res.worst()["coverage"] == pytest.approx(check["worst"]["coverage"])
-    assert res.worst()["coverage"] < 1.0
+    knots_t, knots_tk = chamber_knots(plan.programme.to_csv(tmp_path / "s.csv"))
+    _, temp, grad = ode_trajectories(knots_t, knots_tk, taus.ravel(), dt0s.ravel())
+    cov = np.array(
+        [np.mean(levels_per_bin(temp[i], grad[i], -10.0, 0.0, 0.05) >= 3) for i in range(63)]
+    ).reshape(taus.shape)
+    assert np.mean(cov >= 1.0) == pytest.approx(check["full_share"])
+    assert cov.min() == pytest.approx(check["worst"]["coverage"]) and cov.min() < 1.0
+    i, j = np.unravel_index(np.argmin(cov), cov.shape)
+    assert cov[
+        list(np.linspace(*box["robust_tau_s"], 9)).index(check["worst"]["tau_s"]),
+        list(np.linspace(*box["robust_dt0_c"], 7)).index(check["worst"]["dt0_c"]),
+    ] == pytest.approx(cov[i, j])
     part = check["covered_box"]
     if part is not None:  # the named part of the box is covered at every grid point in it
-        frame = res.to_frame()
-        inside = frame[
-            frame.tau_s.between(*part["tau_s_range"]) & frame.dt0_c.between(*part["dt0_c_range"])
-        ]
-        assert len(inside) == part["n_points"] and (inside.coverage >= 1.0).all()
+        inside = (
+            (taus >= part["tau_s_range"][0])
+            & (taus <= part["tau_s_range"][1])
+            & (dt0s >= part["dt0_c_range"][0])
+            & (dt0s <= part["dt0_c_range"][1])
+        )
+        assert inside.sum() == part["n_points"] and (cov[inside] >= 1.0).all()
         assert f"{part['tau_s_range'][0]:g}..{part['tau_s_range'][1]:g} s" in plan.notes[-1]
 
 
@@ -297,8 +315,6 @@ def test_robust_scenarios_cover_the_box_ends():
 
 def test_temperature_is_affine_in_dt0_so_box_ends_bound_it():
     """The fact the robust formulation rests on: for fixed rates, T(dT0) is affine."""
-    from schedsyn import Programme
-
     prog = Programme([60.0, 90.0, 120.0], [-0.8, 0.5, 0.0])
     t = [simulate(prog, ThermalParams(dt0_c=d), dt_min=1.0).t_c for d in (0.0, 2.0, 6.0)]
     np.testing.assert_allclose(t[1], t[0] + (t[2] - t[0]) * (2.0 / 6.0), atol=1e-9)
@@ -433,3 +449,49 @@ def test_a_region_beyond_the_device_limits_is_refused_before_any_lp(monkeypatch)
     spec = ExperimentSpec("hot", 40.0, 62.0, 30.0, 62.0)  # the top edge + 0.5 > device 62
     with pytest.raises(ParameterError, match="outside its limits -52 .. 62"):
         plan_experiment(spec, ThermalParams(), Limits())
+
+
+#: How far the test programmes pass a device limit: less than 1 degC on purpose.
+GRAZE_C = 0.5
+
+
+def _hot_and_cold_programmes():
+    """Heat to 55 degC and hold (the device creeps towards 58 degC), back to 20; and cool
+    to -40 degC and hold (the device sinks towards -37 degC), back to 20."""
+    hot = Programme([35.0, 100.0, 35.0, 30.0], [1.0, 0.0, -1.0, 0.0])
+    cold = Programme([60.0, 110.0, 20.0, 30.0], [-1.0, 0.0, 3.0, 0.0])
+    return {"max": hot, "min": cold}
+
+
+@pytest.mark.parametrize("robust", [False, True], ids=["nominal", "two-scenarios"])
+@pytest.mark.parametrize("side", ["max", "min"])
+def test_check_programme_catches_a_device_limit_grazed_by_half_a_degree(side, robust, tmp_path):
+    """The device's extreme comes from scipy's integration of the table as typed; a limit
+    0.5 degC inside it is reported, a limit 0.01 degC outside it is not."""
+    prog = _hot_and_cold_programmes()[side]
+    scenarios = (
+        [ThermalParams(tau_s=2000.0, dt0_c=2.0), ThermalParams(tau_s=2800.0, dt0_c=4.0)]
+        if robust
+        else [ThermalParams()]
+    )
+    knots_t, knots_tk = chamber_knots(prog.to_csv(tmp_path / f"{side}.csv"))
+    _, temp, _ = ode_trajectories(
+        knots_t, knots_tk, [p.tau_s for p in scenarios], [p.dt0_c for p in scenarios]
+    )
+    extreme = temp.max() if side == "max" else temp.min()
+    spec = ExperimentSpec("G", 0.0, 10.0, -5.0, 15.0)
+    sign = 1.0 if side == "max" else -1.0
+
+    def limits(device_c):
+        return Limits(**{f"device_{side}_c": device_c})
+
+    *_, problems, t_lo, t_hi = check_programme(
+        prog, spec, limits(extreme - sign * GRAZE_C), scenarios
+    )
+    assert (t_hi if side == "max" else t_lo) == pytest.approx(extreme, abs=1e-3)
+    device = [s for s in problems if "device reaches" in s]
+    assert len(device) == 1, problems
+    assert f"{extreme - sign * GRAZE_C:g}" in device[0]
+    assert (" design scenarios " in device[0]) == robust
+    *_, problems, _, _ = check_programme(prog, spec, limits(extreme + sign * 0.01), scenarios)
+    assert problems == []

@@ -15,6 +15,10 @@ def test_round_trip_is_identity(tmp_path):
     path = prog.to_csv(tmp_path / "s.csv")
     frame = pd.read_csv(path)
     assert tuple(frame.columns[:6]) == STEP_COLUMNS
+    # the file holds the programme's own boundary temperatures (written to 0.001 degC)
+    tk = prog.boundary_temps_c
+    np.testing.assert_allclose(frame["tk_start_c"], tk[:-1], rtol=0, atol=5e-4 + 1e-12)
+    np.testing.assert_allclose(frame["tk_end_c"], tk[1:], rtol=0, atol=5e-4 + 1e-12)
     assert frame["segment_type"].tolist() == ["RAMP", "HOLD", "RAMP"]
     assert frame["duration_hhmm"].tolist() == ["00:30", "00:15", "01:00"]
     back = read_steps(path)
@@ -22,11 +26,26 @@ def test_round_trip_is_identity(tmp_path):
     np.testing.assert_allclose(back.rates_c_per_min, prog.rates_c_per_min)
 
 
-@settings(max_examples=40, deadline=None)
-@given(st.lists(st.tuples(st.integers(1, 120), st.floats(-1.0, 3.0)), min_size=1, max_size=12))
-def test_rounded_programme_is_typable_and_close(segs):
-    prog = Programme([d for d, _ in segs], [r for _, r in segs])
-    lim = Limits(chamber_min_c=-1000, chamber_max_c=1000, duration_max_min=5000)
+#: Typing a temperature to 0.1 degC moves it by at most half a step.
+HALF_STEP_C = 0.05
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(st.tuples(st.integers(1, 120), st.floats(-1.0, 3.0)), min_size=1, max_size=12),
+    st.floats(-40.0, 60.0),
+)
+def test_rounded_programme_is_typable_and_within_half_a_step(segs, start_c):
+    """Whole-minute segments: rounding moves no boundary temperature by more than 0.05 degC.
+
+    Why this bound holds even at the rate limits: with whole-minute durations the limits
+    -1 and +3 degC/min change the temperature by whole degrees, so the nearest 0.1 degC
+    value of every boundary is always reachable from the rounded previous one (rounding
+    commutes with adding a multiple of 0.1). Between boundaries both paths are linear, so
+    the whole chamber path is within 0.05 degC too.
+    """
+    prog = Programme([d for d, _ in segs], [r for _, r in segs], start_c)
+    lim = Limits(chamber_min_c=-1000, chamber_max_c=1000, duration_max_min=5000, start_c=start_c)
     r = prog.rounded(lim)
     assert np.allclose(r.durations_min, np.round(r.durations_min))
     tk = r.boundary_temps_c
@@ -34,9 +53,24 @@ def test_rounded_programme_is_typable_and_close(segs):
     assert np.all(r.rates_c_per_min <= 3.0 + 1e-9) and np.all(r.rates_c_per_min >= -1.0 - 1e-9)
     assert np.all(np.abs(np.diff(r.rates_c_per_min)) > 1e-9)  # merged
     assert r.total_min == pytest.approx(prog.total_min)
-    # the chamber path moves by at most a rounding step
-    t = np.linspace(0, prog.total_min, 200)
-    assert np.max(np.abs(r.chamber_at(t) - prog.chamber_at(t))) < 0.1 * len(segs) + 3.0 * 1.0
+    # every original boundary (time and temperature), and a dense path between them
+    edges = np.concatenate(([0.0], np.cumsum(prog.durations_min)))
+    gap = np.abs(r.chamber_at(edges) - prog.boundary_temps_c)
+    assert gap.max() <= HALF_STEP_C + 1e-9, (gap.max(), np.argmax(gap))
+    t = np.linspace(0, prog.total_min, 1000)
+    assert np.max(np.abs(r.chamber_at(t) - prog.chamber_at(t))) <= HALF_STEP_C + 1e-9
+
+
+@pytest.mark.parametrize("start_c", [20.0, -17.26, 33.349999])
+def test_rounding_is_to_the_nearest_tenth(start_c):
+    """Hand-made boundaries whose nearest tenths are known: no bias in either direction."""
+    d = [10.0, 10.0, 10.0, 10.0]
+    wanted_changes = [-3.04, 2.96, -0.55 + 1e-6, 7.4449]
+    prog = Programme(d, np.array(wanted_changes) / 10.0, start_c)
+    r = prog.rounded(Limits(chamber_min_c=-100, start_c=start_c))
+    exact = prog.boundary_temps_c
+    expected = np.floor(exact * 10 + 0.5) / 10  # nearest tenth (no boundary is a tie)
+    np.testing.assert_allclose(r.chamber_at(np.cumsum([0.0, *d])), expected, atol=1e-9)
 
 
 def test_merge_keeps_path():

@@ -323,7 +323,7 @@ def test_cli_writes_table_and_heatmap(tmp_path, capsys, programme):
 )
 def test_cli_bad_grid_is_one_line_exit_2(tmp_path, capsys, option, value, words):
     opt = [option] if value is None else [option, value]
-    rc = main(["sweep", STEPS, *opt, "--out", str(tmp_path), "--no-progress"])
+    rc = main(["sweep", STEPS, *opt, "--region", "-50", "-30", "--out", str(tmp_path), "--quiet"])
     assert rc == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and words in err and "Traceback" not in err
@@ -353,6 +353,9 @@ def test_cli_replan_writes_rows(tmp_path, capsys, monkeypatch):
             "2000:2800:3",
             "--dt0-c",
             "0:6:3",
+            "--region",
+            "-50",
+            "-30",
             "--out",
             str(tmp_path),
             "--workers",
@@ -420,7 +423,8 @@ def test_covered_box_is_the_largest_full_sub_box():
 
 
 def test_cli_on_dask_matches_serial(tmp_path, dask_address):
-    common = ["sweep", STEPS, "--tau-s", "2000:2800:3", "--dt0-c", "0:6:3", "--no-progress"]
+    common = ["sweep", STEPS, "--tau-s", "2000:2800:3", "--dt0-c", "0:6:3", "--region", "-50"]
+    common += ["-30", "--no-progress"]
     assert main([*common, "--out", str(tmp_path / "d"), "--dask", dask_address]) == 0
     assert main([*common, "--out", str(tmp_path / "s"), "--workers", "1"]) == 0
     pd.testing.assert_frame_equal(

@@ -2,16 +2,27 @@
 
 Each subcommand lives in its own module ``schedsyn.cli.<name>`` with ``register(sub)``
 (adds its parser and sets ``func``); ``func(args) -> int`` calls the API and writes files.
-A :class:`~schedsyn.errors.SchedsynError` becomes a one-line message and exit code 2.
+
+Exit codes (every command):
+
+* 0 done (a plan: complete);
+* 1 a plan was made but is incomplete (``plan``, ``campaign``);
+* 2 bad input: a :class:`~schedsyn.errors.SchedsynError`, one line on stderr;
+* 3 a fault of the environment: an output cannot be written (permissions, disk full), a
+  worker process was killed, out of memory; one line on stderr;
+* 4 an internal error (a bug): one line; ``SCHEDSYN_DEBUG=1`` shows the traceback.
+
+Never a traceback otherwise; 130 after Ctrl-C.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
-from ..errors import SchedsynError
+from ..errors import EnvironmentFaultError, SchedsynError
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = (
@@ -28,12 +39,16 @@ COMMANDS = (
     "report",
 )
 
+EXIT_OK, EXIT_INCOMPLETE, EXIT_BAD_INPUT, EXIT_FAULT, EXIT_BUG = 0, 1, 2, 3, 4
+
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="schedsyn",
         description="Plan thermal calibration tests of gyroscopes (chamber programmes with "
         "guaranteed temperature/gradient coverage).",
+        epilog="Exit codes: 0 done, 1 plan incomplete, 2 bad input, 3 environment fault "
+        "(cannot write, worker killed), 4 internal error.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
@@ -42,20 +57,69 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _fail(command: str, kind: str, message: str) -> None:
+    from ._common import units_text
+
+    text = " ".join(units_text(str(message)).split())  # one line, whatever it held
+    print(f"schedsyn {command}: {kind}: {text}", file=sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
+    from concurrent.futures.process import BrokenProcessPool
+
+    from ..io import os_error_text
+
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # argparse: usage errors exit 2, --help exits 0
-        return int(exc.code) if isinstance(exc.code, int) else 2
+        return int(exc.code) if isinstance(exc.code, int) else EXIT_BAD_INPUT
+    command = args.command
     try:
-        return int(args.func(args) or 0)
+        return _run(args)
+    except EnvironmentFaultError as exc:
+        _fail(command, "fault", str(exc))
+        return EXIT_FAULT
     except SchedsynError as exc:
-        print(f"schedsyn {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        _fail(command, "error", str(exc))
+        return EXIT_BAD_INPUT
+    except BrokenPipeError:  # the reader of stdout went away (e.g. `| head`)
+        try:
+            sys.stdout = open(os.devnull, "w")  # nothing more is written to the closed pipe
+        except OSError:
+            pass
+        return EXIT_FAULT
+    except OSError as exc:
+        _fail(command, "fault", os_error_text(exc))
+        return EXIT_FAULT
+    except MemoryError:
+        _fail(command, "fault", "out of memory; give the run more memory or smaller input")
+        return EXIT_FAULT
+    except BrokenProcessPool as exc:
+        _fail(command, "fault", f"a worker process died ({exc})")
+        return EXIT_FAULT
     except KeyboardInterrupt:
         print("schedsyn: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:
+        if os.environ.get("SCHEDSYN_DEBUG"):
+            raise
+        _fail(
+            command,
+            "internal error",
+            f"{type(exc).__name__}: {exc} (a bug in schedsyn; run again with "
+            "SCHEDSYN_DEBUG=1 for the traceback and report it)",
+        )
+        return EXIT_BUG
+
+
+def _run(args: argparse.Namespace) -> int:
+    from ._common import discard_uncommitted
+
+    try:
+        return int(args.func(args) or 0)
+    finally:  # outputs of a command that failed midway never reach their folder
+        discard_uncommitted()
 
 
 def entry() -> None:

@@ -1,24 +1,73 @@
-"""Argument helpers shared by the subcommands (units in every option name)."""
+"""Argument helpers shared by the subcommands (units in every option name), the one way
+to print results, and where the region and model come from."""
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import re
+import sys
 from pathlib import Path
 
 from ..errors import ParameterError
+from ..io import OutputDir
 from ..params import Limits, ThermalParams
+from ..progress import Progress
+
+# ---------------------------------------------------------------------------------------
+# text: one spelling of units, no markup in help
+# ---------------------------------------------------------------------------------------
+_DEG_C = re.compile(r"\bdeg\s?C\b")
+_BARE_C_PER_MIN = re.compile(r"(?<![°\w])C/min\b")
 
 
-def add_model_options(p: argparse.ArgumentParser) -> None:
+def units_text(text: str) -> str:
+    """User-facing text with one spelling of units: ``degC`` -> ``°C``, ``C/min`` ->
+    ``°C/min``. (Docstrings and messages of the library may say degC; what the command
+    line prints never does.)"""
+    return _BARE_C_PER_MIN.sub("°C/min", _DEG_C.sub("°C", text))
+
+
+def say(*lines: str) -> None:
+    """Print result lines to stdout (units spelt one way)."""
+    for line in lines:
+        print(units_text(str(line)))
+
+
+def plain(doc: str | None) -> str:
+    """A docstring as plain help text: no reST markup (``x``, :func:`y`), units as °C."""
+    text = doc or ""
+    text = re.sub(r":[a-z]+:`~?([^`]+)`", lambda m: m.group(1).split(".")[-1], text)
+    text = text.replace("``", "").replace("`", "")
+    return units_text(text)
+
+
+def add_quiet_option(p: argparse.ArgumentParser) -> None:
     p.add_argument(
-        "--tau-s", type=float, default=None, help="device time constant, s (default 2400)"
+        "--quiet",
+        action="store_true",
+        help="no progress on stderr (results and errors are still printed)",
+    )
+
+
+def progress_of(args: argparse.Namespace) -> Progress:
+    """The run's progress reporter: off with ``--quiet``."""
+    return Progress(enabled=not getattr(args, "quiet", False))
+
+
+# ---------------------------------------------------------------------------------------
+# model, region, limits
+# ---------------------------------------------------------------------------------------
+def add_model_options(p: argparse.ArgumentParser, default_from: str = "") -> None:
+    where = f"{default_from}, else " if default_from else ""
+    p.add_argument(
+        "--tau-s", type=float, default=None, help=f"device time constant, s (default: {where}2400)"
     )
     p.add_argument(
         "--dt0-c",
         type=float,
         default=None,
-        help="self-heating offset, °C (default 3.0, an assumption)",
+        help=f"self-heating offset, °C (default: {where}3.0, an assumption)",
     )
 
 
@@ -28,28 +77,56 @@ def thermal_params(args: argparse.Namespace, base: ThermalParams | None = None) 
     return dataclasses.replace(base, **changes)
 
 
+def model_from_table(args: argparse.Namespace, meta) -> tuple[ThermalParams, str]:
+    """``(params, where they come from)``: the options over the step table's recorded model,
+    else the defaults (said so: "default")."""
+    recorded = meta.params() if meta is not None else None
+    params = thermal_params(args, recorded)
+    given = [k for k in ("tau_s", "dt0_c") if getattr(args, k) is not None]
+    if len(given) == 2:
+        source = "given"
+    elif recorded is not None:
+        source = "from the step table" + (" and the options" if given else "")
+    else:
+        source = "default" + (" and the options" if given else "; the step table records none")
+    return params, source
+
+
 def add_region_option(
     p: argparse.ArgumentParser,
-    default=(-50.0, -30.0),
-    name="--region",
-    help_text="working region LO HI, °C",
+    name: str = "--region",
+    help_text: str = "working region LO HI, °C (default: the one the step table records)",
 ) -> None:
     p.add_argument(
-        name,
-        nargs=2,
-        type=float,
-        metavar=("LO_C", "HI_C"),
-        default=list(default),
-        help=f"{help_text} (default {default[0]:g} {default[1]:g})",
+        name, nargs=2, type=float, metavar=("LO_C", "HI_C"), default=None, help=help_text
     )
+
+
+def region_from_table(args: argparse.Namespace, meta, steps: str) -> tuple[float, float]:
+    """The working region: ``--region`` if given, else the step table's; never a guess."""
+    if args.region is not None:
+        return float(args.region[0]), float(args.region[1])
+    region = meta.working_region_c if meta is not None else None
+    if region is None:
+        raise ParameterError(
+            f"{steps} carries no working region; give --region LO HI (°C), e.g. "
+            "--region -50 -30 for the paper's W1"
+        )
+    return region
 
 
 def add_limit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
-        "--chamber-min-c", type=float, default=None, help="chamber air floor, °C (default -70)"
+        "--chamber-min-c",
+        type=float,
+        default=None,
+        help="chamber air floor, °C (default: the step table's, else -70)",
     )
     p.add_argument(
-        "--chamber-max-c", type=float, default=None, help="chamber air ceiling, °C (default 80)"
+        "--chamber-max-c",
+        type=float,
+        default=None,
+        help="chamber air ceiling, °C (default: the step table's, else 80)",
     )
 
 
@@ -63,8 +140,83 @@ def limits(args: argparse.Namespace, base: Limits | None = None) -> Limits:
     return dataclasses.replace(base, **changes)
 
 
+# ---------------------------------------------------------------------------------------
+# outputs
+# ---------------------------------------------------------------------------------------
 def out_dir(path: str | None, default: str) -> Path:
     out = Path(path if path is not None else default)
     if out.exists() and not out.is_dir():
         raise ParameterError(f"--out {out} exists and is not a directory")
     return out
+
+
+#: Output folders of the running command; :func:`discard_uncommitted` cleans up after a
+#: command that failed before committing them.
+_OPEN: list[OutputDir] = []
+
+
+def output_dir(path: str | None, default: str, inputs=(), names=()) -> OutputDir:
+    """The run's :class:`~schedsyn.io.OutputDir`, checked (inputs vs outputs, writable).
+
+    Call it before any long work; ``names`` are the files the command will write.
+    """
+    out = OutputDir(path if path is not None else default, inputs)
+    _OPEN.append(out)
+    out.check(names)
+    return out
+
+
+def discard_uncommitted() -> None:
+    """Remove the staged outputs of every output folder the command did not commit."""
+    while _OPEN:
+        _OPEN.pop().discard()
+
+
+def stderr(message: str) -> None:
+    """A note on stderr (units spelt one way)."""
+    print(units_text(message), file=sys.stderr)
+
+
+def add_coverage_options(p: argparse.ArgumentParser) -> None:
+    """``--levels`` and ``--delta-c-per-min``, by default the step table's (else 6, 0.05)."""
+    p.add_argument(
+        "--levels",
+        type=int,
+        default=None,
+        help="required distinct gradient levels (default: the step table's, else 6)",
+    )
+    p.add_argument(
+        "--delta-c-per-min",
+        type=float,
+        default=None,
+        help="minimum gradient difference between levels, °C/min (default: the step "
+        "table's, else 0.05)",
+    )
+
+
+def coverage_settings(args: argparse.Namespace, meta) -> tuple[int, float]:
+    """``(levels_required, delta_c_per_min)``: the options, else the table's, else 6, 0.05."""
+    levels = args.levels
+    if levels is None:
+        levels = meta.levels_required if meta is not None and meta.levels_required else 6
+    delta = args.delta_c_per_min
+    if delta is None:
+        delta = meta.delta_c_per_min if meta is not None and meta.delta_c_per_min else 0.05
+    return int(levels), float(delta)
+
+
+def end_soak_text(programme, t_end_c: float, soak_min: float, settled_c: float, limits) -> str:
+    """What the operator should know about the end: where the device is, how long to hold."""
+    included = programme.meta.end_soak_included_min if programme.meta is not None else None
+    head = f"end: the chamber ends at {programme.end_c:.1f} °C and the device at {t_end_c:.1f} °C"
+    if soak_min <= 0:
+        return head + f", within ±{limits.end_tol_c:g} °C of where it settles ({settled_c:.1f} °C)"
+    text = (
+        f"{head}; it needs {soak_min:.0f} min more at {programme.end_c:.1f} °C to come within "
+        f"±{limits.end_tol_c:g} °C of where it settles ({settled_c:.1f} °C)"
+    )
+    if included:
+        text += f" (the table's last {included:.0f} min are an end soak already)"
+    else:
+        text += "; add it to the table with --end-soak (plan, campaign)"
+    return text

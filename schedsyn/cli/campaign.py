@@ -7,23 +7,35 @@ Without a config, the paper's campaign (``data/paper_campaign.toml``: W1..W4). W
 ``steps.<controller>.json|csv``; ``summary.csv`` (one row per experiment, next to the
 paper-like baseline where the config names one) and ``index.html``.
 
+Every step table starts with its experiment's metadata (region, model, limits, end
+soak). The outputs of a run appear all at once at the end (they are written to a staging
+folder beside DIR first), and DIR/schedsyn-run.json lists them; files of an earlier run
+that this one does not rewrite are removed. Outputs that would overwrite an input are
+refused before any planning.
+
+With --end-soak each table ends with a hold until the device settles; an experiment
+whose soak does not fit in the time limit is written without it and reported.
+
 Exit codes: 0 every experiment is complete (independent check of its exported table);
-1 at least one experiment is incomplete or infeasible (its files, if any, are still
-written and the problem is printed); 2 bad input (config, options).
+1 at least one experiment is incomplete or infeasible, or its end soak does not fit (its
+files, if any, are still written and the problem is printed); 2 bad input (config,
+options); 3 an environment fault (an output cannot be written, a worker process died).
 """
 
 from __future__ import annotations
 
 import argparse
 
+from ..errors import ParameterError
 from . import _common
+from .plan import PLAN_FILES, add_end_soak_option
 
 
 def register(sub) -> None:
     p = sub.add_parser(
         "campaign",
         help="plan a campaign of experiments (default: the paper's)",
-        description=__doc__,
+        description=_common.plain(__doc__),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument(
@@ -46,8 +58,20 @@ def register(sub) -> None:
         default=None,
         help="processes of the local pool (default: the number of cores)",
     )
-    p.add_argument("--quiet", action="store_true", help="no progress messages on stderr")
+    add_end_soak_option(p)
+    _common.add_quiet_option(p)
     p.set_defaults(func=run)
+
+
+def campaign_outputs(config) -> list[str]:
+    """Every file a campaign writes, relative to its output folder."""
+    from ..export import default_export_path
+
+    per_experiment: list[str] = [*PLAN_FILES, "sheet.html"]
+    per_experiment += [str(default_export_path("steps.csv", e.controller)) for e in config.exports]
+    return ["summary.csv", "index.html"] + [
+        f"{e.name}/{f}" for e in config.experiments for f in per_experiment
+    ]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -56,13 +80,14 @@ def run(args: argparse.Namespace) -> int:
     from ..campaign import default_campaign, load_campaign, plan_campaign, stderr_progress
     from ..export import default_export_path
     from ..io import write_frame_atomic
-    from .plan import report_plan, write_plan_outputs
+    from .plan import end_soak_lines, report_plan, with_end_soak, write_plan_outputs
     from .sheet import write_campaign_index, write_plan_deliverables
 
     config = default_campaign() if args.config is None else load_campaign(args.config)
-    out = _common.out_dir(args.out, "out/campaign")
     inputs = [args.config] if args.config else []
     inputs += [b for b in config.baseline_steps if b is not None]
+    # checked before any planning: no output overwrites an input, the folder is writable
+    out = _common.output_dir(args.out, "out/campaign", inputs, campaign_outputs(config))
     result = plan_campaign(
         config,
         progress=None if args.quiet else stderr_progress,
@@ -70,42 +95,61 @@ def run(args: argparse.Namespace) -> int:
         workers=args.workers,
     )
     lines = []
-    links, lost = {}, []
-    for spec, plan, err in zip(config.experiments, result.plans, result.errors, strict=True):
+    no_soak: list[str] = []
+    links: dict[str, list[tuple[str, str]]] = {}
+    lost: list[str] = []
+    plans = list(result.plans)
+    for i, (spec, plan, err) in enumerate(
+        zip(config.experiments, result.plans, result.errors, strict=True)
+    ):
         if plan is None:
             lines.append(f"*** {spec.name} COULD NOT BE PLANNED: {err}")
             continue
-        write_plan_outputs(plan, out / spec.name, inputs)
+        if args.end_soak:
+            try:
+                plan = plans[i] = with_end_soak(plan)
+            except ParameterError as exc:  # the others go on; this one is reported
+                no_soak.append(spec.name)
+                lines.append(f"*** {exc}; its table is written WITHOUT an end soak")
+        folder = out.folder(spec.name)
+        write_plan_outputs(plan, folder)
         lines += report_plan(plan)
+        lines += end_soak_lines(plan)
         extra, links[spec.name], lost_one = write_plan_deliverables(
-            plan, out / spec.name, config.exports, config.sheet, inputs
+            plan, folder, config.exports, config.sheet, inputs
         )
         lines += extra
         if lost_one:
             lost.append(spec.name)
+    if args.end_soak:
+        import dataclasses
+
+        result = dataclasses.replace(result, plans=tuple(plans))
     frame = result.summary_frame()
-    write_frame_atomic(out / "summary.csv", frame, inputs)
-    write_campaign_index(out, frame, links, inputs)
+    write_frame_atomic(out.path("summary.csv"), frame)
+    write_campaign_index(out.path("summary.csv").parent, frame, links, inputs)
+    out.commit()
     with pd.option_context("display.width", 200, "display.max_columns", 30):
-        print(frame.to_string(index=False, float_format=lambda x: f"{x:.4g}"))
-    print("\n".join(lines))
+        summary = frame.to_string(index=False, float_format=lambda x: f"{x:.4g}")
     n_bad = sum(not (p is not None and p.complete) for p in result.plans)
-    print(
+    soak_text = f"; no end soak fits in {', '.join(no_soak)}" if no_soak else ""
+    _common.say(
+        summary,
+        *lines,
         f"campaign planned in {result.wall_s:.1f} s; "
         + (
             "every experiment is complete"
             if n_bad == 0
             else f"{n_bad} of {len(result.plans)} experiments are NOT complete"
         )
+        + soak_text,
+        f"wrote {out.target}/summary.csv, index.html and {out.target}/<experiment>/steps.csv, "
+        "plan.json, program.png, phase.png, coverage.png, sheet.html"
+        + "".join(f", {default_export_path('steps.csv', e.controller)}" for e in config.exports),
     )
     if lost:
         print(
             f"*** the controller export of {', '.join(lost)} failed or covers LESS than its "
             "step table (see above)"
         )
-    print(
-        f"wrote {out}/summary.csv, index.html and {out}/<experiment>/steps.csv, plan.json, "
-        "program.png, phase.png, coverage.png, sheet.html"
-        + "".join(f", {default_export_path('steps.csv', e.controller)}" for e in config.exports)
-    )
-    return 0 if n_bad == 0 and not lost else 1
+    return 0 if n_bad == 0 and not no_soak and not lost else 1

@@ -3,6 +3,8 @@
 Simulates the plan, estimates the run's gradient, overlays the phase trajectories,
 plots measured and simulated temperature with the residual, and reports the coverage the
 run achieved (same metric, on the estimated gradient) next to the planned coverage.
+The working region, the model and the coverage requirement are the step table's (its
+metadata) unless given; a table that records no working region needs --region.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from ..compare import compare_run
 from ..grid import BinGrid
 from ..io import write_frame_atomic, write_json_atomic
 from ..logs import read_log
-from ..programme import read_steps
+from ..programme import read_step_meta, read_steps
 from . import _common
 from .estimate import add_estimator_options, print_log_report
 
@@ -22,53 +24,72 @@ def register(sub) -> None:
     p = sub.add_parser(
         "compare",
         help="compare a measured log with its plan (phase portraits, residual, achieved coverage)",
-        description=__doc__,
+        description=_common.plain(__doc__),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("log", metavar="LOG.csv", help="measured log (time_s, t_int_c, ...)")
     p.add_argument("steps", metavar="STEPS.csv", help="the step table that was run")
     p.add_argument("--out", default=None, help="output directory (default out/compare)")
     add_estimator_options(p)
-    _common.add_model_options(p)
+    _common.add_model_options(p, default_from="the step table's")
     _common.add_region_option(p)
     _common.add_limit_options(p)
-    p.add_argument("--levels", type=int, default=6, help="required distinct gradient levels")
-    p.add_argument(
-        "--delta-c-per-min",
-        type=float,
-        default=0.05,
-        help="minimum gradient difference between levels, °C/min",
-    )
+    _common.add_coverage_options(p)
+    _common.add_quiet_option(p)
     p.set_defaults(func=run)
+
+
+NAMES = (
+    "gradient.csv",
+    "compare.csv",
+    "coverage.csv",
+    "summary.json",
+    "phase_compare.png",
+    "temperature_compare.png",
+    "coverage_compare.png",
+    "compare.png",
+)
 
 
 def run(args: argparse.Namespace) -> int:
     from .. import plots
 
-    params = _common.thermal_params(args)
-    limits = _common.limits(args)
+    progress = _common.progress_of(args)
+    meta = read_step_meta(args.steps)
+    limits = _common.limits(args, meta.limits() if meta is not None else None)
+    programme = read_steps(args.steps, limits)
+    lo, hi = _common.region_from_table(args, programme.meta, args.steps)
+    levels, delta = _common.coverage_settings(args, programme.meta)
+    params, source = _common.model_from_table(args, programme.meta)
+    recorded = programme.meta.model_json() if programme.meta is not None else None
+    if recorded is not None and recorded.get("effect", "none") != "none":
+        _common.stderr(
+            f"note: {args.steps} was planned with the augmented model "
+            f"{recorded.get('effect')}; compare simulates the plan with its base model "
+            "(tau, dT0)"
+        )
+    out = _common.output_dir(args.out, "out/compare", [args.log, args.steps], NAMES)
     log = read_log(args.log)
     print_log_report(log)
-    programme = read_steps(args.steps, limits)
-    lo, hi = args.region
+    progress("estimating the run's gradient and simulating the plan")
     cmp = compare_run(
         log,
         programme,
         params,
         grid=BinGrid(lo, hi),
-        levels_required=args.levels,
-        delta_c_per_min=args.delta_c_per_min,
+        levels_required=levels,
+        delta_c_per_min=delta,
         method=args.method,
         chamber=args.chamber,
         q=args.q,
         r=args.r,
         t0_c=limits.t_init_c,
     )
-    out = _common.out_dir(args.out, "out/compare")
-    inputs = [args.log, args.steps]
-    write_frame_atomic(out / "gradient.csv", cmp.estimate.to_frame(), inputs)
-    write_frame_atomic(out / "compare.csv", cmp.to_frame(), inputs)
-    write_frame_atomic(out / "coverage.csv", cmp.coverage_frame(), inputs)
-    write_json_atomic(out / "summary.json", cmp.summary_dict(), inputs)
+    progress("writing tables and plots")
+    write_frame_atomic(out.path("gradient.csv"), cmp.estimate.to_frame())
+    write_frame_atomic(out.path("compare.csv"), cmp.to_frame())
+    write_frame_atomic(out.path("coverage.csv"), cmp.coverage_frame())
+    write_json_atomic(out.path("summary.json"), cmp.summary_dict())
     region = (lo, hi)
     plots.save_figure(
         plots.phase_overlay_plot(
@@ -79,8 +100,7 @@ def run(args: argparse.Namespace) -> int:
             region=region,
             title="phase portrait: measured over simulated",
         ),
-        out / "phase_compare.png",
-        inputs,
+        out.path("phase_compare.png"),
     )
     plots.save_figure(
         plots.temperature_compare_plot(
@@ -89,20 +109,26 @@ def run(args: argparse.Namespace) -> int:
             cmp.simulated.t_c,
             title="internal temperature: measured vs simulated",
         ),
-        out / "temperature_compare.png",
-        inputs,
+        out.path("temperature_compare.png"),
     )
     plots.save_figure(
         plots.coverage_compare_plot(cmp.planned_coverage, cmp.run_coverage),
-        out / "coverage_compare.png",
-        inputs,
+        out.path("coverage_compare.png"),
     )
-    axes = plots.compare_panels(cmp, region=region, suptitle=f"{args.log} vs plan {args.steps}")
-    plots.save_figure(axes[0], out / "compare.png", inputs)
-    print(cmp.estimate.summary())
-    print(cmp.summary())
-    print(
-        f"wrote {out}/gradient.csv, compare.csv, coverage.csv, summary.json, "
-        "phase_compare.png, temperature_compare.png, coverage_compare.png, compare.png"
+    axes = plots.compare_panels(
+        cmp,
+        region=region,
+        suptitle=f"{args.log} vs plan {args.steps} (tau {params.tau_s:g} s, "
+        f"dT0 {params.dt0_c:g} °C)",
+    )
+    plots.save_figure(axes[0], out.path("compare.png"))
+    out.commit()
+    region_src = "given" if args.region is not None else "from the step table"
+    _common.say(
+        f"plan model: tau {params.tau_s:g} s, dT0 {params.dt0_c:g} °C ({source}); working "
+        f"region [{lo:g}, {hi:g}] °C ({region_src})",
+        cmp.estimate.summary(),
+        cmp.summary(),
+        f"wrote {out.target}/" + ", ".join(NAMES),
     )
     return 0

@@ -1,11 +1,15 @@
 """``schedsyn diagnose LOG.csv``: find where the model and a measured log disagree, name the
-missing effect, write the augmented model (``DIR/model.json``) and plots."""
+missing effect, write the augmented model (``DIR/model.json``) and plots.
+
+Prints the fitted device model (tau and dT0 with their standard errors), the chosen effect
+and its parameters, the RMS gap before and after, and the ranking of the candidates."""
 
 from __future__ import annotations
 
 import argparse
 import json
-import sys
+
+import numpy as np
 
 from ..discrepancy import DiagnoseSettings, diagnose
 from ..io import write_frame_atomic, write_json_atomic
@@ -19,7 +23,8 @@ def register(sub) -> None:
         "diagnose",
         help="name the effect a measured log shows that the model "
         "lacks, and write the augmented model",
-        description=__doc__,
+        description=_common.plain(__doc__),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument(
         "log", metavar="LOG.csv", help="measured log (time_s, t_int_c, tk_set_c [, tk_air_c])"
@@ -44,81 +49,122 @@ def register(sub) -> None:
         help="candidates to try (default: the whole library)",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    _common.add_quiet_option(p)
     p.set_defaults(func=run)
 
 
+TABLES = (
+    "model.json",
+    "diagnosis.json",
+    "candidates.csv",
+    "residual_segments.csv",
+    "residual_by_temperature.csv",
+)
+PLOTS = ("residuals.png", "phase.png")
+
+
+def _pm(value: float, stderr: float | None, digits: str = ".4g") -> str:
+    """``value ± stderr`` (the stderr left out when not identified)."""
+    if stderr is None or not np.isfinite(stderr):
+        return f"{value:{digits}} (uncertainty not identified)"
+    return f"{value:{digits}} ± {stderr:.2g}"
+
+
+def findings(d) -> list[str]:
+    """The main finding in words: the fitted model with its uncertainties (the effect and
+    its parameters follow in ``Diagnosis.summary()``)."""
+    se = d.stderr
+    lines = [
+        f"fitted device model: tau {_pm(d.model.tau_s, se.get('tau_s'), '.1f')} s, "
+        f"dT0 {_pm(d.model.dt0_c, se.get('dt0_c'), '.3f')} °C"
+        + (" (with the effect below)" if d.effect != "none" else ""),
+    ]
+    if d.effect != "none":
+        base = d.base_fit
+        lines.append(
+            f"base model alone: tau {_pm(base.values['tau_s'], base.stderr.get('tau_s'), '.1f')}"
+            f" s, dT0 {_pm(base.values['dt0_c'], base.stderr.get('dt0_c'), '.3f')} °C"
+        )
+    if d.ambiguous_with:
+        lines.append(f"cannot be told apart from: {', '.join(d.ambiguous_with)}")
+    return lines
+
+
 def run(args: argparse.Namespace) -> int:
+    progress = _common.progress_of(args)
+    names = TABLES + (() if args.no_plots else PLOTS)
+    out = _common.output_dir(args.out, "out/diagnose", [args.log], names)
     log = read_log(args.log)
     settings = DiagnoseSettings(
         fit_step_s=args.fit_step_s,
         effects=tuple(args.effects) if args.effects is not None else None,
     )
+    progress("fitting the base model and every candidate effect")
     d = diagnose(log, settings)
-    out = _common.out_dir(args.out, "out/diagnose")
-    inputs = [args.log]
-    write_model(out / "model.json", d.model, inputs)
-    write_json_atomic(out / "diagnosis.json", d.to_json_dict(), inputs)
-    write_frame_atomic(out / "candidates.csv", d.to_frame(), inputs)
-    write_frame_atomic(out / "residual_segments.csv", d.residuals_before.segments, inputs)
-    write_frame_atomic(
-        out / "residual_by_temperature.csv", d.residuals_before.by_temperature, inputs
-    )
-    written = [
-        "model.json",
-        "diagnosis.json",
-        "candidates.csv",
-        "residual_segments.csv",
-        "residual_by_temperature.csv",
-    ]
+    progress("writing the model, tables and plots")
+    write_model(out.path("model.json"), d.model)
+    write_json_atomic(out.path("diagnosis.json"), d.to_json_dict())
+    write_frame_atomic(out.path("candidates.csv"), d.to_frame())
+    write_frame_atomic(out.path("residual_segments.csv"), d.residuals_before.segments)
+    write_frame_atomic(out.path("residual_by_temperature.csv"), d.residuals_before.by_temperature)
     if not args.no_plots:
-        written += _plots(d, log, out, inputs, args.log)
-    msg = sys.stderr if args.json else sys.stdout
+        _plots(d, log, out, args.log)
+    out.commit()
+    wrote = f"wrote {out.target}/" + ", ".join(names)
     if args.json:
         print(json.dumps(d.to_json_dict()))
+        _common.stderr(wrote)
     else:
-        print(d.summary())
-        print(
+        _common.say(
+            *findings(d),
+            d.summary(),
             d.to_frame()[["effect", "delta_bic_vs_none", "rms_c", "parameters"]].to_string(
                 index=False, float_format=lambda v: f"{v:.4g}"
-            )
+            ),
+            wrote,
         )
-    print(f"wrote {out}/" + ", ".join(written), file=msg)
     return 0
 
 
-def _plots(d, log, out, inputs, name) -> list[str]:
+def _plots(d, log, out, name) -> None:
     from .. import plots
     from ..errors import SchedsynError
     from ..estimate import estimate_gradient
 
+    found = d.effect != "none"
     plots.save_figure(
         plots.residual_plot(
             d.time_min,
             d.before_c - d.measured_c,
-            d.after_c - d.measured_c,
-            title=f"{name}: residuals, base vs {d.effect}",
+            d.after_c - d.measured_c if found else None,
+            title=f"{name}: residuals\n"
+            + (f"base model vs with {d.effect}" if found else "base model (no effect found)")
+            + f"; fitted tau {d.model.tau_s:.0f} s, dT0 {d.model.dt0_c:.2f} °C",
             labels=("base model", f"with {d.effect}"),
         ),
-        out / "residuals.png",
-        inputs,
+        out.path("residuals.png"),
     )
-    ax = plots._axes(None)
+    ax = plots._axes(None, figsize=(8.5, 5))
     try:  # the measured gradient from the Kalman smoother
+        from ..compare import resample_run
+
         est = estimate_gradient(log)
-        ok = log.finite
-        plots.phase_plot(
-            est.t_est_c[ok], est.g_est_c_per_min[ok], ax=ax, label="measured", color="k"
-        )
+        dense = resample_run(log, est)  # NaN inside logging gaps: no line across them
+        plots.phase_plot(dense.t_c, dense.g_c_per_min, ax=ax, label="measured", color="k")
     except SchedsynError as exc:
-        print(f"note: no measured phase portrait ({exc})", file=sys.stderr)
-    plots.phase_plot(d.before_c, d.before_g_c_per_min, ax=ax, label="base model", color="tab:red")
+        _common.stderr(f"note: no measured phase portrait ({exc})")
+    # NaN inserted at logging gaps: no line across them
+    _, before_c, before_g, after_c, after_g = plots._break_at_gaps(
+        d.time_min, d.before_c, d.before_g_c_per_min, d.after_c, d.after_g_c_per_min
+    )
+    plots.phase_plot(before_c, before_g, ax=ax, label="base model", color="tab:red")
     plots.phase_plot(
-        d.after_c,
-        d.after_g_c_per_min,
+        after_c,
+        after_g,
         ax=ax,
         label=f"with {d.effect}",
         color="tab:blue",
-        title=f"{name}: phase portraits",
+        title=f"{name}: phase portraits\n(fitted tau {d.model.tau_s:.0f} s, "
+        f"dT0 {d.model.dt0_c:.2f} °C)",
     )
-    plots.save_figure(ax, out / "phase.png", inputs)
-    return ["residuals.png", "phase.png"]
+    plots.save_figure(ax, out.path("phase.png"))

@@ -41,14 +41,14 @@ def add_estimator_options(p: argparse.ArgumentParser) -> None:
 
 
 def print_log_report(log) -> None:
-    print(f"log {log.source}: {log.report.summary()}")
+    _common.say(f"log {log.source}: {log.report.summary()}")
 
 
 def register(sub) -> None:
     p = sub.add_parser(
         "estimate",
         help="estimate the internal-temperature gradient of a measured log (Kalman smoother)",
-        description=__doc__,
+        description=_common.plain(__doc__),
     )
     p.add_argument("log", metavar="LOG.csv", help="measured log (time_s, t_int_c, ...)")
     p.add_argument("--out", default=None, help="output directory (default out/estimate)")
@@ -68,6 +68,8 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from .. import plots
 
+    names = ("gradient.csv", "phase.png", "gradient.png")
+    out = _common.output_dir(args.out, "out/estimate", [args.log], names)
     log = read_log(args.log)
     print_log_report(log)
     if args.method == "model":
@@ -75,9 +77,7 @@ def run(args: argparse.Namespace) -> int:
         est = estimate_gradient_model(log, params, chamber=args.chamber, q=args.q, r=args.r)
     else:
         est = estimate_gradient(log, q=args.q, r=args.r)
-    out = _common.out_dir(args.out, "out/estimate")
-    inputs = [args.log]
-    write_frame_atomic(out / "gradient.csv", est.to_frame(), inputs)
+    write_frame_atomic(out.path("gradient.csv"), est.to_frame())
     region = tuple(args.region) if args.region else None
     dense = resample_run(log, est)  # the same estimate, with the line broken at gaps
     plots.save_figure(
@@ -86,14 +86,14 @@ def run(args: argparse.Namespace) -> int:
             dense.g_c_per_min,
             region=region,
             color="tab:red",
+            label="measured (smoothed)",
             title=f"measured phase portrait ({log.source})",
         ),
-        out / "phase.png",
-        inputs,
+        out.path("phase.png"),
     )
     plots.save_figure(
-        plots.gradient_plot(est, title="estimated gradient"), out / "gradient.png", inputs
+        plots.gradient_plot(est, title="estimated gradient"), out.path("gradient.png")
     )
-    print(est.summary())
-    print(f"wrote {out}/gradient.csv, phase.png, gradient.png")
+    out.commit()
+    _common.say(est.summary(), f"wrote {out.target}/" + ", ".join(names))
     return 0

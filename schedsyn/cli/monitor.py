@@ -22,7 +22,7 @@ def register(sub) -> None:
     p = sub.add_parser(
         "monitor",
         help="watch a run in progress: coverage so far, identified model, predicted coverage",
-        description=__doc__,
+        description=_common.plain(__doc__),
     )
     p.add_argument("log", metavar="LOG.csv", help="log of the run so far (time_s, t_int_c, ...)")
     p.add_argument("plan", metavar="PLAN_DIR", help="the plan's folder (steps.csv, plan.json)")

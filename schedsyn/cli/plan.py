@@ -7,9 +7,15 @@ values it answers "what chamber do I need?": one plan per (floor, ceiling), the 
 ``chamber.csv``, and the files of the least demanding chamber that reaches full coverage
 (or of the best one when none does).
 
+steps.csv starts with the plan's metadata (experiment, regions, model, limits, robust
+box, end_soak_min: how long the device needs at the end to settle), so that
+schedsyn simulate, compare and sweep read the region and model from it. --end-soak
+appends that hold to the table (it must fit in the time limit).
+
 Exit codes: 0 the plan is complete (every bin covered by the independent check of the
 exported table, every limit met); 1 a plan was made but is incomplete; 2 bad input or
-nothing could be planned (the message names the best coverage reachable).
+nothing could be planned (the message names the best coverage reachable); 3 an
+environment fault (an output cannot be written, a worker process died).
 """
 
 from __future__ import annotations
@@ -18,6 +24,8 @@ import argparse
 import dataclasses
 import math
 from pathlib import Path
+
+import numpy as np
 
 from ..errors import ParameterError
 from ..params import Limits, ThermalParams
@@ -29,7 +37,7 @@ def register(sub) -> None:
     p = sub.add_parser(
         "plan",
         help="plan one experiment (programme with full coverage)",
-        description=__doc__,
+        description=_common.plain(__doc__),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument(
@@ -123,38 +131,77 @@ def register(sub) -> None:
         "--model",
         default=None,
         metavar="MODEL.json",
-        help="plan with a linear augmented model file (from `schedsyn diagnose`); "
+        help="plan with a linear augmented model file (from schedsyn diagnose); "
         "--tau-s/--dt0-c then override its base",
     )
+    add_end_soak_option(p)
     p.add_argument("--out", default=None, help="output directory (default out/plan)")
-    p.add_argument("--quiet", action="store_true", help="no progress messages on stderr")
+    _common.add_quiet_option(p)
     p.set_defaults(func=run)
+
+
+def add_end_soak_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--end-soak",
+        action="store_true",
+        help="append a hold at the end temperature until the device is within the end "
+        "tolerance (±0.5 °C) of where it settles; it must fit in the time limit",
+    )
+
+
+#: The files one experiment's folder gets.
+PLAN_FILES = ("steps.csv", "plan.json", "program.png", "phase.png", "coverage.png")
 
 
 # ---------------------------------------------------------------------------------------
 # outputs shared with `schedsyn campaign`
 # ---------------------------------------------------------------------------------------
-def write_plan_outputs(plan: Plan, out: Path, inputs=(), model=None) -> list[Path]:
-    """Write steps.csv, plan.json, program.png, phase.png, coverage.png into ``out``."""
+def write_plan_outputs(
+    plan: Plan, out: Path, inputs=(), model=None, model_json: dict | None = None
+) -> list[Path]:
+    """Write steps.csv (with the plan's metadata), plan.json, program.png, phase.png,
+    coverage.png into ``out``.
+
+    The phase portrait and the coverage plot show the same parameters, the plan's nominal
+    ones (their titles say which); for a robust plan the coverage title also gives the
+    worst point of the box.
+    """
     from .. import plots
+    from ..coverage import coverage_report
     from ..io import write_json_atomic
+    from ..programme import StepTableMeta
     from ..simulate import simulate
 
     out = Path(out)
     spec = plan.spec
     region = (spec.working_lo_c, spec.working_hi_c)
-    written = [
-        plan.programme.to_csv(out / "steps.csv", inputs),
-        write_json_atomic(out / "plan.json", plan.to_json_dict(), inputs),
-    ]
     traj = simulate(plan.programme, plan.params, model=model, dt_min=0.1, t0_c=plan.limits.t_init_c)
+    soak, _, _ = end_state(plan, model)
+    recorded = plan.programme.meta
+    meta = StepTableMeta.from_plan(
+        plan,
+        end_soak_min=soak,
+        end_soak_included_min=recorded.end_soak_included_min if recorded else None,
+        model_json=model_json,
+    )
+    written = [
+        plan.programme.with_meta(meta).to_csv(out / "steps.csv", inputs),
+        write_json_atomic(out / "plan.json", {**plan.to_json_dict(), "end_soak_min": soak}, inputs),
+    ]
     state = "complete" if plan.complete else f"NOT COMPLETE ({plan.status})"
+    model_text = f"tau {plan.params.tau_s:g} s, dT0 {plan.params.dt0_c:g} °C"
+    robust = len(plan.scenarios) > 1
+    if robust:
+        model_text = "nominal " + model_text
     written.append(
         plots.save_figure(
             plots.programme_plot(
                 traj,
                 region=region,
-                title=f"{spec.name}: {plan.duration_min:g} min, {plan.steps} steps, {state}",
+                limits=plan.limits,
+                programme=plan.programme,
+                title=f"{spec.name}: {plan.duration_min:g} min, {plan.steps} steps, {state} "
+                f"({model_text})",
             ),
             out / "program.png",
             inputs,
@@ -166,27 +213,117 @@ def write_plan_outputs(plan: Plan, out: Path, inputs=(), model=None) -> list[Pat
                 traj.t_c,
                 traj.g_c_per_min,
                 region=region,
-                title=f"{spec.name}: phase portrait (tau {plan.params.tau_s:g} s, "
-                f"dT0 {plan.params.dt0_c:g} °C)",
+                title=f"{spec.name}: phase portrait ({model_text})",
             ),
             out / "phase.png",
             inputs,
         )
     )
+    # coverage at the parameters of the phase portrait (for a robust plan plan.coverage is
+    # the worst design scenario: said in the title, not drawn)
+    shown = coverage_report(
+        traj.t_c, traj.g_c_per_min, spec.grid, spec.levels_required, spec.delta_c_per_min
+    )
+    title = (
+        f"{spec.name}: {'' if plan.complete else 'NOT COMPLETE, '}coverage {shown.coverage:.0%} "
+        f"at {model_text} (Δ {spec.delta_c_per_min:g}), "
+        f"{plan.coverage_0p1.coverage:.0%} at Δ 0.1 °C/min"
+    )
+    worst = (plan.box_check or {}).get("worst") if robust else None
+    if worst:
+        title += f"; worst point of the box {worst['coverage']:.0%}"
     written.append(
-        plots.save_figure(
-            plots.coverage_plot(
-                plan.coverage,
-                title=f"{spec.name}: {'' if plan.complete else 'NOT COMPLETE, '}"
-                f"coverage {plan.coverage.coverage:.0%} "
-                f"(Δ {spec.delta_c_per_min:g}), "
-                f"{plan.coverage_0p1.coverage:.0%} at Δ 0.1 °C/min",
-            ),
-            out / "coverage.png",
-            inputs,
-        )
+        plots.save_figure(plots.coverage_plot(shown, title=title), out / "coverage.png", inputs)
     )
     return written
+
+
+def end_state(plan: Plan, model=None) -> tuple[float, float, float]:
+    """``(end_soak_min, device temperature at the end, settled temperature)`` of a plan's
+    exported programme at its nominal parameters (see :func:`schedsyn.simulate.end_soak_min`)."""
+    from ..simulate import end_soak_min, simulate
+
+    prog, lim = plan.programme, plan.limits
+    soak = end_soak_min(prog, plan.params, model=model, tol_c=lim.end_tol_c, t0_c=lim.t_init_c)
+    t_end, settled = simulate(
+        prog, plan.params, model=model, t0_c=lim.t_init_c, times_min=np.array([prog.total_min, 1e6])
+    ).t_c
+    return soak, float(t_end), float(settled)
+
+
+def end_soak_lines(plan: Plan, model=None) -> list[str]:
+    """The end of the programme in words: device temperature, the soak it needs."""
+    soak, t_end, settled = end_state(plan, model)
+    return ["  " + _common.end_soak_text(plan.programme, t_end, soak, settled, plan.limits)]
+
+
+def with_end_soak(plan: Plan, model=None) -> Plan:
+    """The plan with a hold appended at its end temperature until the device settles
+    (``--end-soak``), re-checked: coverage, limits and completeness of the new table.
+
+    Raises :class:`ParameterError` when the soak does not fit in the time limit.
+    """
+    from ..planner import check_programme
+
+    soak, _, _ = end_state(plan, model)
+    if soak <= 0:
+        return plan
+    from ..programme import StepTableMeta
+
+    base = plan.programme
+    try:  # the metadata records the soak the table includes (end_soak_included_min)
+        prog = base.with_meta(base.meta or StepTableMeta()).with_end_soak(soak, plan.limits)
+    except ParameterError as exc:
+        raise ParameterError(f"{plan.spec.name}: --end-soak: {exc}") from None
+    # the soak runs after the planned sweeps, so the device passes bins again: check anew
+    scenarios = tuple(plan.scenarios) or (plan.params,)
+    cov, cov01, problems, t_lo, t_hi = check_programme(
+        prog, plan.spec, plan.limits, scenarios, model=model
+    )
+    box_check = plan.box_check
+    complete = plan.complete and cov.complete and not problems
+    notes = (*plan.notes, f"an end soak of {soak:g} min was appended (--end-soak)")
+    if len(scenarios) > 1 and box_check is not None:
+        box_check = _box_check(prog, plan, scenarios)
+        complete = complete and bool(box_check["holds"])
+    return dataclasses.replace(
+        plan,
+        programme=prog,
+        coverage=cov,
+        coverage_0p1=cov01,
+        complete=complete,
+        status=plan.status if complete or not plan.complete else "incomplete",
+        violations=tuple(problems),
+        notes=notes,
+        t_min_c=t_lo,
+        t_max_c=t_hi,
+        box_check=box_check,
+    )
+
+
+def _box_check(programme, plan: Plan, scenarios) -> dict:
+    """The robust box check of a modified programme (same grid as the planner's)."""
+    from ..sweep import verify_box
+
+    taus = [p.tau_s for p in scenarios]
+    dt0s = [p.dt0_c for p in scenarios]
+    res = verify_box(
+        programme,
+        (plan.spec.working_lo_c, plan.spec.working_hi_c),
+        (min(taus), max(taus)),
+        (min(dt0s), max(dt0s)),
+        levels_required=plan.spec.levels_required,
+        deltas_c_per_min=(plan.spec.delta_c_per_min, 0.1),
+        t0_c=plan.limits.t_init_c,
+    )
+    return {
+        "holds": res.holds(),
+        "full_share": res.full_share,
+        "worst": res.worst(),
+        "min_levels": int(res.min_levels_grid.min()),
+        "covered_box": res.covered_box(),
+        "grid_points": int(np.prod(res.shape)),
+    }
 
 
 def report_plan(plan: Plan) -> list[str]:
@@ -225,9 +362,9 @@ def _robust(text: str | None, name: str):
 
 
 def _model(args, params: ThermalParams, limits: Limits):
-    """``(params, limits, linear model or None)`` from ``--model`` (if given)."""
+    """``(params, limits, linear model or None, model file dict or None)`` from ``--model``."""
     if args.model is None:
-        return params, limits, None
+        return params, limits, None, None
     from ..models_io import load_model
 
     spec = load_model(args.model)
@@ -237,9 +374,9 @@ def _model(args, params: ThermalParams, limits: Limits):
         raise ParameterError(
             f"model file {args.model}: the effect {spec.effect!r} is not linear; the planner "
             "needs a linear model (plan with the base model and check the plan with "
-            "`schedsyn simulate --model`)"
+            "schedsyn simulate --model)"
         )
-    return params, spec.planner_limits(limits), spec.linear_model()
+    return params, spec.planner_limits(limits), spec.linear_model(), spec.to_json_dict()
 
 
 def build_spec(args, limits: Limits) -> ExperimentSpec:
@@ -276,7 +413,7 @@ def _pick(pairs, results):
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..campaign import chamber_frame, chamber_plans, stderr_progress
+    from ..campaign import chamber_frame, chamber_plans
     from ..errors import InfeasiblePlanError
     from ..io import write_frame_atomic
     from ..planner import plan_experiment
@@ -287,11 +424,25 @@ def run(args: argparse.Namespace) -> int:
     floors = args.chamber_min_c or [base.chamber_min_c]
     ceilings = args.chamber_max_c or [base.chamber_max_c]
     limits = dataclasses.replace(base, chamber_min_c=floors[0], chamber_max_c=ceilings[0])
-    params, limits, model = _model(args, _common.thermal_params(args), limits)
+    params, limits, model, model_json = _model(args, _common.thermal_params(args), limits)
     spec = build_spec(args, limits)
     robust_tau = _robust(args.robust_tau_s, "--robust-tau-s")
     robust_dt0 = _robust(args.robust_dt0_c, "--robust-dt0-c")
-    out = _common.out_dir(args.out, "out/plan")
+    several = not (len(floors) == 1 and len(ceilings) == 1)
+    if several and model is not None:
+        raise ParameterError(
+            "--model with several chamber floors/ceilings is not "
+            "supported; give one --chamber-min-c/--chamber-max-c"
+        )
+    inputs = [args.model] if args.model else []
+    names = list(PLAN_FILES)
+    if several:
+        names.append("chamber.csv")
+    if robust_tau is not None or robust_dt0 is not None:
+        names.append("price.csv")
+    # checked before any planning: outputs are not inputs, the folder can be written
+    out = _common.output_dir(args.out, "out/plan", inputs, names)
+    reporter = _common.progress_of(args)
     progress = None
     if not args.quiet:
         import time
@@ -299,11 +450,10 @@ def run(args: argparse.Namespace) -> int:
         tic = time.perf_counter()
 
         def progress(message: str) -> None:  # experiment, solver time so far, message
-            stderr_progress(f"{spec.name} [{time.perf_counter() - tic:6.1f} s] {message}")
+            reporter(f"{spec.name} [{time.perf_counter() - tic:6.1f} s] {message}")
 
-    inputs = [args.model] if args.model else []
-
-    if len(floors) == 1 and len(ceilings) == 1:
+    lines: list[str] = []
+    if not several:
         plan = plan_experiment(
             spec,
             params,
@@ -314,11 +464,6 @@ def run(args: argparse.Namespace) -> int:
             progress=progress,
         )
     else:
-        if model is not None:
-            raise ParameterError(
-                "--model with several chamber floors/ceilings is not "
-                "supported; give one --chamber-min-c/--chamber-max-c"
-            )
         pairs, results = chamber_plans(
             spec,
             floors,
@@ -328,28 +473,38 @@ def run(args: argparse.Namespace) -> int:
             robust_tau_s=robust_tau,
             robust_dt0_c=robust_dt0,
             # runs in worker processes: a picklable callable
-            progress=None if args.quiet else stderr_progress,
+            progress=None if args.quiet else reporter,
         )
         frame = chamber_frame(pairs, results)
-        write_frame_atomic(out / "chamber.csv", frame, inputs)
-        print("coverage vs chamber floor/ceiling:")
-        print(frame.drop(columns=["notes"]).to_string(index=False))
-        print(f"wrote {out}/chamber.csv")
+        write_frame_atomic(out.path("chamber.csv"), frame)
+        lines += [
+            "coverage vs chamber floor/ceiling:",
+            frame.drop(columns=["notes"]).to_string(index=False),
+        ]
         plan = _pick(pairs, results)
         if plan is None:
+            out.commit()  # the table says what each chamber reaches
+            _common.say(*lines, f"wrote {out.target}/chamber.csv")
             best = max(r.best_coverage for r in results if not isinstance(r, Plan))
             raise InfeasiblePlanError(
                 f"no chamber in the list can plan {spec.name}; best reachable coverage is "
                 f"{best:.0%} ({results[0]})",
                 best_coverage=best,
             )
-        print(
+        lines.append(
             f"files below are for the chamber {plan.limits.chamber_min_c:g} .. "
             f"{plan.limits.chamber_max_c:g} °C"
         )
-    write_plan_outputs(plan, out, inputs, model=model)
-    print("\n".join(report_plan(plan)))
-    print(f"wrote {out}/steps.csv, plan.json, program.png, phase.png, coverage.png")
+    if args.end_soak:
+        plan = with_end_soak(plan, model)
+    write_plan_outputs(plan, out.folder("."), model=model, model_json=model_json)
+    lines += report_plan(plan)
+    lines += end_soak_lines(plan, model)
+    _common.say(*lines)  # the plan's report now; the price may take as long again
+    lines = []
+    wrote = ["steps.csv", "plan.json", "program.png", "phase.png", "coverage.png"]
+    if several:
+        wrote.append("chamber.csv")
     if (robust_tau is not None or robust_dt0 is not None) and not args.no_price:
         from ..planner import robustness_price
 
@@ -357,12 +512,19 @@ def run(args: argparse.Namespace) -> int:
             progress("planning the nominal point for the price of robustness")
         try:
             nominal = plan_experiment(spec, params, plan.limits, progress=progress)
-        except InfeasiblePlanError as exc:  # the robust plan's files are written already
-            print(f"price of robustness not computed: the nominal point cannot be planned ({exc})")
+        except InfeasiblePlanError as exc:  # the robust plan's files are written anyway
+            lines.append(
+                f"price of robustness not computed: the nominal point cannot be planned ({exc})"
+            )
         else:
             price = robustness_price(nominal, plan, robust_tau, robust_dt0)
-            write_frame_atomic(out / "price.csv", price, inputs)
-            print("price of robustness (both plans checked on the same grid over the box):")
-            print(price.to_string(index=False))
-            print(f"wrote {out}/price.csv")
+            write_frame_atomic(out.path("price.csv"), price)
+            lines += [
+                "price of robustness (both plans checked on the same grid over the box):",
+                price.to_string(index=False),
+            ]
+            wrote.append("price.csv")
+    out.commit()
+    lines.append(f"wrote {out.target}/" + ", ".join(wrote))
+    _common.say(*lines)
     return 0 if plan.complete else 1

@@ -1,76 +1,144 @@
-"""``schedsyn simulate STEPS.csv``: simulate a step table, report coverage, write plots."""
+"""``schedsyn simulate STEPS.csv``: simulate a step table, report its coverage and end, write
+trajectory.csv, coverage.csv and the plots.
+
+The working region, the model (tau, dT0, an augmented model), the coverage requirement and
+the limits are those the step table records in its metadata (a table written by
+``schedsyn plan`` or ``campaign``); options override them. A table without a recorded
+working region needs --region: the region is never guessed.
+"""
 
 from __future__ import annotations
 
 import argparse
 
+import numpy as np
+
 from ..coverage import trajectory_coverage
 from ..io import write_frame_atomic
 from ..params import ThermalParams
-from ..programme import read_steps
-from ..simulate import simulate
+from ..programme import read_step_meta, read_steps
+from ..simulate import end_soak_min, simulate
 from . import _common
+
+NAMES = ("trajectory.csv", "coverage.csv", "program.png", "phase.png", "coverage.png")
 
 
 def register(sub) -> None:
     p = sub.add_parser(
-        "simulate", help="simulate a step table and report its coverage", description=__doc__
+        "simulate",
+        help="simulate a step table and report its coverage",
+        description=_common.plain(__doc__),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("steps", metavar="STEPS.csv", help="chamber step table")
     p.add_argument("--out", default=None, help="output directory (default out/simulate)")
-    _common.add_model_options(p)
+    _common.add_model_options(p, default_from="the step table's")
     _common.add_region_option(p)
     _common.add_limit_options(p)
-    p.add_argument("--levels", type=int, default=6, help="required distinct gradient levels")
-    p.add_argument(
-        "--delta-c-per-min",
-        type=float,
-        default=0.05,
-        help="minimum gradient difference between levels, °C/min",
-    )
-    p.add_argument("--dt-min", type=float, default=0.1, help="simulation step, min")
+    _common.add_coverage_options(p)
+    p.add_argument("--dt-min", type=float, default=None, help="simulation step, min (default 0.1)")
     p.add_argument(
         "--model",
         default=None,
         metavar="MODEL.json",
-        help="augmented model file (from `schedsyn diagnose --out DIR`); "
-        "--tau-s/--dt0-c then override its base",
+        help="augmented model file (from schedsyn diagnose --out DIR); --tau-s/--dt0-c "
+        "then override its base (default: the model the step table records)",
     )
     p.set_defaults(func=run)
 
 
+def _augmented(args, programme):
+    """The augmented model spec to simulate with (the --model file, else the table's)."""
+    from ..effects import ModelSpec
+    from ..errors import SchedsynError, StepTableError
+    from ..models_io import load_model
+
+    if args.model is not None:
+        return load_model(args.model), args.model
+    recorded = programme.meta.model_json() if programme.meta is not None else None
+    if recorded is None:
+        return None, None
+    try:
+        return ModelSpec.from_json_dict(recorded), "the step table"
+    except SchedsynError as exc:
+        raise StepTableError(f"{args.steps}: metadata model: {exc}") from None
+
+
 def run(args: argparse.Namespace) -> int:
+    import dataclasses
+
     from .. import plots
+    from ..models_io import simulate_effect
 
-    params = _common.thermal_params(args)
-    limits = _common.limits(args)
+    meta = read_step_meta(args.steps)
+    limits = _common.limits(args, meta.limits() if meta is not None else None)
     programme = read_steps(args.steps, limits)
-    if args.model is not None:  # an augmented model: exact if linear, else on a grid
-        import dataclasses
-
-        from ..models_io import load_model, simulate_effect
-
-        spec = load_model(args.model)
-        params = _common.thermal_params(args, ThermalParams(spec.tau_s, spec.dt0_c))
+    lo, hi = _common.region_from_table(args, programme.meta, args.steps)
+    levels, delta = _common.coverage_settings(args, programme.meta)
+    params, source = _common.model_from_table(args, programme.meta)
+    dt_min = 0.1 if args.dt_min is None else args.dt_min
+    out = _common.output_dir(args.out, "out/simulate", [args.steps, args.model], NAMES)
+    spec, spec_from = _augmented(args, programme)
+    lines = [
+        f"programme: {programme.n_segments} steps, {programme.total_min:.1f} min, "
+        f"chamber {programme.boundary_temps_c.min():.1f} .. "
+        f"{programme.boundary_temps_c.max():.1f} °C"
+    ]
+    model = None
+    if spec is not None:  # an augmented model: exact if linear, else on a grid
+        base = ThermalParams(spec.tau_s, spec.dt0_c)
+        params = _common.thermal_params(args, base)
+        source = f"from {spec_from}"
         spec = dataclasses.replace(spec, tau_s=params.tau_s, dt0_c=params.dt0_c)
         limits = spec.planner_limits(limits)
-        traj = simulate_effect(programme, spec, dt_min=args.dt_min, t0_c=limits.t_init_c)
-        print(
-            f"model {args.model}: effect {spec.effect} "
-            f"{dict(spec.parameters) if spec.parameters else ''}"
+        traj = simulate_effect(programme, spec, dt_min=dt_min, t0_c=limits.t_init_c)
+        model = spec.linear_model() if spec.is_linear else None
+        effect = f"{spec.effect} {dict(spec.parameters) if spec.parameters else ''}".strip()
+        lines.append(
+            f"model ({source}): effect {effect}, tau {params.tau_s:g} s, dT0 {params.dt0_c:g} °C"
         )
     else:
-        traj = simulate(programme, params, dt_min=args.dt_min, t0_c=limits.t_init_c)
-    lo, hi = args.region
-    report = trajectory_coverage(traj, lo, hi, args.levels, args.delta_c_per_min)
-    out = _common.out_dir(args.out, "out/simulate")
-    inputs = [args.steps]
-    write_frame_atomic(out / "trajectory.csv", traj.to_frame(), inputs)
-    write_frame_atomic(out / "coverage.csv", report.to_frame(), inputs)
+        traj = simulate(programme, params, dt_min=dt_min, t0_c=limits.t_init_c)
+        lines.append(f"model: tau {params.tau_s:g} s, dT0 {params.dt0_c:g} °C ({source})")
+    region_src = "given" if args.region is not None else "from the step table"
+    lines.append(f"working region: [{lo:g}, {hi:g}] °C ({region_src})")
+    tau_box, dt0_box = programme.meta.robust_box if programme.meta is not None else (None, None)
+    if tau_box is not None or dt0_box is not None:
+        box = " x ".join(
+            t
+            for t in (
+                f"tau {tau_box[0]:g} .. {tau_box[1]:g} s" if tau_box else "",
+                f"dT0 {dt0_box[0]:g} .. {dt0_box[1]:g} °C" if dt0_box else "",
+            )
+            if t
+        )
+        lines.append(
+            f"the table was planned for the robust box {box}; this is its nominal point "
+            "(schedsyn sweep checks the box)"
+        )
+    report = trajectory_coverage(traj, lo, hi, levels, delta)
+    soak = end_soak_min(
+        programme, params, model=model, tol_c=limits.end_tol_c, t0_c=limits.t_init_c
+    )
+    settled = float(
+        simulate(
+            programme, params, model=model, t0_c=limits.t_init_c, times_min=np.array([1e6])
+        ).t_c[0]
+    )
+
+    write_frame_atomic(out.path("trajectory.csv"), traj.to_frame())
+    write_frame_atomic(out.path("coverage.csv"), report.to_frame())
+    experiment = meta.experiment if meta is not None else None
+    name = f"{args.steps}" + (f" ({experiment})" if experiment else "")
     plots.save_figure(
-        plots.programme_plot(traj, region=(lo, hi), title=f"programme {args.steps}"),
-        out / "program.png",
-        inputs,
+        plots.programme_plot(
+            traj,
+            region=(lo, hi),
+            limits=limits,
+            programme=programme,
+            title=f"programme {name}",
+        ),
+        out.path("program.png"),
     )
     plots.save_figure(
         plots.phase_plot(
@@ -79,26 +147,20 @@ def run(args: argparse.Namespace) -> int:
             region=(lo, hi),
             title=f"phase portrait (tau {params.tau_s:g} s, dT0 {params.dt0_c:g} °C)",
         ),
-        out / "phase.png",
-        inputs,
+        out.path("phase.png"),
     )
-    plots.save_figure(plots.coverage_plot(report), out / "coverage.png", inputs)
-    print(
-        f"programme: {programme.n_segments} steps, {programme.total_min:.1f} min, "
-        f"chamber {programme.boundary_temps_c.min():.1f} .. "
-        f"{programme.boundary_temps_c.max():.1f} °C"
-    )
-    print(
-        f"internal temperature: min {traj.t_c.min():.2f} °C, max {traj.t_c.max():.2f} °C "
-        f"(tau {params.tau_s:g} s, dT0 {params.dt0_c:g} °C)"
-    )
-    for v in programme.violations(limits):
-        print(f"warning: {v}")
+    plots.save_figure(plots.coverage_plot(report), out.path("coverage.png"))
+    out.commit()
+
+    lines.append(f"internal temperature: min {traj.t_c.min():.2f} °C, max {traj.t_c.max():.2f} °C")
+    lines.append(_common.end_soak_text(programme, float(traj.t_c[-1]), soak, settled, limits))
+    lines += [f"warning: {v}" for v in programme.violations(limits)]
     if traj.t_c.min() < limits.device_min_c or traj.t_c.max() > limits.device_max_c:
-        print(
+        lines.append(
             f"warning: the internal temperature leaves the device limits "
             f"{limits.device_min_c:g} .. {limits.device_max_c:g} °C"
         )
-    print(report.summary())
-    print(f"wrote {out}/trajectory.csv, coverage.csv, program.png, phase.png, coverage.png")
+    lines.append(report.summary())
+    lines.append(f"wrote {out.target}/" + ", ".join(NAMES))
+    _common.say(*lines)
     return 0

@@ -2,7 +2,9 @@
 
 Writes ``DIR/sweep.csv`` (one row per grid point) and ``DIR/sweep.png`` (heatmaps with
 the nominal point marked) and prints a summary. Runs in parallel on the local cores by
-default, or on a Dask cluster with ``--dask tcp://HOST:PORT``.
+default, or on a Dask cluster with ``--dask tcp://HOST:PORT``. The working region, the
+nominal point and the coverage requirement are the step table's (its metadata) unless
+given; a table that records no working region needs --region.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from dataclasses import dataclass
 from ..errors import ParameterError, SchedsynError
 from ..io import write_frame_atomic
 from ..params import Limits, ThermalParams
-from ..programme import read_steps
+from ..programme import read_step_meta, read_steps
 from ..sweep import parse_grid, sweep_fixed, sweep_replan
 from . import _common
 
@@ -23,7 +25,7 @@ def register(sub) -> None:
     p = sub.add_parser(
         "sweep",
         help="coverage of a plan over a grid of tau and dT0 (or re-plan at every grid point)",
-        description=__doc__,
+        description=_common.plain(__doc__),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument(
@@ -33,7 +35,11 @@ def register(sub) -> None:
         default=None,
         help="chamber step table (not needed with --replan)",
     )
-    _common.add_region_option(p)
+    _common.add_region_option(
+        p,
+        help_text="working region LO HI, °C (default: the one the step table records; "
+        "needed with --replan)",
+    )
     p.add_argument(
         "--approx",
         nargs=2,
@@ -57,7 +63,12 @@ def register(sub) -> None:
         "negative start with '=', e.g. --dt0-c=-2:4:7",
     )
     p.add_argument("--out", default=None, help="output directory (default out/sweep)")
-    p.add_argument("--levels", type=int, default=6, help="required distinct gradient levels")
+    p.add_argument(
+        "--levels",
+        type=int,
+        default=None,
+        help="required distinct gradient levels (default: the step table's, else 6)",
+    )
     p.add_argument(
         "--deltas-c-per-min",
         type=float,
@@ -72,13 +83,14 @@ def register(sub) -> None:
         "--nominal-tau-s",
         type=float,
         default=None,
-        help="nominal time constant marked on the heatmap, s (default 2400)",
+        help="nominal time constant marked on the heatmap, s (default: the step "
+        "table's, else 2400)",
     )
     p.add_argument(
         "--nominal-dt0-c",
         type=float,
         default=None,
-        help="nominal offset marked on the heatmap, °C (default 3.0)",
+        help="nominal offset marked on the heatmap, °C (default: the step table's, else 3.0)",
     )
     p.add_argument(
         "--replan",
@@ -97,7 +109,8 @@ def register(sub) -> None:
         default=None,
         help="local worker processes (default: all cores; 1 = in this process)",
     )
-    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    _common.add_quiet_option(p)
+    p.add_argument("--no-progress", dest="quiet", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(func=run)
 
 
@@ -155,34 +168,46 @@ def run(args: argparse.Namespace) -> int:
 
     taus = parse_grid(args.tau_s, "--tau-s", "s")
     dt0s = parse_grid(args.dt0_c, "--dt0-c", "°C")
+    meta = read_step_meta(args.steps) if args.steps is not None else None
+    recorded = meta.params() if meta is not None else None
     nominal = ThermalParams(
         **{
-            k: v
-            for k, v in (("tau_s", args.nominal_tau_s), ("dt0_c", args.nominal_dt0_c))
-            if v is not None
+            **(recorded.to_dict() if recorded is not None else {}),
+            **{
+                k: v
+                for k, v in (("tau_s", args.nominal_tau_s), ("dt0_c", args.nominal_dt0_c))
+                if v is not None
+            },
         }
     )
-    limits = Limits()
-    lo, hi = args.region
-    out = _common.out_dir(args.out, "out/sweep")
+    limits = (meta.limits() if meta is not None else None) or Limits()
+    if args.steps is None and not args.replan:
+        raise ParameterError("give the step table STEPS.csv to sweep (or --replan to re-plan)")
+    if args.replan and not _planner_available():
+        raise SchedsynError(
+            "re-planning needs the planner (schedsyn.planner), which this "
+            "installation lacks; run the sweep without --replan"
+        )
+    if args.steps is None and args.region is None:
+        raise ParameterError("re-planning needs the working region: give --region LO HI (°C)")
+    lo, hi = _common.region_from_table(args, meta, args.steps)
+    levels = args.levels
+    if levels is None:
+        levels = meta.levels_required if meta is not None and meta.levels_required else 6
     backend = _backend(args)
-    progress = not args.no_progress
+    progress = _common.progress_of(args)
     inputs = [args.steps] if args.steps else []
+    out = _common.output_dir(args.out, "out/sweep", inputs, ("sweep.csv", "sweep.png"))
     marker = (nominal.tau_s, nominal.dt0_c)
 
     if args.replan:
-        if not _planner_available():
-            raise SchedsynError(
-                "re-planning needs the planner (schedsyn.planner), which this "
-                "installation lacks; run the sweep without --replan"
-            )
         approx = tuple(args.approx) if args.approx else default_approx((lo, hi), limits)
-        plan_fn = PlanAtPoint((lo, hi), approx, args.levels, args.deltas_c_per_min[0], limits)
+        plan_fn = PlanAtPoint((lo, hi), approx, levels, args.deltas_c_per_min[0], limits)
         replanned = sweep_replan(
             plan_fn, taus, dt0s, backend=backend, workers=args.workers, progress=progress
         )
         frame = replanned.to_frame()
-        write_frame_atomic(out / "sweep.csv", frame, inputs)
+        write_frame_atomic(out.path("sweep.csv"), frame)
         numeric = [
             c for c in frame.columns if c not in ("tau_s", "dt0_c") and frame[c].dtype.kind in "if"
         ]
@@ -191,18 +216,17 @@ def run(args: argparse.Namespace) -> int:
         if preferred:
             ok = frame[frame["status"] == "ok"]
             panels = [(ok, c, f"re-planned: {c}") for c in preferred]
-            plots.save_figure(
-                plots.sweep_panels(panels, nominal=marker)[0], out / "sweep.png", inputs
-            )
-        print(replanned.summary())
-        print(f"wrote {out}/sweep.csv" + (", sweep.png" if preferred else ""))
+            plots.save_figure(plots.sweep_panels(panels, nominal=marker)[0], out.path("sweep.png"))
+        out.commit()
+        _common.say(
+            replanned.summary(),
+            f"wrote {out.target}/sweep.csv" + (", sweep.png" if preferred else ""),
+        )
         return 0
 
-    if args.steps is None:
-        raise ParameterError("give the step table STEPS.csv to sweep (or --replan to re-plan)")
     programme = read_steps(args.steps, limits)
     kw = dict(
-        levels_required=args.levels,
+        levels_required=levels,
         deltas_c_per_min=args.deltas_c_per_min,
         dt_min=args.dt_min,
         t0_c=limits.t_init_c,
@@ -219,7 +243,7 @@ def run(args: argparse.Namespace) -> int:
     )
     at_nominal = sweep_fixed(programme, (lo, hi), [nominal.tau_s], [nominal.dt0_c], **kw)
     frame = result.to_frame()
-    write_frame_atomic(out / "sweep.csv", frame, inputs)
+    write_frame_atomic(out.path("sweep.csv"), frame)
     d0 = result.deltas_c_per_min[0]
     panels = [
         (frame, "coverage", f"coverage (≥ {result.levels_required} levels, Δ {d0:g} °C/min)"),
@@ -229,27 +253,34 @@ def run(args: argparse.Namespace) -> int:
         plots.sweep_panels(
             panels, nominal=marker, suptitle=f"{args.steps}: working region [{lo:g}, {hi:g}] °C"
         )[0],
-        out / "sweep.png",
-        inputs,
+        out.path("sweep.png"),
     )
-    print(f"programme: {programme.n_segments} steps, {programme.total_min:.1f} min")
-    print(
+    out.commit()
+    region_src = "given" if args.region is not None else "from the step table"
+    nominal_src = (
+        "from the step table" if recorded is not None else "default; the step table records none"
+    )
+    lines = [
+        f"programme: {programme.n_segments} steps, {programme.total_min:.1f} min; working "
+        f"region [{lo:g}, {hi:g}] °C ({region_src})",
         f"at the nominal point (tau {nominal.tau_s:g} s, dT0 {nominal.dt0_c:g} °C): coverage "
-        f"{at_nominal.coverage_grid[0, 0]:.1%}, min {at_nominal.min_levels_grid[0, 0]} levels"
-    )
-    print(result.summary())
+        f"{at_nominal.coverage_grid[0, 0]:.1%}, min {at_nominal.min_levels_grid[0, 0]} "
+        f"levels (nominal point: {nominal_src})",
+        result.summary(),
+    ]
     box = result.covered_box()
     if box is not None:
         (t0, t1), (c0, c1) = box["tau_s_range"], box["dt0_c_range"]
-        print(
+        lines.append(
             f"largest fully covered box: tau {t0:g} .. {t1:g} s x dT0 {c0:g} .. {c1:g} °C "
             f"({box['n_points']} grid points)"
         )
     for j, d in enumerate(result.deltas_c_per_min[1:], start=1):
         cov = result.coverage[:, :, j]
-        print(
+        lines.append(
             f"at delta {d:g} °C/min: coverage {cov.min():.1%} .. {cov.max():.1%}, min "
             f"levels {result.min_levels[:, :, j].min()} .. {result.min_levels[:, :, j].max()}"
         )
-    print(f"wrote {out}/sweep.csv, sweep.png")
+    lines.append(f"wrote {out.target}/sweep.csv, sweep.png")
+    _common.say(*lines)
     return 0
