@@ -74,13 +74,15 @@ class Classic:
 
 #: The structures the search tries, in order. Guided bands first: designed around the
 #: speed profiles of the duration bound's relaxation (slow near the edges, where turning
-#: round is dear, fast in the middle), they give the shortest plans. The classic designs
-#: follow, tuned on the paper's four regions: heating -> cooling turnarounds happen at the
-#: upper edge and are slow (the chamber cools at only 1 degC/min), so sweeps are slower
-#: there; the exact turning room with more knots allows faster passes near a device limit
-#: (W4's hot edge has 2 degC of room below +62 degC). Every candidate yields a valid plan
-#: or none.
+#: round is dear, fast in the middle), they give the shortest plans; once one of them has
+#: given a structure, the classic designs are not tried. Those follow, tuned on the
+#: paper's four regions, for what guided bands cannot place: heating -> cooling
+#: turnarounds happen at the upper edge and are slow (the chamber cools at only
+#: 1 degC/min), so sweeps are slower there; the exact turning room with more knots allows
+#: faster passes near a device limit (W4's hot edge has 2 degC of room below +62 degC).
+#: Every candidate yields a valid plan or none.
 CANDIDATES: tuple[Guided | Classic, ...] = (
+    Guided(0.9, 0.04),
     Guided(0.9, 0.05),
     Guided(0.8, 0.06),
     Classic((1.0, 0.7, 1.0, 0.9), True, "sqrt"),
@@ -410,7 +412,10 @@ def synthesise(
         for first in first_directions(spec, limits, start_t):
             directions = sweep_directions(spec, first, n_sweeps)
             n_by_dir = {d: directions.count(d) for d in (+1, -1)}
+            guided_found = False
             for candidate in CANDIDATES[:max_candidates]:
+                if guided_found and isinstance(candidate, Classic):
+                    break  # the classic designs were tuned as fallbacks: not worth the LPs
                 # robust plans use the same bands: each scenario gets its own windows
                 # and a slack (see scenario_windows and SubLP.window)
                 bands = candidate_bands(candidate, spec, params_list, limits, n_by_dir, sep)
@@ -443,6 +448,7 @@ def synthesise(
                     continue
                 if search.best is None or structure.n_seg < search.best[0].n_seg:
                     search.best = (structure, sep)
+                guided_found = guided_found or isinstance(candidate, Guided)
                 if progress:
                     progress(f"structure found: {minutes:g} min")
         if search.best is not None:
