@@ -252,6 +252,12 @@ def test_too_wide_a_robust_box_says_which_part_is_covered(tmp_path):
     ).reshape(taus.shape)
     assert np.mean(cov >= 1.0) == pytest.approx(check["full_share"])
     assert cov.min() == pytest.approx(check["worst"]["coverage"]) and cov.min() < 1.0
+    # the report names the nominal point (grid point tau 2400 s, dT0 3 degC) and the fallback
+    doc = plan.to_json_dict()
+    assert doc["coverage_nominal"] == pytest.approx(cov[4, 3])
+    assert doc["coverage_nominal"] > cov.min()
+    assert doc["robust_fallback"] in ("inner half", "inner quarter", "nominal point")
+    assert any(n.startswith("FALLBACK") for n in plan.notes)
     i, j = np.unravel_index(np.argmin(cov), cov.shape)
     assert cov[
         list(np.linspace(*box["robust_tau_s"], 9)).index(check["worst"]["tau_s"]),
@@ -495,3 +501,31 @@ def test_check_programme_catches_a_device_limit_grazed_by_half_a_degree(side, ro
     assert (" design scenarios " in device[0]) == robust
     *_, problems, _, _ = check_programme(prog, spec, limits(extreme + sign * 0.01), scenarios)
     assert problems == []
+
+
+def test_a_robust_plan_reports_the_nominal_point_and_the_box_by_name(small_robust_plan):
+    """Coverage at the nominal point, the worst design scenario and the box check, each
+    named in plan.json; the nominal coverage is that of an independent re-simulation at
+    the nominal (tau, dT0), and no fallback was needed for this box."""
+    plan = small_robust_plan
+    doc = plan.to_json_dict()
+    traj = simulate(plan.programme, plan.params, dt_min=0.1, t0_c=SMALL_LIMITS.t_init_c)
+    rep = coverage_report(traj.t_c, traj.g_c_per_min, plan.spec.grid, plan.spec.levels_required)
+    assert doc["coverage_nominal"] == rep.coverage and doc["min_levels_nominal"] == rep.min_levels
+    assert doc["coverage_worst_design_scenario"] == plan.coverage.coverage
+    assert doc["robust_fallback"] is None and not any("FALLBACK" in n for n in plan.notes)
+
+
+def test_the_step_table_carries_the_plan_and_simulates_with_its_model(tmp_path):
+    """Plan.programme carries region, model and limits: simulate(plan.programme) with no
+    parameters uses the plan's tau and dT0 (here not the defaults), and so does the
+    written table read back."""
+    params = ThermalParams(tau_s=1500.0, dt0_c=1.0)
+    plan = plan_experiment(ExperimentSpec(**SMALL), params, SMALL_LIMITS)
+    meta = plan.programme.meta
+    assert (meta.working_lo_c, meta.working_hi_c) == (SMALL["working_lo_c"], SMALL["working_hi_c"])
+    assert (meta.tau_s, meta.dt0_c) == (1500.0, 1.0)
+    for prog in (plan.programme, read_steps(plan.programme.to_csv(tmp_path / "s.csv"))):
+        traj = simulate(prog)
+        rep = coverage_report(traj.t_c, traj.g_c_per_min, plan.spec.grid, 3)
+        assert rep.coverage == plan.coverage.coverage and plan.complete

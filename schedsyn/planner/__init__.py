@@ -30,6 +30,9 @@ windows and maximises the margin, then a second minimises the rate changes
 densely and its coverage recomputed by :mod:`schedsyn.coverage`; a plan is called
 complete only on that independent check (:mod:`.check`).
 
+A proven lower bound on the duration of any complete plan (:mod:`.bound`) is computed from
+the physics alone, independently of the search, and reported with every plan.
+
 The stages, one module each, imports flowing one way::
 
     request -> physics -> bands -> lp -> search -> polish -> check -> robust -> core
@@ -39,6 +42,7 @@ The stages, one module each, imports flowing one way::
 """
 
 from .bands import BAND_SAFETY_C_PER_MIN, DESIGNS, Band, BandDesign, make_bands, order_bands
+from .bound import DurationBound, duration_lower_bound
 from .check import Plan, check_programme
 from .core import plan_experiment
 from .explain import explain_shortfall
@@ -62,12 +66,14 @@ __all__ = [
     "Band",
     "BandDesign",
     "Continuation",
+    "DurationBound",
     "ExperimentSpec",
     "LpStats",
     "Plan",
     "Scenario",
     "check_programme",
     "check_request",
+    "duration_lower_bound",
     "explain_shortfall",
     "make_bands",
     "order_bands",

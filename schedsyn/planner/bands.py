@@ -10,8 +10,10 @@ every band constraint is linear in the rates.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 
@@ -36,6 +38,12 @@ KNOT_INSETS_C = (1.5, 4.0)
 MINUTES_POINTS = 50
 #: Slowest speed :meth:`Band.minutes` divides by, degC/min (a band touching zero).
 MINUTES_FLOOR_C_PER_MIN = 1e-3
+#: Where in a band sweeps are first timed: top, three quarters, half, a quarter.
+BAND_FRACTIONS = (1.0, 0.75, 0.5, 0.25)
+#: Shares of a guided band's design speed sweeps are timed at, fastest first.
+PROFILE_SHARES = (1.0, 0.95, 0.9, 0.8)
+#: Relative tolerance within which two band orders count as equally fast.
+ORDER_TIE_TOL = 1e-9
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,6 +63,9 @@ class Band:
     #: the fastest band of its direction: no band above it, so its upper bound only
     #: shapes the plan, it is not needed for distinct levels
     top: bool = False
+    #: the speed the band was designed around at each knot (guided bands; see
+    #: :mod:`.guide`): sweeps are timed by it rather than by the band's edges
+    speed_c_per_min: tuple[float, ...] | None = None
 
     def bounds(self, temp_c):
         t = np.asarray(temp_c, dtype=float)
@@ -79,6 +90,27 @@ class Band:
             v = np.maximum(lo + fraction * (hi - lo), MINUTES_FLOOR_C_PER_MIN)
             out.append(float(np.trapezoid(1.0 / v, t)))
         return np.array(out)
+
+    def timing_options(self) -> list[np.ndarray]:
+        """Minutes per piece (ascending T) to time a sweep by, in order of preference.
+
+        A band designed around a speed profile is crossed at that profile and then a little
+        slower (``PROFILE_SHARES``); otherwise at its top, three quarters, half and a
+        quarter of its width (``BAND_FRACTIONS``).
+        """
+        if self.speed_c_per_min is None:
+            return [self.minutes(f) for f in BAND_FRACTIONS]
+        out = []
+        for share in PROFILE_SHARES:
+            pieces = []
+            for i in range(len(self.knots_c) - 1):
+                t = np.linspace(self.knots_c[i], self.knots_c[i + 1], MINUTES_POINTS)
+                speed = np.interp(t, self.knots_c, self.speed_c_per_min) * share
+                pieces.append(
+                    float(np.trapezoid(1.0 / np.maximum(speed, MINUTES_FLOOR_C_PER_MIN), t))
+                )
+            out.append(np.array(pieces))
+        return out
 
     def edge_speeds(self) -> tuple[float, float]:
         """``(entry, exit)`` lower-bound speed of a sweep in this band, degC/min."""
@@ -206,31 +238,54 @@ def order_bands(
     params: ThermalParams,
     limits: Limits,
 ) -> list[Band]:
-    """Assign bands to sweeps so that the estimated total time is smallest.
+    """Assign bands to sweeps so that the estimated turnaround time is smallest.
 
-    Estimated time = sum of sweep times (region span / band centre) + turnarounds (the
-    first-order response to the full chamber rate, :func:`~.physics.turnaround_minutes`),
-    over every assignment of the bands of each direction to that direction's sweeps.
+    Between consecutive sweeps the gradient must go from the previous sweep's exit speed
+    to the next one's entry speed at the full chamber rate
+    (:func:`~.physics.turnaround_minutes`); the sweeps' own times do not depend on the
+    order. The least total is a shortest path over (bands of each direction used so far,
+    last band): exact, and cheap for any level count (the 518,400 permutations of 12
+    levels took minutes). That estimate is nearly separable in the exit and entry speeds,
+    so many orders tie; ties go to the first in the natural order (bands slowest first,
+    heating sweeps before cooling ones).
     """
-    from itertools import permutations
+    idx_of = {d: [k for k, dd in enumerate(directions) if dd == d] for d in (+1, -1)}
+    pool = {d: list(bands_by_dir.get(d, [])) for d in (+1, -1)}
+    if any(len(pool[d]) != len(idx_of[d]) for d in (+1, -1)):
+        raise ValueError("one band per sweep of each direction is needed")
+    n = len(directions)
 
-    idx = {d: [k for k, dd in enumerate(directions) if dd == d] for d in (+1, -1)}
-    best: tuple[float, list[Band]] | None = None
-    perms_h = list(permutations(bands_by_dir[+1])) or [()]
-    perms_c = list(permutations(bands_by_dir[-1])) or [()]
-    for ph in perms_h:
-        for pc in perms_c:
-            placed = dict(zip(idx[+1], ph, strict=True)) | dict(zip(idx[-1], pc, strict=True))
-            seq = [placed[k] for k in range(len(directions))]
-            total = 0.0
-            prev = 0.0
-            for d, b in zip(directions, seq, strict=True):
-                v_in, v_out = b.edge_speeds()
-                total += float(b.minutes().sum()) + turnaround_minutes(
-                    prev, d, v_in, params, limits
-                )
-                prev = v_out
-            if best is None or total < best[0]:
-                best = (total, seq)
-    assert best is not None  # at least one assignment is tried
-    return best[1]
+    def turn(prev: Band | None, nxt: Band) -> float:
+        v_out = 0.0 if prev is None else prev.edge_speeds()[1]
+        return turnaround_minutes(v_out, nxt.direction, nxt.edge_speeds()[0], params, limits)
+
+    @cache
+    def rest(pos: int, used: tuple[int, int], last: tuple[int, int] | None, pins: tuple) -> float:
+        """Least turnaround time of sweeps ``pos..``; ``pins`` fixes some sweeps' bands."""
+        if pos == n:
+            return 0.0
+        d = directions[pos]
+        k = 0 if d > 0 else 1
+        prev = None if last is None else pool[last[0]][last[1]]
+        choices = [pins[pos]] if pins[pos] is not None else range(len(pool[d]))
+        best = math.inf
+        for i in choices:
+            if used[k] >> i & 1:
+                continue
+            nu = (used[0] | 1 << i, used[1]) if d > 0 else (used[0], used[1] | 1 << i)
+            best = min(best, turn(prev, pool[d][i]) + rest(pos + 1, nu, (d, i), pins))
+        return best
+
+    optimum = rest(0, (0, 0), None, (None,) * n)
+    tol = ORDER_TIE_TOL * max(1.0, abs(optimum))
+    pinned: list[int | None] = [None] * n
+    for d in (+1, -1):  # pin sweep by sweep the lowest band index that keeps the optimum
+        for pos in idx_of[d]:
+            taken = {pinned[j] for j in idx_of[d]}
+            for i in range(len(pool[d])):
+                if i in taken:
+                    continue
+                pinned[pos] = i
+                if rest(0, (0, 0), None, tuple(pinned)) <= optimum + tol:
+                    break
+    return [pool[d][i] for d, i in zip(directions, pinned, strict=True) if i is not None]

@@ -62,6 +62,25 @@ class Plan:
     box_check: dict | None = None
     #: a continuation: the minute from which the rest of the run was planned
     continued_from_min: float | None = None
+    #: proven lower bound on the duration of any complete plan of the request, min
+    #: (:mod:`.bound`; None where the proof does not apply: augmented models, continuations)
+    duration_lower_bound_min: float | None = None
+    #: robust plans: coverage at the nominal point (``params``); ``coverage`` is the worst
+    #: of the design scenarios, ``box_check`` the dense check over the whole box
+    coverage_nominal: CoverageReport | None = None
+    #: robust plans: which fallback was planned ("inner half", "inner quarter", "nominal
+    #: point") when no programme fitted the whole box; None when it did
+    robust_fallback: str | None = None
+    #: fewer levels than asked were planned because the target could not be met (graded
+    #: partial plan): the level count every bin was planned for
+    levels_planned: int | None = None
+
+    @property
+    def gap_to_bound_min(self) -> float | None:
+        """How much longer than the proven lower bound this plan is, min."""
+        if self.duration_lower_bound_min is None:
+            return None
+        return self.duration_min - self.duration_lower_bound_min
 
     @property
     def duration_min(self) -> float:
@@ -94,6 +113,8 @@ class Plan:
             "margin_g_c_per_min": self.margin_g_c_per_min,
             "margin_t_c": self.margin_t_c,
             "solve_s": self.solve_s,
+            "duration_lower_bound_min": self.duration_lower_bound_min,
+            "gap_to_bound_min": self.gap_to_bound_min,
         }
 
     def to_json_dict(self) -> dict:
@@ -127,6 +148,19 @@ class Plan:
             "notes": list(self.notes),
             "robust_box_check": self.box_check,
             "continued_from_min": self.continued_from_min,
+            "duration_lower_bound_min": self.duration_lower_bound_min,
+            "gap_to_bound_min": self.gap_to_bound_min,
+            "coverage_nominal": (
+                None if self.coverage_nominal is None else self.coverage_nominal.coverage
+            ),
+            "min_levels_nominal": (
+                None if self.coverage_nominal is None else self.coverage_nominal.min_levels
+            ),
+            "coverage_worst_design_scenario": (
+                self.coverage.coverage if len(self.scenarios) > 1 else None
+            ),
+            "robust_fallback": self.robust_fallback,
+            "levels_planned": self.levels_planned,
         }
 
 

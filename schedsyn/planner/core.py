@@ -7,24 +7,28 @@ scenarios -> search (robust ladder) -> polish -> round for the operator -> check
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..coverage import CoverageReport
 from ..errors import InfeasiblePlanError, ParameterError
 from ..model import FirstOrderLag, LinearThermalModel
 from ..params import Limits, ThermalParams
 from ..programme import Programme
+from .bound import duration_lower_bound
 from .check import Plan, check_programme
 from .continuation import plan_continuation
 from .explain import explain_shortfall
 from .lp import Context, LpStats, require_solvable
-from .polish import polish
+from .polish import honour_step_limits, merge_small_changes, polish, step_runs
 from .request import Continuation, ExperimentSpec, check_request
 from .robust import box_note, box_scenarios, search_robust, verify_robust
-from .search import Search, subregions, synthesise, truncate
+from .search import Search, Structure, subregions, synthesise, truncate
 
 #: Rates closer than this are one step of the exported table, degC/min.
 MERGE_TOL_C_PER_MIN = 1e-6
@@ -32,8 +36,16 @@ MERGE_TOL_C_PER_MIN = 1e-6
 MAX_REPOLISH = 2
 #: Extra tightening of the device limits per re-polish, degC, beyond the excess found.
 REPOLISH_PAD_C = 0.05
+#: Longest decision segment the planner uses, min (ExperimentSpec allows up to 30).
+MAX_SEGMENT_MIN = 30
+#: Segment lengths (multiples of the requested one) tried when merging steps cannot meet
+#: max_steps.
+COARSER_FACTORS = (2, 3)
 #: Device excess (degC) below which rounding is not worth a re-polish.
 EXCESS_TOL_C = 1e-6
+#: A step that changes the setpoint by less than this is merged into a neighbour when the
+#: plan stays as good (an operator types fewer, more meaningful steps), degC.
+MIN_STEP_CHANGE_C = 0.5
 
 
 @dataclass(slots=True)
@@ -127,6 +139,48 @@ def _fallback(
     return max(options, key=verified)
 
 
+def _shape_steps(
+    spec: ExperimentSpec,
+    limits: Limits,
+    params_list: list[ThermalParams],
+    model: LinearThermalModel | None,
+    ctx: Context,
+    structure: Structure,
+    chosen: _Candidate,
+    cov: CoverageReport,
+):
+    """Merge steps: to meet ``max_steps`` and ``min_step_min``, then steps that change the
+    setpoint by less than ``MIN_STEP_CHANGE_C`` (for the operator). A merge is kept only
+    when the rounded table, re-checked, covers at least as much, stays inside the device
+    limits and meets the step limits. Returns the new table's check, or None (unchanged).
+    """
+    min_seg = max(1, math.ceil(spec.min_step_min / spec.segment_min - 1e-9))
+    result = None
+
+    def run(u: np.ndarray):
+        prog = operator_programme(u, spec, limits)
+        return prog, check_programme(prog, spec, limits, params_list, model)
+
+    def accept(u: np.ndarray) -> bool:
+        _, c = run(u)
+        steps_ok = c[0].coverage >= cov.coverage and not [p for p in c[2] if "device" in p]
+        return steps_ok and c[0].min_levels >= cov.min_levels
+
+    programme, _ = run(chosen.u)
+    too_many = programme.n_segments > spec.max_steps
+    too_short = bool(np.any(programme.durations_min < spec.min_step_min - 1e-9))
+    if too_many or too_short:
+        res = honour_step_limits(ctx, structure, chosen.u, accept, spec.max_steps, min_seg)
+        if res is not None:
+            chosen.u, chosen.margin_g, chosen.margin_t = res
+            result = run(chosen.u)
+    res = merge_small_changes(ctx, structure, chosen.u, accept, MIN_STEP_CHANGE_C)
+    if res is not None and len(step_runs(res[0])) <= len(step_runs(chosen.u)):
+        chosen.u, chosen.margin_g, chosen.margin_t = res
+        result = run(chosen.u)
+    return result
+
+
 def plan_experiment(
     spec: ExperimentSpec,
     params: ThermalParams | None = None,
@@ -138,6 +192,7 @@ def plan_experiment(
     progress: Callable[[str], None] | None = None,
     require_complete: bool = False,
     continuation: Continuation | None = None,
+    graded: bool = True,
 ) -> Plan:
     """Synthesise a chamber programme for ``spec`` (see :mod:`schedsyn.planner`).
 
@@ -162,6 +217,10 @@ def plan_experiment(
         Plan only the rest of a run in progress: its executed steps stay, the levels
         measured so far count (see :mod:`.continuation`). The plan's programme is the
         whole run; its coverage joins the measured passes and the new ones.
+    graded : bool
+        When the target cannot be met, also plan for fewer levels and return whichever
+        plan gives the weakest bins the most levels, then the most complete bins (see
+        :func:`_graded`).
 
     Returns
     -------
@@ -189,15 +248,35 @@ def plan_experiment(
             "robust planning uses the first-order model of each scenario; "
             "give either a model or a robust box, not both"
         )
+    if spec.min_step_min > spec.segment_min:  # plan with steps at least that long
+        seg = min(MAX_SEGMENT_MIN, math.ceil(spec.min_step_min - 1e-9))
+        if seg > spec.segment_min:
+            inner = plan_experiment(
+                dataclasses.replace(spec, segment_min=seg),
+                params,
+                limits,
+                model=model,
+                robust_tau_s=robust_tau_s,
+                robust_dt0_c=robust_dt0_c,
+                progress=progress,
+                continuation=continuation,
+                graded=graded,
+            )
+            note = (
+                f"planned with {seg:g}-min segments so that no step is shorter than "
+                f"min_step_min = {spec.min_step_min:g} min"
+            )
+            return _respec(inner, spec, note, require_complete)
     stats = LpStats()
     notes: list[str] = []
+    fallback: str | None = None
     if continuation is not None:
         if robust:
             raise ParameterError("a continuation is planned with one model, not a robust box")
         return _plan_continued(spec, params, limits, model, continuation, progress, stats, tic)
     if robust:
         params_list = box_scenarios(params, robust_tau_s, robust_dt0_c)
-        search, notes = search_robust(
+        search, notes, fallback = search_robust(
             spec, params, limits, robust_tau_s, robust_dt0_c, progress, stats
         )
     else:
@@ -212,7 +291,16 @@ def plan_experiment(
         chosen = _Candidate(u, margin_g, margin_t, search, search.ctx)
     else:
         notes += explain_shortfall(spec, params, limits)
-        chosen = _fallback(spec, limits, params_list, models, model, search, progress, stats)
+        try:
+            chosen = _fallback(spec, limits, params_list, models, model, search, progress, stats)
+        except InfeasiblePlanError:
+            # nothing at all with these levels: fewer levels, if some count fits
+            fewer = None
+            if graded and model is None and not robust:
+                fewer = _graded(None, spec, params, limits, progress, tuple(notes))
+            if fewer is None:
+                raise
+            return with_table_meta(fewer)
         notes.append(chosen.note)
 
     programme = operator_programme(chosen.u, spec, limits)
@@ -232,11 +320,21 @@ def plan_experiment(
         if check2[0].coverage < cov.coverage or _device_excess(limits, *check2[3:]) >= excess:
             break
         programme, (cov, cov01, problems, t_lo, t_hi) = prog2, check2
-        chosen.margin_g, chosen.margin_t, ctx = mg2, mt2, tight
+        chosen.u, chosen.margin_g, chosen.margin_t, ctx = u2, mg2, mt2, tight
+    if best is not None:  # fewer, longer steps: within the limits, and no trivial ones
+        checked = _shape_steps(spec, limits, params_list, model, ctx, best[0], chosen, cov)
+        if checked is not None:
+            programme, (cov, cov01, problems, t_lo, t_hi) = checked
     if programme.n_segments > spec.max_steps:
         problems.append(
             f"the step table has {programme.n_segments} steps, more than "
             f"max_steps = {spec.max_steps}"
+        )
+    short_steps = int(np.sum(programme.durations_min < spec.min_step_min - 1e-9))
+    if short_steps:
+        problems.append(
+            f"{short_steps} step(s) of the table are shorter than min_step_min = "
+            f"{spec.min_step_min:g} min"
         )
     complete = cov.complete and not problems
     if not cov.complete:
@@ -247,7 +345,9 @@ def plan_experiment(
         )
         notes += [n for n in explain_shortfall(spec, params, limits) if n not in notes]
     box_check = None
+    cov_nominal = None
     if robust:
+        cov_nominal = check_programme(programme, spec, limits, [params])[0]
         box_check = verify_robust(programme, spec, params, robust_tau_s, robust_dt0_c, limits)
         if not box_check["holds"]:
             complete = False
@@ -258,6 +358,15 @@ def plan_experiment(
             "(counted apart from infeasible ones; see plan.json 'lp')"
         )
     status = "complete" if complete else ("incomplete" if not problems else "limits violated")
+    bound = None
+    if model is None:  # the proof is for the first-order lag; a robust plan meets every scenario
+        bound = max(duration_lower_bound(spec, p, limits).lower_bound_min for p in params_list)
+        if bound > limits.duration_max_min:
+            notes.append(
+                f"no complete plan exists within {limits.duration_max_min:g} min: any plan "
+                f"whose sweeps cross the whole region needs at least {bound:.0f} min "
+                "(proven lower bound)"
+            )
     plan = Plan(
         spec=spec,
         params=params,
@@ -278,7 +387,24 @@ def plan_experiment(
         t_min_c=t_lo,
         t_max_c=t_hi,
         box_check=box_check,
+        duration_lower_bound_min=bound,
+        coverage_nominal=cov_nominal,
+        robust_fallback=fallback,
     )
+    if (
+        programme.n_segments > spec.max_steps
+        and cov.complete
+        and graded
+        and not robust
+        and continuation is None
+    ):  # merging steps was not enough: coarser control has fewer steps
+        coarser = _coarser(spec, params, limits, model, progress)
+        if coarser is not None:
+            plan = coarser
+            complete = True
+    if not complete and graded and (model is None and not robust):
+        plan = _graded(plan, spec, params, limits, progress, plan.notes) or plan
+    plan = with_table_meta(plan)
     if require_complete and not complete:
         raise InfeasiblePlanError(
             f"{spec.name}: the target cannot be met: {'; '.join(notes + problems)}; best "
@@ -324,24 +450,135 @@ def _plan_continued(
             + ", ".join(f"[{a:g},{b:g}) {n}" for a, b, n in short[:10])
         )
     status = "complete" if complete else ("incomplete" if not problems else "limits violated")
-    return Plan(
-        spec=spec,
-        params=params,
-        limits=limits,
-        programme=programme,
-        coverage=cov,
-        coverage_0p1=cov01,
-        complete=complete,
-        status=status,
-        solve_s=time.perf_counter() - tic,
-        margin_g_c_per_min=mg,
-        margin_t_c=mt,
-        lp=stats.to_dict(),
-        problem_size=search.ctx.size if search is not None else {},
-        scenarios=(params,),
-        violations=tuple(problems),
-        notes=tuple(notes),
-        t_min_c=t_lo,
-        t_max_c=t_hi,
-        continued_from_min=continuation.at_min,
+    return with_table_meta(
+        Plan(
+            spec=spec,
+            params=params,
+            limits=limits,
+            programme=programme,
+            coverage=cov,
+            coverage_0p1=cov01,
+            complete=complete,
+            status=status,
+            solve_s=time.perf_counter() - tic,
+            margin_g_c_per_min=mg,
+            margin_t_c=mt,
+            lp=stats.to_dict(),
+            problem_size=search.ctx.size if search is not None else {},
+            scenarios=(params,),
+            violations=tuple(problems),
+            notes=tuple(notes),
+            t_min_c=t_lo,
+            t_max_c=t_hi,
+            continued_from_min=continuation.at_min,
+        )
     )
+
+
+def with_table_meta(plan: Plan) -> Plan:
+    """The plan with its step table carrying what it was planned for (region, model,
+    limits, box): ``schedsyn.simulate(plan.programme)`` and readers of the written table
+    then use the plan's own parameters."""
+    from ..programme import StepTableMeta
+
+    meta = StepTableMeta.from_plan(plan)
+    return dataclasses.replace(plan, programme=plan.programme.with_meta(meta))
+
+
+def _graded(
+    plan: Plan | None,
+    spec: ExperimentSpec,
+    params: ThermalParams,
+    limits: Limits,
+    progress: Callable[[str], None] | None,
+    notes: tuple[str, ...],
+) -> Plan | None:
+    """The best partial plan when ``levels_required`` cannot be met: also plan for fewer
+    levels (from ``L - 1`` down, skipping counts whose proven bound exceeds the budget;
+    the first complete one ends the search) and keep whichever table gives the weakest bin
+    the most levels, then covers the most bins, counted at the requested ``L`` by the
+    independent check. ``plan``: the best found with ``L`` (None: nothing at all).
+    """
+    best = plan
+    key = (plan.coverage.min_levels, plan.coverage.coverage) if plan is not None else (-1, -1.0)
+    for levels in range(spec.levels_required - 1, 1, -1):
+        if levels <= key[0]:
+            break  # no fewer-level plan can give the weakest bin more than it has
+        fewer = dataclasses.replace(spec, levels_required=levels)
+        if duration_lower_bound(fewer, params, limits).lower_bound_min > limits.duration_max_min:
+            continue
+        if progress:
+            progress(f"the target cannot be met: planning {levels} levels per bin instead")
+        try:
+            alt = plan_experiment(fewer, params, limits, progress=progress, graded=False)
+        except InfeasiblePlanError:
+            continue
+        cov, cov01, _, _, _ = check_programme(alt.programme, spec, limits, [params])
+        alt_key = (cov.min_levels, cov.coverage)
+        if alt_key > key and not alt.violations:
+            best = dataclasses.replace(
+                alt,
+                spec=spec,
+                coverage=cov,
+                coverage_0p1=cov01,
+                complete=False,
+                status="incomplete",
+                levels_planned=levels,
+                notes=(
+                    *notes,
+                    f"GRADED: no complete plan with {spec.levels_required} levels per bin "
+                    f"was found; this one plans {levels} in every bin (the most the search "
+                    f"fits in {limits.duration_max_min:g} min): weakest bin {cov.min_levels} "
+                    f"levels, {cov.coverage:.0%} of the bins at {spec.levels_required}",
+                ),
+                duration_lower_bound_min=duration_lower_bound(spec, params, limits).lower_bound_min,
+            )
+            key = alt_key
+        if alt.complete:
+            break
+    return best
+
+
+def _respec(plan: Plan, spec: ExperimentSpec, note: str, require_complete: bool) -> Plan:
+    """A plan made for a variant of ``spec`` (other segments), reported for ``spec``."""
+    out = dataclasses.replace(plan, spec=spec, notes=(*plan.notes, note))
+    if require_complete and not out.complete:
+        raise InfeasiblePlanError(
+            f"{spec.name}: the target cannot be met: {'; '.join(out.notes)}",
+            best_coverage=out.coverage.coverage,
+        )
+    return with_table_meta(out)
+
+
+def _coarser(
+    spec: ExperimentSpec,
+    params: ThermalParams,
+    limits: Limits,
+    model: LinearThermalModel | None,
+    progress: Callable[[str], None] | None,
+) -> Plan | None:
+    """A complete plan within ``max_steps`` with longer segments, or None."""
+    for factor in COARSER_FACTORS:
+        seg = spec.segment_min * factor
+        if seg > MAX_SEGMENT_MIN:
+            break
+        if progress:
+            progress(f"more than max_steps = {spec.max_steps} steps: trying {seg:g}-min segments")
+        try:
+            alt = plan_experiment(
+                dataclasses.replace(spec, segment_min=seg),
+                params,
+                limits,
+                model=model,
+                progress=progress,
+                graded=False,
+            )
+        except InfeasiblePlanError:
+            continue
+        if alt.complete:
+            note = (
+                f"planned with {seg:g}-min segments: with {spec.segment_min:g}-min ones the "
+                f"table had more than max_steps = {spec.max_steps} steps"
+            )
+            return _respec(alt, spec, note, False)
+    return None

@@ -26,6 +26,8 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 
+import numpy as np
+
 from ..params import Limits, ThermalParams
 
 #: Share of the full-rate acceleration of g (rate/tau) a turnaround is planned with.
@@ -67,20 +69,75 @@ def invert_increasing(fun: Callable[[float], float], target: float, hi: float) -
     return lo_v
 
 
-def accel_distance(v: float, rate: float, tau_min: float) -> float:
+def accel_distance(v, rate: float, tau_min: float):
     """Distance (degC) to speed up from rest to ``v`` at chamber rate ``rate`` (v < rate).
 
     ``dv/dt = (rate - v)/tau`` and ``dT = v dt`` give ``tau (-v - rate ln(1 - v/rate))``.
+    Works on floats and arrays.
     """
-    return tau_min * (-v - rate * math.log(max(1.0 - v / rate, 1e-12)))
+    return tau_min * (-v - rate * np.log(np.maximum(1.0 - v / rate, 1e-12)))
 
 
-def stop_distance(v: float, rate: float, tau_min: float) -> float:
+def stop_distance(v, rate: float, tau_min: float):
     """Distance (degC) to stop from speed ``v`` reversing at chamber rate ``rate``.
 
-    ``dv/dt = -(rate + v)/tau`` gives ``tau (v - rate ln(1 + v/rate))``.
+    ``dv/dt = -(rate + v)/tau`` gives ``tau (v - rate ln(1 + v/rate))``. Floats and arrays.
     """
-    return tau_min * (v - rate * math.log1p(v / rate))
+    return tau_min * (v - rate * np.log1p(v / rate))
+
+
+def accel_time(v, rate: float, tau_min: float):
+    """Time (min) to speed up from rest to ``v`` at chamber rate ``rate``:
+    ``g(t) = rate (1 - exp(-t/tau))`` gives ``tau ln(rate / (rate - v))``."""
+    return tau_min * np.log(rate / np.maximum(rate - v, 1e-12 * rate))
+
+
+def stop_time(v, rate: float, tau_min: float):
+    """Time (min) to stop from speed ``v`` reversing at ``rate``: ``tau ln(1 + v/rate)``."""
+    return tau_min * np.log1p(v / rate)
+
+
+def _inverse(fun: Callable, target, hi: float):
+    """Elementwise largest ``v`` in ``[0, hi]`` with ``fun(v) <= target`` (``fun`` increasing,
+    ``fun(0) = 0``): vectorised bisection, exact to 2^-60 of ``hi``."""
+    target = np.asarray(target, dtype=float)
+    lo_v, hi_v = np.zeros_like(target), np.full_like(target, hi)
+    for _ in range(BISECTION_STEPS):
+        mid = 0.5 * (lo_v + hi_v)
+        ok = fun(mid) <= target
+        lo_v, hi_v = np.where(ok, mid, lo_v), np.where(ok, hi_v, mid)
+    return lo_v
+
+
+def speed_after_accel(v0, distance_c, rate: float, tau_min: float):
+    """Fastest speed after ``distance_c`` degC of full-rate acceleration from ``v0``.
+
+    Along the acceleration curve distances add: ``accel_distance(v) = accel_distance(v0) +
+    distance``. The speed stays below ``rate``.
+    """
+    target = accel_distance(np.asarray(v0, dtype=float), rate, tau_min) + distance_c
+    return _inverse(lambda v: accel_distance(v, rate, tau_min), target, rate * (1 - 1e-12))
+
+
+def speed_after_decel(v0, distance_c, rate: float, tau_min: float):
+    """Slowest speed after ``distance_c`` degC of full-rate braking from ``v0`` (0 if it stops)."""
+    left = stop_distance(np.asarray(v0, dtype=float), rate, tau_min) - distance_c
+    top = float(np.max(v0)) + 1.0
+    return np.where(
+        left > 0, _inverse(lambda v: stop_distance(v, rate, tau_min), np.maximum(left, 0), top), 0
+    )
+
+
+def speed_before_accel(v1, distance_c, rate: float, tau_min: float):
+    """Slowest speed from which full-rate acceleration over ``distance_c`` reaches ``v1``."""
+    left = accel_distance(np.asarray(v1, dtype=float), rate, tau_min) - distance_c
+    return np.where(
+        left > 0,
+        _inverse(
+            lambda v: accel_distance(v, rate, tau_min), np.maximum(left, 0), rate * (1 - 1e-12)
+        ),
+        0.0,
+    )
 
 
 def turning_speed(

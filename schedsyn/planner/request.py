@@ -40,14 +40,22 @@ class ExperimentSpec:
     delta_c_per_min : float
         Minimum difference between two levels, degC/min, in (0, 1].
     segment_min : float
-        Length of one decision segment, whole minutes, 2..30 (5-15 typical).
+        Length of one decision segment, whole minutes, 2..30 (default 3: finer control
+        follows the guided speed profiles closely; longer segments give fewer, longer
+        steps and longer plans).
     objective : str
         ``"shortest"`` (shortest programme reaching the target) or ``"margin"`` (largest
         margin within ``duration_max_min``).
     max_steps : int
-        Most steps the exported step table may have (after merging equal rates), >= 2.
+        Most steps the exported step table may have (after merging equal rates), >= 2; the
+        planner merges steps to meet it.
+    min_step_min : float
+        Shortest step the table may have, min (0: one segment); the planner merges
+        shorter steps into a neighbour.
     edge_margin_c : float
-        Each sweep passes the working edges by at least this, degC, in (0, 10].
+        Each sweep passes the working edges by at least this, degC, in (0, 10] (default
+        0.25: sweeps are slow near the edges, where every tenth of a degree costs time; a
+        wider margin or ``objective = "margin"`` tolerates more model error).
     max_cool_c_per_min, max_heat_c_per_min : float
         Fastest cooling / heating gradient the bands use, degC/min, in [0.1, 3]. Fast
         sweeps cost long turnarounds and overshoot: the chamber cools at only 1 degC/min,
@@ -61,10 +69,11 @@ class ExperimentSpec:
     approx_hi_c: float
     levels_required: int = 6
     delta_c_per_min: float = 0.05
-    segment_min: float = 5.0
+    segment_min: float = 3.0
     objective: str = "shortest"
     max_steps: int = 80
-    edge_margin_c: float = 0.5
+    min_step_min: float = 0.0
+    edge_margin_c: float = 0.25
     max_cool_c_per_min: float = 0.85
     max_heat_c_per_min: float = 1.0
 
@@ -79,6 +88,7 @@ class ExperimentSpec:
             "delta_c_per_min",
             "segment_min",
             "edge_margin_c",
+            "min_step_min",
             "max_cool_c_per_min",
             "max_heat_c_per_min",
         ):
@@ -114,6 +124,8 @@ class ExperimentSpec:
         steps = self.max_steps
         if isinstance(steps, bool) or int(steps) != steps or steps < 2:
             raise ParameterError(f"{self.name}: max_steps must be a whole number >= 2")
+        if not 0 <= self.min_step_min <= 240:
+            raise ParameterError(f"{self.name}: min_step_min must be in 0..240 min")
         if not 0 < self.edge_margin_c <= 10:
             raise ParameterError(f"{self.name}: edge_margin_c must be in (0, 10] °C")
         for f in ("max_cool_c_per_min", "max_heat_c_per_min"):

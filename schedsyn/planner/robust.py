@@ -55,13 +55,14 @@ def search_robust(
     dt0_c: Range,
     progress: Progress,
     stats: LpStats,
-) -> tuple[Search, list[str]]:
-    """Search a programme for the whole box, else the fallbacks; notes say which was used."""
+) -> tuple[Search, list[str], str | None]:
+    """Search a programme for the whole box, else the fallbacks: the search, notes saying
+    which was used, and the fallback's name (None: the whole box)."""
     params_list = box_scenarios(params, tau_s, dt0_c)
     models = [FirstOrderLag(p) for p in params_list]
     search = synthesise(spec, params_list, limits, models, progress, stats)
     if search.best is not None:
-        return search, []
+        return search, [], None
     for share, word in INNER_SHARES:
         in_tau, in_dt0 = _inner(tau_s, share), _inner(dt0_c, share)
         if progress:
@@ -76,17 +77,25 @@ def search_robust(
                 for name, r, unit in (("tau", in_tau, "s"), ("dT0", in_dt0, "°C"))
                 if r is not None
             )
-            return search, [
-                "no single programme meeting the target for every scenario of the robust "
-                f"box was found; planned robustly for its inner {word} ({box})"
-            ]
+            return (
+                search,
+                [
+                    "FALLBACK: no single programme meeting the target for every scenario of "
+                    f"the robust box was found; planned robustly for its inner {word} ({box})"
+                ],
+                f"inner {word}",
+            )
     spec_margin = replace(spec, objective="margin")
     search = synthesise(spec_margin, [params], limits, [FirstOrderLag(params)], progress, stats)
-    return search, [
-        "no single programme meeting the target for every scenario of the robust box (or "
-        "its inner half or quarter) was found; planned at the nominal point with the "
-        "widest margins that fit"
-    ]
+    return (
+        search,
+        [
+            "FALLBACK: no single programme meeting the target for every scenario of the "
+            "robust box (or its inner half or quarter) was found; planned at the nominal "
+            "point with the widest margins that fit"
+        ],
+        "nominal point",
+    )
 
 
 def verify_robust(

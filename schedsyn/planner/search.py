@@ -27,6 +27,7 @@ from .bands import (
     make_bands,
     order_bands,
 )
+from .guide import guided_bands
 from .lp import (
     KNOT_TOL_C,
     ROBUST_SLACK_C_PER_MIN,
@@ -43,31 +44,102 @@ Progress = Callable[[str], None] | None
 
 #: Longest transition (turnaround) searched before a sweep, min.
 MAX_TRANSITION_MIN = 150.0
-#: Speeds a sweep's window is first tried at, as fractions of its band (top first).
-WINDOW_FRACTIONS = (1.0, 0.75, 0.5, 0.25)
 #: Weight of |rate| in a probe's objective (among equally slow exits, the calmest rates).
 PROBE_L1_WEIGHT = 1e-4
 #: Robust plans: segments simulated past a sweep's planned end to find where the lagging
 #: scenarios leave the region (the last rate is held).
 SCENARIO_LOOKAHEAD_SEG = 6
-#: Structures tried by the search: edge caps (cooling at lo, cooling at hi, heating at
-#: lo, heating at hi) as fractions of ``max_cool_c_per_min`` / ``max_heat_c_per_min``, and
-#: whether the band tops are lowered to what the sweep dynamics can follow, and the band
-#: design (``DESIGNS``: how the turning room near the device limits is modelled). Heating ->
-#: cooling turnarounds happen at the upper edge and are slow (the chamber cools at only
-#: 1 degC/min), so sweeps are slower there; cooling -> heating turnarounds at the lower
-#: edge are quick (3 degC/min). The list was tuned on the paper's four regions (see
-#: docs/planner.md); every candidate yields a valid plan or none.
-CANDIDATES = (
-    ((1.0, 0.7, 1.0, 0.9), True, "sqrt"),
-    ((1.0, 0.7, 1.0, 0.9), False, "sqrt"),
-    ((1.0, 0.7, 1.4, 0.9), False, "sqrt"),
-    ((0.7, 0.7, 1.0, 0.9), True, "sqrt"),
-    # exact turning room and more knots: faster passes near a device limit (W4's hot
-    # edge has 2 degC of room below +62 degC and a chamber that cools at 1 degC/min)
-    ((1.0, 0.7, 1.0, 0.9), True, "exact"),
-    ((1.0, 1.0, 1.0, 1.0), True, "exact"),
+
+
+@dataclass(frozen=True, slots=True)
+class Guided:
+    """Bands around parallel speed profiles designed with ``rate_share`` of the chamber
+    rates, ``width`` wide (:func:`~.guide.guided_bands`)."""
+
+    rate_share: float
+    width_c_per_min: float
+
+
+@dataclass(frozen=True, slots=True)
+class Classic:
+    """Bands stacked down from the fastest speed (:func:`~.bands.make_bands`): edge caps
+    (cooling at lo, cooling at hi, heating at lo, heating at hi) as fractions of
+    ``max_cool_c_per_min`` / ``max_heat_c_per_min``, whether the tops are lowered to what a
+    sweep can follow, and the band design (``DESIGNS``)."""
+
+    caps: tuple[float, float, float, float]
+    dynamic: bool
+    design: str
+
+
+#: The structures the search tries, in order. Guided bands first: designed around the
+#: speed profiles of the duration bound's relaxation (slow near the edges, where turning
+#: round is dear, fast in the middle), they give the shortest plans; once one of them has
+#: given a structure, the classic designs are not tried. Those follow, tuned on the
+#: paper's four regions, for what guided bands cannot place: heating -> cooling
+#: turnarounds happen at the upper edge and are slow (the chamber cools at only
+#: 1 degC/min), so sweeps are slower there; the exact turning room with more knots allows
+#: faster passes near a device limit (W4's hot edge has 2 degC of room below +62 degC).
+#: Every candidate yields a valid plan or none.
+CANDIDATES: tuple[Guided | Classic, ...] = (
+    Guided(0.9, 0.04),
+    Guided(0.9, 0.05),
+    Guided(0.8, 0.06),
+    Classic((1.0, 0.7, 1.0, 0.9), True, "sqrt"),
+    Classic((1.0, 0.7, 1.0, 0.9), False, "sqrt"),
+    Classic((1.0, 0.7, 1.4, 0.9), False, "sqrt"),
+    Classic((0.7, 0.7, 1.0, 0.9), True, "sqrt"),
+    Classic((1.0, 0.7, 1.0, 0.9), True, "exact"),
+    Classic((1.0, 1.0, 1.0, 1.0), True, "exact"),
 )
+
+
+def candidate_bands(
+    candidate: Guided | Classic,
+    spec: ExperimentSpec,
+    params_list: list[ThermalParams],
+    limits: Limits,
+    n_by_dir: dict[int, int],
+    sep: float,
+) -> dict[int, list[Band]] | None:
+    """The bands of one candidate structure, or None when they do not fit."""
+    if isinstance(candidate, Guided):
+        extra = sep - (spec.delta_c_per_min + BAND_SAFETY_C_PER_MIN)
+        return guided_bands(
+            spec,
+            params_list,
+            limits,
+            n_by_dir,
+            candidate.width_c_per_min,
+            candidate.rate_share,
+            sep_extra_c_per_min=extra,
+        )
+    caps = candidate.caps
+    cap_by_dir = {
+        -1: (caps[0] * spec.max_cool_c_per_min, caps[1] * spec.max_cool_c_per_min),
+        +1: (caps[2] * spec.max_heat_c_per_min, caps[3] * spec.max_heat_c_per_min),
+    }
+    bands = {
+        d: make_bands(
+            spec,
+            n_by_dir[d],
+            d,
+            sep,
+            params_list,
+            limits,
+            caps=cap_by_dir[d],
+            dynamic=candidate.dynamic,
+            design=DESIGNS[candidate.design],
+        )
+        if n_by_dir[d]
+        else []
+        for d in (+1, -1)
+    }
+    if any(bands[d] and band_feasibility(bands[d]) <= 0 for d in (+1, -1)):
+        return None
+    return bands
+
+
 #: The greedy may run past the duration limit by this factor; such a structure is only
 #: used (cut at the limit) when nothing fits, to give the best reachable coverage.
 OVERRUN_FACTOR = 1.3
@@ -95,9 +167,9 @@ def place_sweep(
     """Shortest transition + window for one sweep.
 
     The window may start at any planner sample after the fixed segments; its knot
-    crossings are planned at the band's top speed first, then slower
-    (``WINDOW_FRACTIONS``). The transition is scanned in segment steps (feasibility is not
-    monotone enough for bisection over the whole range), then refined to the minute.
+    crossings are planned fast first, then slower (:meth:`~.bands.Band.timing_options`).
+    The transition is scanned in segment steps (feasibility is not monotone enough for
+    bisection over the whole range), then refined to the minute.
     """
     spec, r = ctx.spec, ctx.responses
     seg = spec.segment_min
@@ -105,8 +177,7 @@ def place_sweep(
     s_max = r.sample_of(max_seg)
     # piece durations (samples) in travel order, from the band's top speed down
     options = []
-    for fraction in WINDOW_FRACTIONS:
-        minutes = band.minutes(fraction)
+    for minutes in band.timing_options():
         if d < 0:
             minutes = minutes[::-1]
         # round the planned knot times, not each piece (rounded pieces drift)
@@ -341,35 +412,18 @@ def synthesise(
         for first in first_directions(spec, limits, start_t):
             directions = sweep_directions(spec, first, n_sweeps)
             n_by_dir = {d: directions.count(d) for d in (+1, -1)}
-            for caps, dynamic, design in CANDIDATES[:max_candidates]:
-                cap_by_dir = {
-                    -1: (caps[0] * spec.max_cool_c_per_min, caps[1] * spec.max_cool_c_per_min),
-                    +1: (caps[2] * spec.max_heat_c_per_min, caps[3] * spec.max_heat_c_per_min),
-                }
+            guided_found = False
+            for candidate in CANDIDATES[:max_candidates]:
+                if guided_found and isinstance(candidate, Classic):
+                    break  # the classic designs were tuned as fallbacks: not worth the LPs
                 # robust plans use the same bands: each scenario gets its own windows
                 # and a slack (see scenario_windows and SubLP.window)
-                bands = {
-                    d: make_bands(
-                        spec,
-                        n_by_dir[d],
-                        d,
-                        sep,
-                        params_list,
-                        limits,
-                        caps=cap_by_dir[d],
-                        dynamic=dynamic,
-                        design=DESIGNS[design],
-                    )
-                    if n_by_dir[d]
-                    else []
-                    for d in (+1, -1)
-                }
-                narrow = [d for d in (+1, -1) if bands[d] and band_feasibility(bands[d]) <= 0]
-                if narrow:
+                bands = candidate_bands(candidate, spec, params_list, limits, n_by_dir, sep)
+                if bands is None:
                     search.reasons.append(
-                        f"the {'heating' if narrow[0] > 0 else 'cooling'} gradients the chamber "
-                        f"allows near the region's edges cannot hold {n_by_dir[narrow[0]]} "
-                        f"levels {sep:.3f} °C/min apart"
+                        f"the gradients the chamber allows cannot hold the levels "
+                        f"{sep:.3f} °C/min apart with the {type(candidate).__name__.lower()} "
+                        "band design"
                     )
                     continue
                 order = order_bands(directions, bands, params_list[0], limits)
@@ -394,6 +448,7 @@ def synthesise(
                     continue
                 if search.best is None or structure.n_seg < search.best[0].n_seg:
                     search.best = (structure, sep)
+                guided_found = guided_found or isinstance(candidate, Guided)
                 if progress:
                     progress(f"structure found: {minutes:g} min")
         if search.best is not None:

@@ -1,0 +1,91 @@
+"""Step-count and step-length limits are constraints of the planner, and the best partial
+plan is graded (schedsyn.planner: polish.honour_step_limits, core._graded)."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from independent import table_check
+
+from schedsyn import Limits
+from schedsyn.errors import InfeasiblePlanError
+from schedsyn.planner import ExperimentSpec, duration_lower_bound, plan_experiment
+
+SPEC = ExperimentSpec("S", -12.0, -4.0, -20.0, 4.0, levels_required=4)
+LIMITS = Limits(duration_max_min=360.0)
+
+
+@pytest.fixture(scope="module")
+def free_plan():
+    return plan_experiment(SPEC, limits=LIMITS)
+
+
+def test_max_steps_is_met_by_merging_steps_and_the_plan_stays_complete(free_plan, tmp_path):
+    """A limit 8 steps below what the plan has without one: the planner merges steps (tied
+    rates, or coarser segments) and the table, re-checked by scipy and separate counting,
+    is still complete within the limit."""
+    limit = free_plan.steps - 8
+    assert free_plan.complete and limit >= 10
+    plan = plan_experiment(dataclasses.replace(SPEC, max_steps=limit), limits=LIMITS)
+    assert plan.complete, plan.notes + plan.violations
+    assert plan.steps <= limit
+    check = table_check(plan.programme.to_csv(tmp_path / "s.csv"), (-12.0, -4.0), 4)
+    assert check["coverage"] == 1.0 and check["duration_min"] == plan.duration_min
+
+
+def test_a_few_steps_too_many_are_merged_with_the_same_segments(free_plan):
+    """Three steps over the limit: tied rates suffice, no coarser segments needed."""
+    limit = free_plan.steps - 3
+    plan = plan_experiment(dataclasses.replace(SPEC, max_steps=limit), limits=LIMITS)
+    assert plan.complete and plan.steps <= limit
+    assert not any("-min segments" in n for n in plan.notes), plan.notes
+
+
+def test_min_step_min_is_met_and_the_plan_stays_complete(free_plan, tmp_path):
+    shortest = float(free_plan.programme.durations_min.min())
+    assert shortest < 9.0  # the limit below binds
+    plan = plan_experiment(dataclasses.replace(SPEC, min_step_min=9.0), limits=LIMITS)
+    assert plan.complete, plan.notes + plan.violations
+    assert plan.programme.durations_min.min() >= 9.0 - 1e-9
+    check = table_check(plan.programme.to_csv(tmp_path / "s.csv"), (-12.0, -4.0), 4)
+    assert check["coverage"] == 1.0
+
+
+def test_an_impossible_step_limit_is_reported_not_hidden():
+    plan = plan_experiment(dataclasses.replace(SPEC, max_steps=3), limits=LIMITS)
+    assert not plan.complete and plan.status == "limits violated"
+    assert any("max_steps = 3" in v for v in plan.violations)
+
+
+def test_a_request_too_short_for_its_levels_gets_the_most_levels_every_bin_can_have(tmp_path):
+    """Graded partial plan: a budget the bound proves too short for 6 and for 5 levels,
+    not for 4. The plan gives every bin as many levels as the fewer-level plan it found
+    (re-checked independently) where, without graded plans, nothing would come back; and
+    it says so."""
+    spec = ExperimentSpec("G", -12.0, -4.0, -20.0, 4.0, levels_required=6)
+    limits = Limits(duration_max_min=195.0)
+    for levels in (6, 5):  # proven impossible
+        fewer = dataclasses.replace(spec, levels_required=levels)
+        assert duration_lower_bound(fewer, limits=limits).lower_bound_min > 195.0
+    plan = plan_experiment(spec, limits=limits)
+    assert not plan.complete and plan.levels_planned is not None
+    assert plan.levels_planned >= 4
+    assert any(n.startswith("GRADED") for n in plan.notes)
+    check = table_check(plan.programme.to_csv(tmp_path / "g.csv"), (-12.0, -4.0), 6)
+    assert check["min_levels"] >= plan.levels_planned == plan.coverage.min_levels
+    # without graded plans nothing at all comes back: no 6-sweep programme fits
+    with pytest.raises(InfeasiblePlanError, match="no programme covers any part"):
+        plan_experiment(spec, limits=limits, graded=False)
+
+
+def test_the_summary_has_the_bound_and_the_gap():
+    from schedsyn.campaign import CampaignConfig, plan_campaign
+
+    cfg = CampaignConfig(experiments=(dataclasses.replace(SPEC, name="A"),), limits=LIMITS)
+    frame = plan_campaign(cfg, backend="serial").summary_frame()
+    row = frame.iloc[0]
+    assert row["duration_lower_bound_min"] <= row["duration_min"]
+    assert row["gap_to_bound_min"] == pytest.approx(
+        row["duration_min"] - row["duration_lower_bound_min"]
+    )
+    assert np.isfinite(row["duration_lower_bound_min"])
