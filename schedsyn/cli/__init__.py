@@ -14,7 +14,7 @@ import sys
 from ..errors import SchedsynError
 
 #: Subcommand modules, in the order ``--help`` lists them.
-COMMANDS = ("simulate", "sweep", "estimate", "compare", "diagnose", "plan", "campaign")
+COMMANDS = ("simulate", "sweep", "estimate", "compare", "diagnose", "fit", "plan", "campaign")
 
 
 def build_parser() -> argparse.ArgumentParser:

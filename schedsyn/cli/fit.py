@@ -1,0 +1,98 @@
+"""``schedsyn fit LOG.csv --region LO HI``: fit the drift polynomial b(T, g) to a run.
+
+Writes ``coefficients.json`` (coefficients in physical units with standard errors,
+condition number, noise model, term selection, held-out check), ``compensation.csv``
+(``t_c, g_c_per_min, drift_dph`` over the gradients the run reached), ``residuals.csv``
+and the plots ``residuals_t.png``, ``residuals_g.png``, ``surface.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from ..driftfit import ESTIMATORS, FitSettings, fit_drift
+from ..io import write_frame_atomic, write_json_atomic
+from ..logs import read_log
+from . import _common
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "fit",
+        help="fit the drift polynomial b(T, g) to a log with drift_dph",
+        description=__doc__,
+    )
+    p.add_argument("log", metavar="LOG.csv", help="measured log with t_int_c and drift_dph")
+    p.add_argument(
+        "--region",
+        nargs=2,
+        type=float,
+        required=True,
+        metavar=("LO_C", "HI_C"),
+        help="approximation region to fit over, °C",
+    )
+    p.add_argument(
+        "--terms",
+        default="auto",
+        help="auto (select by blocked cross-validation among t-only, g1, g2, full; "
+        "default), a set name, or a comma list of terms from 1,t,g,t2,tg,g2,t3,t2g,tg2,g3",
+    )
+    p.add_argument("--holdout", metavar="LOG2.csv", default=None, help="a second run to check on")
+    p.add_argument(
+        "--estimator",
+        choices=ESTIMATORS,
+        default="auto",
+        help="gradient estimator (auto: model-based when the log has tk_set_c)",
+    )
+    p.add_argument(
+        "--no-eiv",
+        action="store_true",
+        help="plain least squares on the estimates (no errors-in-variables correction)",
+    )
+    p.add_argument(
+        "--min-points-per-bin",
+        type=int,
+        default=5,
+        help="samples every 1 °C bin of the region needs (default 5)",
+    )
+    p.add_argument("--out", default=None, help="output directory (default out/fit)")
+    _common.add_model_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from .. import fitplots
+
+    settings = FitSettings(
+        terms=args.terms,
+        eiv="none" if args.no_eiv else "als",
+        estimator=args.estimator,
+        min_points_per_bin=args.min_points_per_bin,
+    )
+    log = read_log(args.log)
+    holdout = read_log(args.holdout) if args.holdout else None
+    params = _common.thermal_params(args)
+    fit = fit_drift(log, tuple(args.region), settings, params, holdout=holdout)
+    out = _common.out_dir(args.out, "out/fit")
+    inputs = [args.log] + ([args.holdout] if args.holdout else [])
+    write_json_atomic(out / "coefficients.json", fit.to_json_dict(), inputs)
+    write_frame_atomic(out / "compensation.csv", fit.compensation_frame(), inputs)
+    write_frame_atomic(out / "residuals.csv", fit.residual_frame(), inputs)
+    fitplots.save_figure(
+        fitplots.fit_residual_plot(fit, "t", title="residuals against temperature"),
+        out / "residuals_t.png",
+        inputs,
+    )
+    fitplots.save_figure(
+        fitplots.fit_residual_plot(fit, "g", title="residuals against gradient"),
+        out / "residuals_g.png",
+        inputs,
+    )
+    fitplots.save_figure(fitplots.fit_surface_plot(fit), out / "surface.png", inputs)
+    for line in fit.summary_lines():
+        print(line)
+    print(
+        f"wrote {out}/coefficients.json, compensation.csv, residuals.csv, residuals_t.png, "
+        "residuals_g.png, surface.png"
+    )
+    return 0
