@@ -96,3 +96,72 @@ def run(args: argparse.Namespace) -> int:
         "residuals_g.png, surface.png"
     )
     return 0
+
+
+# -- hooks in `schedsyn simulate` (gyro log and the drift-fit design report) ----------------
+def add_simulate_options(p: argparse.ArgumentParser) -> None:
+    """``--gyro``, ``--log-out``, ``--log-sample-s``, ``--seed``, ``--approx`` of simulate."""
+    p.add_argument(
+        "--gyro",
+        default=None,
+        metavar="GYRO.toml",
+        help="write a synthetic gyro log of this run ([gyro] table: drift polynomial, noise)",
+    )
+    p.add_argument(
+        "--log-out",
+        default=None,
+        metavar="LOG.csv",
+        help="where the gyro log goes (default OUT/log.csv; needs --gyro)",
+    )
+    p.add_argument("--log-sample-s", type=float, default=10.0, help="log sampling period, s")
+    p.add_argument("--seed", type=int, default=0, help="seed of the gyro log's noise")
+    p.add_argument(
+        "--approx",
+        nargs=2,
+        type=float,
+        default=None,
+        metavar=("LO_C", "HI_C"),
+        help="approximation region of the drift-fit design report, °C (default: the "
+        "working region widened by 10 °C each side, within the device limits)",
+    )
+
+
+def simulate_hook(args, programme, params, limits, traj, out, inputs) -> list[str]:
+    """Design report of the simulated run and, with ``--gyro``, its log; returns the
+    names of the files written. Prints the report's summary."""
+    from ..design import DesignSpace, design_report
+    from ..errors import ParameterError
+    from ..gyro import gyro_log, load_gyro
+
+    if args.log_out is not None and args.gyro is None:
+        raise ParameterError("--log-out needs --gyro GYRO.toml (the gyro to simulate)")
+    lo, hi = args.region
+    approx = tuple(args.approx) if args.approx else DesignSpace.default_approx(lo, hi, limits)
+    space = DesignSpace(lo, hi, approx[0], approx[1], params, limits)
+    report = design_report(traj.t_c, traj.g_c_per_min, space)
+    write_frame_atomic(out / "design.csv", report.to_frame(), inputs)
+    print(report.summary())
+    written = ["design.csv"]
+    if args.gyro is not None:
+        if getattr(args, "model", None) is not None:
+            raise ParameterError(
+                "--gyro simulates the first-order model (--tau-s, --dt0-c); drop --model"
+            )
+        gyro = load_gyro(args.gyro)
+        frame = gyro_log(
+            programme,
+            gyro,
+            params,
+            sample_s=args.log_sample_s,
+            seed=args.seed,
+            t0_c=limits.t_init_c,
+        )
+        path = args.log_out if args.log_out is not None else out / "log.csv"
+        write_frame_atomic(path, frame, [*inputs, args.gyro])
+        print(
+            f"gyro log {path}: {len(frame)} rows every {args.log_sample_s:g} s, drift of "
+            f"{gyro.name} (truth columns t_true_c, g_true_c_per_min, drift_true_dph, "
+            "bias_walk_dph for checks)"
+        )
+        written.append(str(path))
+    return written

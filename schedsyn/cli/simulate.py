@@ -10,6 +10,7 @@ from ..params import ThermalParams
 from ..programme import read_steps
 from ..simulate import simulate
 from . import _common
+from . import fit as fit_cli
 
 
 def register(sub) -> None:
@@ -36,6 +37,7 @@ def register(sub) -> None:
         help="augmented model file (from `schedsyn diagnose --out DIR`); "
         "--tau-s/--dt0-c then override its base",
     )
+    fit_cli.add_simulate_options(p)
     p.set_defaults(func=run)
 
 
@@ -100,5 +102,9 @@ def run(args: argparse.Namespace) -> int:
             f"{limits.device_min_c:g} .. {limits.device_max_c:g} °C"
         )
     print(report.summary())
-    print(f"wrote {out}/trajectory.csv, coverage.csv, program.png, phase.png, coverage.png")
+    extra = fit_cli.simulate_hook(args, programme, params, limits, traj, out, inputs)
+    print(
+        f"wrote {out}/trajectory.csv, coverage.csv, program.png, phase.png, coverage.png, "
+        + ", ".join(extra)
+    )
     return 0
