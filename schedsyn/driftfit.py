@@ -45,10 +45,11 @@ start level the constant term absorbs).
 
 **Term selection.** Candidates nested by their order in g (``t-only`` -- the reference,
 a cubic in T -- ``g1``, ``g2``, ``full``; :data:`schedsyn.terms.CANDIDATES`) are compared
-by leave-one-block-out cross-validation with ``cv_folds`` contiguous blocks in time
-(residuals are correlated, so random folds would leak). The simplest candidate whose
-mean squared error exceeds the best one's by less than one standard error of the paired
-per-block differences is chosen.
+by BIC under the white + random-walk noise model (:func:`select_terms`): the bias random
+walk is part of the likelihood, so gradient terms that would only follow its wander do
+not pay. (Plain cross-validation is fooled by it even when it leaves out whole passes:
+each pass has its own gradient level *and* its own stretch of the walk. Its
+leave-one-pass-out RMS is still reported beside the BIC.)
 
 **Compensation table.** The fitted drift on a grid of ``[LO, HI]`` (``t_step_c`` by
 ``g_step_c_per_min``), at each temperature only over the gradients the run reached within
@@ -72,7 +73,6 @@ from .params import ThermalParams
 from .terms import (
     CANDIDATES,
     EXPONENTS,
-    TERM_SETS,
     coded_to_physical,
     corrected_monomials,
     monomials,
@@ -92,9 +92,9 @@ class FitSettings:
     Parameters
     ----------
     terms : str
-        ``"auto"`` (select among :data:`schedsyn.terms.CANDIDATES` by blocked
-        cross-validation), a set name (``t-only``, ``g1``, ``g2``, ``full``) or a comma
-        list of terms (``"1,t,t2,t3,g"``).
+        ``"auto"`` (select among :data:`schedsyn.terms.CANDIDATES` by BIC, see
+        :func:`select_terms`), a set name (``t-only``, ``g1``, ``g2``, ``full``) or a
+        comma list of terms (``"1,t,t2,t3,g"``).
     eiv : {"als", "none"}
         Errors-in-variables correction: adjusted least squares, or none (plain least
         squares on the estimates; for comparison).
@@ -104,7 +104,8 @@ class FitSettings:
     n_error_draws : int
         Re-runs of the smoother that measure its noise (2..200).
     cv_folds : int
-        Contiguous blocks in time for cross-validation (3..50).
+        Blocks of the cross-validation check when the run has fewer than three passes
+        through the region (3..50; otherwise the passes are the blocks).
     min_points_per_bin : int
         Every 1 degC bin of the region needs at least this many samples (>= 1).
     t_step_c, g_step_c_per_min : float
@@ -236,23 +237,59 @@ def _solve(a: np.ndarray, b: np.ndarray, what: str) -> np.ndarray:
 NOISE_MAX_ROWS = 4000
 
 
+@dataclass(frozen=True, slots=True)
+class NoiseFit:
+    """White noise plus a bias random walk fitted with a regression (:func:`noise_fit`).
+
+    ``minus2_log_likelihood`` is the Gaussian ``-2 log L`` (ML fits; REML for ``reml``)
+    on ``n`` samples, ``n_params`` regression coefficients.
+    """
+
+    sigma_dph: float
+    walk_dph_per_rt_h: float
+    minus2_log_likelihood: float
+    n: int
+    n_params: int
+
+    @property
+    def bic(self) -> float:
+        """``-2 log L + (p + 2) log n`` (the coefficients, sigma and K)."""
+        return self.minus2_log_likelihood + (self.n_params + 2) * math.log(max(self.n, 2))
+
+
 def noise_model(
     time_s: np.ndarray, drift_dph: np.ndarray, x: np.ndarray, max_rows: int = NOISE_MAX_ROWS
 ) -> tuple[float, float]:
-    """``(sigma_dph, walk_dph_per_rt_h)``: white noise plus a bias random walk, by REML.
+    """``(sigma_dph, walk_dph_per_rt_h)`` by REML (:func:`noise_fit`)."""
+    fit = noise_fit(time_s, drift_dph, x, reml=True, max_rows=max_rows)
+    return fit.sigma_dph, fit.walk_dph_per_rt_h
+
+
+def noise_fit(
+    time_s: np.ndarray,
+    drift_dph: np.ndarray,
+    x: np.ndarray,
+    *,
+    reml: bool = True,
+    max_rows: int = NOISE_MAX_ROWS,
+) -> NoiseFit:
+    """White noise plus a bias random walk under a regression, by (RE)ML.
 
     The model ``d_k = x_k' c + b_k + w_k``, ``b_k = b_k-1 + eta_k`` with ``var w = sigma^2``
     and ``var eta_k = K^2 dt_k`` (dt in hours, ``b_0 = 0``: the constant term holds the
     start level). For a ratio ``lambda = K^2/sigma^2`` a scalar Kalman filter (in units of
     sigma^2: ``P <- P + lambda dt``, ``f = P + 1``, gain ``P/f``) whitens the drift and
-    every column of ``x`` alike; the coefficients and ``sigma^2`` are then profiled out
-    and the restricted log-likelihood::
+    every column of ``x`` alike (generalised least squares); the coefficients and
+    ``sigma^2`` are then profiled out and the restricted (``reml``) log-likelihood::
 
         -1/2 [(n - p) log sigma^2 + sum_k log f_k + log det(E_x' F^-1 E_x)]
 
-    (``E_x``: the columns' innovations) is maximised over ``log lambda`` (bounded
-    scalar search). REML, unlike a fit to the residuals, does not lose the part of the
-    random walk the polynomial absorbs. Logs longer than ``max_rows`` samples are strided.
+    (``E_x``: the columns' innovations; ``sigma^2 = RSS/(n - p)``) or the plain one,
+    ``-1/2 [n log sigma^2 + sum_k log f_k]`` with ``sigma^2 = RSS/n``, is maximised over
+    ``log lambda`` (bounded scalar search). REML, unlike a fit to the residuals, does not
+    lose the part of the random walk the polynomial absorbs; the plain likelihood
+    compares different term sets (:func:`select_terms_bic`). Logs longer than
+    ``max_rows`` samples are strided.
     """
     n_all = int(np.asarray(drift_dph).size)
     step = max(1, int(math.ceil(n_all / max_rows)))
@@ -260,7 +297,7 @@ def noise_model(
     z = np.column_stack([np.asarray(drift_dph, dtype=float)[::step], np.asarray(x)[::step]])
     n, p = z.shape[0], z.shape[1] - 1
     if n <= p + 2:
-        return float(np.std(z[:, 0])), 0.0
+        return NoiseFit(float(np.std(z[:, 0])), 0.0, math.nan, n, p)
     dt = np.diff(t, prepend=t[0]).tolist()
 
     def whiten(lam: float) -> tuple[np.ndarray, np.ndarray]:
@@ -302,21 +339,31 @@ def noise_model(
         if sign <= 0:
             return math.inf, math.nan
         coef = np.linalg.lstsq(w[:, 1:], w[:, 0], rcond=None)[0]
-        s2 = float(np.sum((w[:, 0] - w[:, 1:] @ coef) ** 2)) / (n - p)
+        rss = float(np.sum((w[:, 0] - w[:, 1:] @ coef) ** 2))
+        dof = n - p if reml else n
+        s2 = rss / dof
         if not s2 > 0:
             return math.inf, math.nan
-        return 0.5 * ((n - p) * math.log(s2) + float(np.sum(np.log(f))) + logdet), s2
+        half = 0.5 * (dof * math.log(s2) + float(np.sum(np.log(f))))
+        return (half + 0.5 * logdet if reml else half), s2
 
+    # the likelihood can have several local optima in lambda: scan a coarse grid (every
+    # factor of 10 from 1e-6 to 1e6 per hour), then refine around the best point
+    grid = np.log(10.0) * np.arange(-6.0, 6.5, 1.0)
+    best = min(grid, key=lambda v: profile(float(v))[0])
     res = minimize_scalar(
         lambda v: profile(v)[0],
-        bounds=(math.log(1e-6), math.log(1e6)),
+        bounds=(float(best) - math.log(10.0), float(best) + math.log(10.0)),
         method="bounded",
-        options={"xatol": 0.05},
+        options={"xatol": 0.02},
     )
-    s2 = profile(float(res.x))[1]
+    x_best = float(res.x) if profile(float(res.x))[0] <= profile(float(best))[0] else float(best)
+    obj, s2 = profile(x_best)
     if not math.isfinite(s2):
-        return float(np.std(z[:, 0])), 0.0
-    return math.sqrt(s2), math.sqrt(math.exp(float(res.x)) * s2)
+        return NoiseFit(float(np.std(z[:, 0])), 0.0, math.nan, n, p)
+    dof = n - p if reml else n
+    m2ll = 2.0 * obj + dof * (math.log(2.0 * math.pi) + 1.0)
+    return NoiseFit(math.sqrt(s2), math.sqrt(math.exp(x_best) * s2), m2ll, n, p)
 
 
 def walk_covariance(time_s: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -426,6 +473,46 @@ def fit_samples(
     )
 
 
+#: A pass shorter than this share of the samples joins its predecessor (turnarounds).
+MIN_PASS_SHARE = 0.03
+#: A sampling step longer than this many median steps separates two passes (the run left
+#: the region and came back).
+PASS_GAP_FACTOR = 5.0
+
+
+def pass_blocks(samples: Samples, min_share: float = MIN_PASS_SHARE) -> np.ndarray:
+    """Block label of every sample: the **passes** through the region.
+
+    A pass is a maximal run of consecutive samples with one sign of the gradient and no
+    gap (a step longer than ``PASS_GAP_FACTOR`` median steps: the run left the region);
+    a pass with fewer than ``min_share`` of the samples is merged into the one before
+    (or after, for the first). Cross-validation leaves whole passes out: a pass has its
+    own gradient level and its own stretch of the bias random walk, so a model that
+    learned a pass's level through its gradient cannot predict it from the others.
+    """
+    n = samples.n
+    if n == 0:
+        return np.zeros(0, dtype=int)
+    step = np.diff(samples.time_s)
+    med = float(np.median(step)) if step.size else 1.0
+    sign = np.sign(samples.g_c_per_min)
+    sign[sign == 0] = 1.0
+    cut = np.zeros(n, dtype=bool)
+    cut[1:] = (sign[1:] != sign[:-1]) | (step > PASS_GAP_FACTOR * med)
+    label = np.cumsum(cut)
+    sizes = np.bincount(label)
+    small = sizes < min_share * n
+    keep = np.flatnonzero(~small)
+    if keep.size == 0:
+        return np.zeros(n, dtype=int)
+    # each small pass joins the nearest kept pass before it (or the first kept one)
+    target = np.array(
+        [keep[keep <= k][-1] if np.any(keep <= k) else keep[0] for k in range(sizes.size)]
+    )
+    merged = target[label]
+    return np.unique(merged, return_inverse=True)[1]
+
+
 def cross_validate(
     samples: Samples,
     candidates: tuple[tuple[str, ...], ...],
@@ -433,19 +520,27 @@ def cross_validate(
     *,
     folds: int = 10,
     eiv: bool = True,
+    blocks: np.ndarray | None = None,
 ) -> pd.DataFrame:
-    """Leave-one-block-out mean squared errors of each candidate (blocks contiguous in time).
+    """Leave-one-block-out mean squared errors of each candidate.
 
-    Returns a frame with one row per candidate and block: ``candidate, fold, mse_dph2,
-    n``. A candidate that cannot be fitted without a block gets NaN for it.
+    ``blocks`` labels the samples (default :func:`pass_blocks`, the passes through the
+    region); with fewer than three blocks, ``folds`` contiguous blocks of equal size are
+    used instead. Returns a frame with one row per candidate and block: ``candidate,
+    fold, mse_dph2, n``. A candidate that cannot be fitted without a block gets NaN.
     """
-    edges = np.linspace(0, samples.n, folds + 1).astype(int)
+    labels = pass_blocks(samples) if blocks is None else np.asarray(blocks)
+    if labels.size != samples.n or np.unique(labels).size < 3:
+        labels = np.repeat(
+            np.arange(folds), np.diff(np.linspace(0, samples.n, folds + 1).astype(int))
+        )
+    fold_ids = np.unique(labels)
     rows = []
     for terms in candidates:
         pieces = _normal_pieces(samples, coding, terms, eiv)
         a_tot, b_tot = pieces.a_k.sum(axis=0), pieces.b_k.sum(axis=0)
-        for f in range(folds):
-            sl = slice(edges[f], edges[f + 1])
+        for f in fold_ids:
+            sl = labels == f
             a = a_tot - pieces.a_k[sl].sum(axis=0)
             b = b_tot - pieces.b_k[sl].sum(axis=0)
             try:
@@ -457,57 +552,63 @@ def cross_validate(
             rows.append(
                 {
                     "candidate": term_set_name(terms),
-                    "fold": f,
+                    "fold": int(f),
                     "mse_dph2": mse,
-                    "n": int(edges[f + 1] - edges[f]),
+                    "n": int(sl.sum()),
                 }
             )
     return pd.DataFrame(rows)
 
 
-def select_terms(cv: pd.DataFrame, candidates: tuple[str, ...]) -> tuple[str, pd.DataFrame]:
-    """The simplest candidate within one paired standard error of the best (module doc).
+def select_terms(
+    samples: Samples,
+    candidates: tuple[str, ...],
+    coding: Coding,
+    *,
+    eiv: bool = True,
+    folds: int = 10,
+) -> tuple[str, pd.DataFrame]:
+    """The candidate with the smallest BIC under the white + random-walk noise model.
 
-    ``candidates`` are names in order of simplicity. Returns ``(name, table)`` with one
-    row per candidate: ``candidate, n_terms, cv_rms_dph, excess_mse_dph2, excess_se_dph2,
-    chosen``.
+    For each candidate (names in order of simplicity) the drift is regressed on its terms
+    by generalised least squares with white noise plus a bias random walk, both levels
+    fitted by maximum likelihood (:func:`noise_fit`), and ``BIC = -2 log L + (p + 2) log
+    n``. The random walk is in the likelihood, so terms that would only follow its wander
+    (through the pass-by-pass gradient levels) earn nothing. Leave-one-pass-out
+    cross-validation (:func:`cross_validate`) is reported beside it as a check.
+
+    Returns ``(name, table)``; the table has one row per candidate: ``candidate,
+    n_terms, minus2_log_likelihood, bic, delta_bic, white_sigma_dph,
+    walk_dph_per_rt_h, cv_rms_dph, chosen``.
     """
-    wide = cv.pivot(index="fold", columns="candidate", values="mse_dph2")[list(candidates)]
-    ok = wide.notna().all(axis=0)
-    usable = [c for c in candidates if ok[c]]
-    if not usable:
-        raise ParameterError(
-            "no candidate model can be fitted in every cross-validation block; use a longer "
-            "log or a narrower region"
-        )
-    means = wide[usable].mean(axis=0)
-    best = str(means.idxmin())
-    k = wide.shape[0]
+    terms = tuple(parse_terms(c) for c in candidates)
+    x, y = coding.code(samples.t_c, samples.g_c_per_min)
     rows = []
-    chosen = None
-    for c in candidates:
-        if c in usable:
-            diff = wide[c] - wide[best]
-            excess = float(diff.mean())
-            se = float(diff.std(ddof=1) / math.sqrt(k)) if k > 1 else 0.0
-            if chosen is None and excess <= se:
-                chosen = c
-            rms = float(math.sqrt(means[c]))
-        else:
-            excess = se = rms = math.nan
+    for name, ts in zip(candidates, terms, strict=True):
+        nf = noise_fit(samples.time_s, samples.drift_dph, monomials(x, y, ts), reml=False)
         rows.append(
             {
-                "candidate": c,
-                "n_terms": len(parse_terms(c)),
-                "cv_rms_dph": rms,
-                "excess_mse_dph2": excess,
-                "excess_se_dph2": se,
+                "candidate": name,
+                "n_terms": len(ts),
+                "minus2_log_likelihood": nf.minus2_log_likelihood,
+                "bic": nf.bic,
+                "white_sigma_dph": nf.sigma_dph,
+                "walk_dph_per_rt_h": nf.walk_dph_per_rt_h,
             }
         )
-    assert chosen is not None  # the best candidate always qualifies (excess 0)
     table = pd.DataFrame(rows)
-    table["chosen"] = table["candidate"] == chosen
-    return chosen, table
+    if not np.isfinite(table["bic"]).any():
+        raise ParameterError(
+            "no candidate model can be fitted to these samples; use a longer log or a "
+            "narrower region"
+        )
+    cv = cross_validate(samples, terms, coding, folds=folds, eiv=eiv)
+    cv_rms = cv.groupby("candidate", sort=False)["mse_dph2"].mean() ** 0.5
+    table["cv_rms_dph"] = [float(cv_rms.get(term_set_name(ts), math.nan)) for ts in terms]
+    best = int(np.nanargmin(table["bic"].to_numpy()))
+    table.insert(4, "delta_bic", table["bic"] - table["bic"].iloc[best])
+    table["chosen"] = np.arange(len(table)) == best
+    return str(table["candidate"].iloc[best]), table
 
 
 # -- from a log ------------------------------------------------------------------------------
@@ -761,10 +862,11 @@ class DriftFit:
         sel = self.selection
         if len(sel) > 1:
             parts = [
-                f"{r.candidate} {r.cv_rms_dph:.4g}" + (" *" if r.chosen else "")
+                f"{r.candidate} {r.delta_bic:+.1f} (CV RMS {r.cv_rms_dph:.4g})"
+                + (" *" if r.chosen else "")
                 for r in sel.itertuples()
             ]
-            lines.append("cross-validation RMS, °/h: " + ", ".join(parts))
+            lines.append("term selection, BIC - best: " + ", ".join(parts))
         for t, c, se in zip(m.terms, m.coefficients_dph, m.std_errors, strict=True):
             lines.append(f"  {t:>4} = {c: .6g} ± {se:.2g} {unit_of(t)}")
         if self.holdout is not None:
@@ -915,12 +1017,9 @@ def fit_drift(
         names = CANDIDATES
     else:
         requested = parse_terms(settings.terms)
-        names = tuple(
-            dict.fromkeys(["t-only", term_set_name(requested)])
-        )  # reference and the requested set
-    cand_terms = tuple(TERM_SETS[n] if n in TERM_SETS else parse_terms(n) for n in names)
-    cv = cross_validate(s, cand_terms, coding, folds=settings.cv_folds, eiv=eiv)
-    chosen, table = select_terms(cv, names)
+        # the reference and the requested set
+        names = tuple(dict.fromkeys(["t-only", term_set_name(requested)]))
+    chosen, table = select_terms(s, names, coding, eiv=eiv, folds=settings.cv_folds)
     if settings.terms != "auto":
         chosen = term_set_name(parse_terms(settings.terms))
         table["chosen"] = table["candidate"] == chosen

@@ -51,12 +51,13 @@ EXPONENTS: dict[str, tuple[int, int]] = {
     "tg2": (1, 2),
     "g3": (0, 3),
 }
-#: Named term sets, nested by their order in g. ``t-only`` is the reference model (a cubic
-#: in T, as PX4's and ArduPilot's thermal calibrations fit).
+#: Named term sets, nested by their order in g (each has every term of total order <= 3
+#: up to that order in g). ``t-only`` is the reference model (a cubic in T, as PX4's and
+#: ArduPilot's thermal calibrations fit).
 TERM_SETS: dict[str, tuple[str, ...]] = {
     "t-only": ("1", "t", "t2", "t3"),
-    "g1": ("1", "t", "g", "t2", "tg", "t2g"),
-    "g2": ("1", "t", "g", "t2", "tg", "g2", "t2g", "tg2"),
+    "g1": ("1", "t", "g", "t2", "tg", "t3", "t2g"),
+    "g2": ("1", "t", "g", "t2", "tg", "g2", "t3", "t2g", "tg2"),
     "full": TERMS,
 }
 #: The candidates term selection compares, simplest first.

@@ -56,6 +56,7 @@ DT0_RANGE_C = (2.0, 4.0)
 @dataclass(frozen=True)
 class Case:
     region: str
+    region_index: int
     working: tuple[float, float]
     approx: tuple[float, float]
     plan_csv: str
@@ -95,7 +96,7 @@ def _fit(frame, region, source, holdout=None):
 
 
 def run_case(case: Case) -> dict:
-    rng = np.random.default_rng([case.seed, case.index, int(case.gradient), 7])
+    rng = np.random.default_rng([case.seed, case.region_index, case.index, int(case.gradient)])
     gyro = random_gyro(rng, case.approx, gradient_terms=case.gradient)
     device = schedsyn.ThermalParams(
         float(rng.uniform(*TAU_RANGE_S)), float(rng.uniform(*DT0_RANGE_C))
@@ -174,6 +175,8 @@ def summarise(cases: pd.DataFrame, designs: dict) -> pd.DataFrame:
                 "ratio_full_median": ratio_full.median(),
                 "ratio_full_le_half_share": float((ratio_full <= 0.5).mean()),
                 "ratio_selected_median": ratio_sel.median(),
+                "selected_rms_dph_median_plan": c["plan_selected_rms_dph"].median(),
+                "selected_rms_dph_median_baseline": c["baseline_selected_rms_dph"].median(),
                 "plan_full_shape_rms_dph_median": c["plan_full_shape_rms_dph"].median(),
                 "baseline_full_shape_rms_dph_median": c["baseline_full_shape_rms_dph"].median(),
                 "ratio_shape_median": (
@@ -229,7 +232,7 @@ def main() -> None:
     args = ap.parse_args()
     config = schedsyn.load_campaign(ROOT / "data" / "paper_campaign.toml")
     cases, designs = [], {}
-    for spec in config.experiments:
+    for k, spec in enumerate(config.experiments):
         if args.regions and spec.name not in args.regions:
             continue
         plan_csv = Path(args.plans) / spec.name / "steps.csv"
@@ -244,10 +247,18 @@ def main() -> None:
         }
         for i in range(args.gyros):
             for gradient in (True, False):
-                cases.append(
-                    Case(spec.name, working, approx, str(plan_csv), plan.total_min, i, gradient,
-                         args.seed)
-                )  # fmt: skip
+                case = Case(
+                    region=spec.name,
+                    region_index=k,
+                    working=working,
+                    approx=approx,
+                    plan_csv=str(plan_csv),
+                    duration_min=plan.total_min,
+                    index=i,
+                    gradient=gradient,
+                    seed=args.seed,
+                )
+                cases.append(case)
     rows = schedsyn.run_map(run_case, cases, "local", workers=args.workers, desc="gyros")
     frame = pd.DataFrame(rows)
     out = Path(args.out)
