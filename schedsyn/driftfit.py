@@ -424,6 +424,18 @@ class PolyFit:
         )
 
 
+def fit_coefficients(
+    samples: Samples, terms: str | tuple[str, ...], coding: Coding, *, eiv: bool = True
+) -> np.ndarray:
+    """Coded coefficients of one term set: ``A^-1 b`` of the (adjusted) normal equations.
+
+    The point estimate of :func:`fit_samples` without its standard errors (cheap).
+    """
+    terms_t = parse_terms(terms)
+    pieces = _normal_pieces(samples, coding, terms_t, eiv)
+    return _solve(pieces.a_k.sum(axis=0), pieces.b_k.sum(axis=0), "drift fit")
+
+
 def fit_samples(
     samples: Samples,
     terms: str | tuple[str, ...],
@@ -495,22 +507,32 @@ def pass_blocks(samples: Samples, min_share: float = MIN_PASS_SHARE) -> np.ndarr
         return np.zeros(0, dtype=int)
     step = np.diff(samples.time_s)
     med = float(np.median(step)) if step.size else 1.0
-    sign = np.sign(samples.g_c_per_min)
-    sign[sign == 0] = 1.0
-    cut = np.zeros(n, dtype=bool)
-    cut[1:] = (sign[1:] != sign[:-1]) | (step > PASS_GAP_FACTOR * med)
-    label = np.cumsum(cut)
+    gap = np.zeros(n, dtype=bool)
+    gap[1:] = step > PASS_GAP_FACTOR * med
+    sign = np.where(samples.g_c_per_min < 0, -1.0, 1.0)
+
+    def runs(sgn: np.ndarray) -> np.ndarray:
+        cut = gap.copy()
+        cut[1:] |= sgn[1:] != sgn[:-1]
+        return np.cumsum(cut)
+
+    # a short run of the other sign inside a stretch (a wobble, a turnaround) takes the
+    # sign of the run before it; then the passes are the runs of equal sign without gaps
+    label = runs(sign)
     sizes = np.bincount(label)
-    small = sizes < min_share * n
-    keep = np.flatnonzero(~small)
+    starts = np.searchsorted(label, np.arange(sizes.size))
+    for k in range(1, sizes.size):
+        if sizes[k] < min_share * n and not gap[starts[k]]:
+            sign[label == k] = sign[starts[k] - 1]
+    label = runs(sign)
+    sizes = np.bincount(label)
+    keep = np.flatnonzero(sizes >= min_share * n)
     if keep.size == 0:
         return np.zeros(n, dtype=int)
-    # each small pass joins the nearest kept pass before it (or the first kept one)
-    target = np.array(
-        [keep[keep <= k][-1] if np.any(keep <= k) else keep[0] for k in range(sizes.size)]
-    )
-    merged = target[label]
-    return np.unique(merged, return_inverse=True)[1]
+    # what is still short (a brief visit between gaps) joins the nearest pass before it
+    before = np.searchsorted(keep, np.arange(sizes.size), side="right") - 1
+    target = keep[np.maximum(before, 0)]
+    return np.unique(target[label], return_inverse=True)[1]
 
 
 def cross_validate(
