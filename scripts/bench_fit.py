@@ -23,7 +23,10 @@ and the drift fitted over the approximation region that both runs reached
     without them: how often term selection picks the T-only model.
 
     python scripts/bench_fit.py --plans out/campaign [--gyros 20] [--regions W1 W2]
-        [--workers 2] [--out out/bench_fit] [--seed 0]
+        [--workers 2] [--out out/bench_fit] [--seed 0] [--no-walk]
+
+``--no-walk`` drops the bias random walk (white noise only): a diagnostic that shows how
+much of (a) the plan's design decides once the walk's offset is gone.
 
 Writes OUT/cases.csv (one row per gyro and region), OUT/summary.csv and OUT/summary.md.
 Timings are not the point here; the machine is shared.
@@ -32,6 +35,7 @@ Timings are not the point here; the machine is shared.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -64,6 +68,7 @@ class Case:
     index: int
     gradient: bool
     seed: int
+    walk: bool = True
 
 
 def _rms(x) -> float:
@@ -98,6 +103,8 @@ def _fit(frame, region, source, holdout=None):
 def run_case(case: Case) -> dict:
     rng = np.random.default_rng([case.seed, case.region_index, case.index, int(case.gradient)])
     gyro = random_gyro(rng, case.approx, gradient_terms=case.gradient)
+    if not case.walk:  # diagnostic: white noise only
+        gyro = dataclasses.replace(gyro, bias_walk_dph_per_rt_h=0.0)
     device = schedsyn.ThermalParams(
         float(rng.uniform(*TAU_RANGE_S)), float(rng.uniform(*DT0_RANGE_C))
     )
@@ -229,6 +236,11 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default="out/bench_fit")
+    ap.add_argument(
+        "--no-walk",
+        action="store_true",
+        help="diagnostic: gyros without the bias random walk (white noise only)",
+    )
     args = ap.parse_args()
     config = schedsyn.load_campaign(ROOT / "data" / "paper_campaign.toml")
     cases, designs = [], {}
@@ -257,6 +269,7 @@ def main() -> None:
                     index=i,
                     gradient=gradient,
                     seed=args.seed,
+                    walk=not args.no_walk,
                 )
                 cases.append(case)
     rows = schedsyn.run_map(run_case, cases, "local", workers=args.workers, desc="gyros")

@@ -144,3 +144,9 @@ def test_simulate_writes_a_gyro_log(tmp_path, capsys):
     assert main(["simulate", BASELINE, "--gyro", str(bad), "--out", str(tmp_path / "s2")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "white_noise_dph_per_rt_hz" in err and str(bad) in err
+
+
+def test_example_gyro_file_loads():
+    gyro = load_gyro("data/example_gyro.toml")
+    assert gyro.has_gradient_terms and gyro.t_ref_c == -36.0
+    assert gyro.coefficients_dph["g"] == 0.6
