@@ -136,7 +136,10 @@ def monomials(x: np.ndarray, y: np.ndarray, terms: Sequence[str]) -> np.ndarray:
 
 
 def evaluate(
-    coefficients: Sequence[float], terms: Sequence[str], x: np.ndarray, y: np.ndarray
+    coefficients: Sequence[float] | np.ndarray,
+    terms: Sequence[str],
+    x: np.ndarray,
+    y: np.ndarray,
 ) -> np.ndarray:
     """``sum_i c_i x^a_i y^b_i`` at every ``(x, y)``."""
     return monomials(x, y, terms) @ np.asarray(coefficients, dtype=float)
