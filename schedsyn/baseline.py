@@ -235,12 +235,12 @@ def paper_like_programme(
         raise ParameterError(
             f"need approx_lo <= working_lo < working_hi <= approx_hi, got approximation "
             f"{approx_lo_c:g} .. {approx_hi_c:g} and working {working_lo_c:g} .. "
-            f"{working_hi_c:g} degC"
+            f"{working_hi_c:g} °C"
         )
     if approx_lo_c < limits.device_min_c or approx_hi_c > limits.device_max_c:
         raise ParameterError(
-            f"the approximation region {approx_lo_c:g} .. {approx_hi_c:g} degC leaves the "
-            f"device limits {limits.device_min_c:g} .. {limits.device_max_c:g} degC"
+            f"the approximation region {approx_lo_c:g} .. {approx_hi_c:g} °C leaves the "
+            f"device limits {limits.device_min_c:g} .. {limits.device_max_c:g} °C"
         )
     if not 0 <= edge_inset_c < 0.5 * (approx_hi_c - approx_lo_c):
         raise ParameterError(f"edge_inset_c must be >= 0 and small, got {edge_inset_c!r}")
@@ -248,12 +248,11 @@ def paper_like_programme(
     cool = [float(r) for r in cool_rates_c_per_min]
     if not heat or not all(0 < r <= limits.rate_max_c_per_min for r in heat):
         raise ParameterError(
-            f"heat_rates_c_per_min must be in (0, {limits.rate_max_c_per_min:g}] degC/min, "
-            f"got {heat}"
+            f"heat_rates_c_per_min must be in (0, {limits.rate_max_c_per_min:g}] °C/min, got {heat}"
         )
     if not cool or not all(0 < r <= -limits.rate_min_c_per_min for r in cool):
         raise ParameterError(
-            f"cool_rates_c_per_min must be in (0, {-limits.rate_min_c_per_min:g}] degC/min, "
+            f"cool_rates_c_per_min must be in (0, {-limits.rate_min_c_per_min:g}] °C/min, "
             f"got {cool}"
         )
     if not (math.isfinite(duration_min) and 0 < duration_min <= limits.duration_max_min):
@@ -287,7 +286,7 @@ def paper_like_programme(
     if n < 1:
         raise ParameterError(
             f"{duration_min:g} min is too short for a paper-like programme over "
-            f"{approx_lo_c:g} .. {approx_hi_c:g} degC (one leg and the return take "
+            f"{approx_lo_c:g} .. {approx_hi_c:g} °C (one leg and the return take "
             f"{total(1, min_hold_min):.0f} min)"
         )
     lo_h, hi_h = min_hold_min, min_hold_min + duration_min / n

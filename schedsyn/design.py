@@ -119,7 +119,7 @@ def reachable_gradients(
         ("max_heat_c_per_min", max_heat_c_per_min),
     ):
         if not (math.isfinite(v) and v > 0):
-            raise ParameterError(f"{name} must be > 0 degC/min, got {v!r}")
+            raise ParameterError(f"{name} must be > 0 °C/min, got {v!r}")
     t = np.asarray(t_c, dtype=float)
     tau = params.tau_min
     up, down = limits.rate_max_c_per_min, -limits.rate_min_c_per_min
@@ -176,31 +176,28 @@ class DesignSpace:
         for name in ("working_lo_c", "working_hi_c", "approx_lo_c", "approx_hi_c"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-                raise ParameterError(f"{name} must be a finite number of degC, got {v!r}")
+                raise ParameterError(f"{name} must be a finite number of °C, got {v!r}")
             object.__setattr__(self, name, float(v))
         if not self.working_lo_c < self.working_hi_c:
             raise ParameterError(
                 f"the working region needs lo < hi, got {self.working_lo_c:g} .. "
-                f"{self.working_hi_c:g} degC"
+                f"{self.working_hi_c:g} °C"
             )
         if not (self.approx_lo_c <= self.working_lo_c and self.working_hi_c <= self.approx_hi_c):
             raise ParameterError(
-                f"the approximation region {self.approx_lo_c:g} .. {self.approx_hi_c:g} degC "
+                f"the approximation region {self.approx_lo_c:g} .. {self.approx_hi_c:g} °C "
                 f"must contain the working region {self.working_lo_c:g} .. "
-                f"{self.working_hi_c:g} degC"
+                f"{self.working_hi_c:g} °C"
             )
+        t = np.linspace(self.working_lo_c, self.working_hi_c, 41)
         g_lo, g_hi = reachable_gradients(
-            np.array([self.working_lo_c, self.working_hi_c]),
-            self.params,
-            self.limits,
-            self.max_cool_c_per_min,
-            self.max_heat_c_per_min,
+            t, self.params, self.limits, self.max_cool_c_per_min, self.max_heat_c_per_min
         )
-        if np.any(g_hi <= 0) or np.any(g_lo >= 0):
+        if not (np.any(g_hi > 0) and np.any(g_lo < 0)):
             raise ParameterError(
-                f"no gradient is reachable at an edge of the working region "
-                f"{self.working_lo_c:g} .. {self.working_hi_c:g} degC with the device limits "
-                f"{self.limits.device_min_c:g} .. {self.limits.device_max_c:g} degC; keep the "
+                f"no gradient is reachable in the working region {self.working_lo_c:g} .. "
+                f"{self.working_hi_c:g} °C with the device limits "
+                f"{self.limits.device_min_c:g} .. {self.limits.device_max_c:g} °C; keep the "
                 "working region inside the device limits"
             )
 
@@ -447,7 +444,7 @@ class DesignReport:
             f"D-efficiency {self.d_efficiency_pct:.1f} %, A-efficiency "
             f"{self.a_efficiency_pct:.2f} %, I-efficiency {self.i_efficiency_pct:.0f} % of the "
             f"I-optimal design; prediction variance over the working region mean "
-            f"{self.mean_variance:.1f}, max {self.max_variance:.1f} (units of sigma²/n)"
+            f"{self.mean_variance:.1f}, max {self.max_variance:.1f} (units of σ²/n)"
         )
 
 

@@ -1026,7 +1026,7 @@ def fit_drift(
     try:
         lo, hi = (float(v) for v in region_c)
     except (TypeError, ValueError):
-        raise ParameterError(f"region_c must be (lo, hi) in degC, got {region_c!r}") from None
+        raise ParameterError(f"region_c must be (lo, hi) in °C, got {region_c!r}") from None
     if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
         raise ParameterError(f"the region needs finite lo < hi, got {lo:g} .. {hi:g} °C")
     region = (lo, hi)

@@ -122,7 +122,7 @@ class Gyro:
         object.__setattr__(self, "coefficients_dph", coefs)
         t_ref = _number("t_ref_c", self.t_ref_c)
         if not -100.0 <= t_ref <= 150.0:
-            raise ParameterError(f"t_ref_c must be within -100 .. 150 degC, got {t_ref!r}")
+            raise ParameterError(f"t_ref_c must be within -100 .. 150 °C, got {t_ref!r}")
         object.__setattr__(self, "t_ref_c", t_ref)
         for name in (
             "white_noise_dph_per_rt_hz",
@@ -160,7 +160,7 @@ class Gyro:
             f"sensor_noise_c = {self.sensor_noise_c!r}",
             f"sensor_quant_c = {self.sensor_quant_c!r}",
             "",
-            "[gyro.drift_dph]  # deg/h per degC^a per (degC/min)^b about t_ref_c",
+            "[gyro.drift_dph]  # °/h per °C^a per (°C/min)^b about t_ref_c",
         ]
         lines += [f"{t} = {self.coefficients_dph[t]!r}" for t in TERMS]
         return "\n".join(lines) + "\n"

@@ -92,7 +92,7 @@ def parse_terms(spec: str | Sequence[str]) -> tuple[str, ...]:
     if unknown:
         raise ParameterError(
             f"unknown drift term(s) {', '.join(unknown)}; the terms are {', '.join(TERMS)} "
-            "(t: T - t_ref in degC, g: gradient in degC/min)"
+            "(t: T - t_ref in °C, g: gradient in °C/min)"
         )
     if len(set(names)) != len(names):
         raise ParameterError(f"a drift term is repeated in {', '.join(names)}")

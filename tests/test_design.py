@@ -204,7 +204,9 @@ def test_design_space_validation():
     with pytest.raises(ParameterError, match="must contain the working region"):
         DesignSpace(-50, -30, -45, -20)
     with pytest.raises(ParameterError, match="no gradient is reachable"):
-        DesignSpace(-52, -30, -52, -20)
+        DesignSpace(-60, -53, -60, -20)
+    edge = DesignSpace(-52, -30, -52, -20)  # a working edge at the device limit is fine
+    assert edge.gradient_band(np.array([-52.0]))[1][0] == 0.0
     assert DesignSpace.default_approx(-50, -30) == (-52.0, -20.0)
     assert DesignSpace.default_approx(0, 30) == (-10.0, 40.0)
 

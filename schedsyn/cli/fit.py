@@ -137,11 +137,18 @@ def simulate_hook(args, programme, params, limits, traj, out, inputs) -> list[st
         raise ParameterError("--log-out needs --gyro GYRO.toml (the gyro to simulate)")
     lo, hi = args.region
     approx = tuple(args.approx) if args.approx else DesignSpace.default_approx(lo, hi, limits)
-    space = DesignSpace(lo, hi, approx[0], approx[1], params, limits)
-    report = design_report(traj.t_c, traj.g_c_per_min, space)
-    write_frame_atomic(out / "design.csv", report.to_frame(), inputs)
-    print(report.summary())
-    written = ["design.csv"]
+    written = []
+    try:
+        space = DesignSpace(lo, hi, approx[0], approx[1], params, limits)
+    except ParameterError as exc:
+        if args.approx:  # the user's own request: an error
+            raise
+        print(f"drift-fit design: not reported ({exc}); give --approx LO HI")
+    else:
+        report = design_report(traj.t_c, traj.g_c_per_min, space)
+        write_frame_atomic(out / "design.csv", report.to_frame(), inputs)
+        print(report.summary())
+        written.append("design.csv")
     if args.gyro is not None:
         if getattr(args, "model", None) is not None:
             raise ParameterError(

@@ -103,8 +103,6 @@ def run(args: argparse.Namespace) -> int:
         )
     print(report.summary())
     extra = fit_cli.simulate_hook(args, programme, params, limits, traj, out, inputs)
-    print(
-        f"wrote {out}/trajectory.csv, coverage.csv, program.png, phase.png, coverage.png, "
-        + ", ".join(extra)
-    )
+    names = ["trajectory.csv", "coverage.csv", "program.png", "phase.png", "coverage.png"]
+    print(f"wrote {out}/" + ", ".join(names + extra))
     return 0
