@@ -234,7 +234,7 @@ def _solve(a: np.ndarray, b: np.ndarray, what: str) -> np.ndarray:
 
 
 #: The noise model is fitted on at most this many samples (an even stride of longer logs).
-NOISE_MAX_ROWS = 4000
+NOISE_MAX_ROWS = 2000
 
 
 @dataclass(frozen=True, slots=True)
@@ -348,8 +348,9 @@ def noise_fit(
         return (half + 0.5 * logdet if reml else half), s2
 
     # the likelihood can have several local optima in lambda: scan a coarse grid (every
-    # factor of 10 from 1e-6 to 1e6 per hour), then refine around the best point
-    grid = np.log(10.0) * np.arange(-6.0, 6.5, 1.0)
+    # factor of 10 from 1e-6 to 1e4 per hour: K up to 100 sigma per sqrt(h)), then refine
+    # around the best point
+    grid = np.log(10.0) * np.arange(-6.0, 4.5, 1.0)
     best = min(grid, key=lambda v: profile(float(v))[0])
     res = minimize_scalar(
         lambda v: profile(v)[0],
