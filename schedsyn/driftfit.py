@@ -660,7 +660,7 @@ def estimation_errors(
     log: MeasuredLog,
     est: GradientEstimate,
     params: ThermalParams,
-    n_draws: int = 16,
+    n_draws: int = 8,
     seed: int = 0,
     smooth_rows: int = 21,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -669,8 +669,9 @@ def estimation_errors(
     Re-runs the smoother at the fitted noise levels on the readings plus white noise of
     variance ``r`` (module docstring): the differences are draws of the estimator's noise.
     The per-row moments are averaged over the draws and over a centred window of
-    ``smooth_rows`` rows (the noise level changes slowly: gaps and the ends).
+    ``smooth_rows`` rows (odd; the noise level changes slowly: gaps and the ends).
     """
+    smooth_rows = smooth_rows + 1 - smooth_rows % 2  # odd: a centred window
     rng = np.random.default_rng(seed)
     finite = np.isfinite(log.t_int_c)
     sd = math.sqrt(est.r)
@@ -695,7 +696,12 @@ def estimation_errors(
 
 @dataclass(frozen=True, slots=True)
 class Holdout:
-    """The fitted models on a second log: residual RMS inside the fit's domain."""
+    """The fitted models on a second log, over its samples inside the fit's domain.
+
+    ``rms_dph`` and ``reference_rms_dph``: residual RMS of the model and of the T-only
+    cubic, deg/h; ``mean_dph``: the model's mean residual (an offset between the runs,
+    e.g. the bias walk's level), deg/h.
+    """
 
     source: str
     n_samples: int
@@ -931,7 +937,6 @@ def _samples_from_log(
     region: tuple[float, float],
     settings: FitSettings,
     params: ThermalParams,
-    what: str,
 ) -> tuple[Samples, GradientEstimate, str]:
     if log.drift_dph is None:
         raise LogFormatError(
@@ -1031,7 +1036,7 @@ def fit_drift(
     if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
         raise ParameterError(f"the region needs finite lo < hi, got {lo:g} .. {hi:g} °C")
     region = (lo, hi)
-    s, _est, method = _samples_from_log(log, region, settings, params, "fit")
+    s, _est, method = _samples_from_log(log, region, settings, params)
     eiv = settings.eiv == "als"
     g_half = max(float(np.max(np.abs(s.g_c_per_min))), 0.05)
     coding = Coding(0.5 * (lo + hi), 0.5 * (hi - lo), g_half)
