@@ -99,10 +99,11 @@ def fit_surface_plot(fit, ax=None, title: str | None = None):
     return ax
 
 
-def variance_map_plot(report, ax=None, title: str | None = None, samples=None):
+def variance_map_plot(report, ax=None, title: str | None = None, samples=None, vlim=None):
     """Prediction variance of a :class:`~schedsyn.design.DesignReport` over (T, g).
 
-    ``samples``: optional ``(t_c, g_c_per_min)`` of the run, drawn as a thin line.
+    ``samples``: optional ``(t_c, g_c_per_min)`` of the run, drawn as a thin line;
+    ``vlim``: optional ``(lo, hi)`` of the colour scale in log10 units (to compare maps).
     """
     ax = _axes(ax, figsize=(7.5, 5))
     m = report.variance_map
@@ -114,6 +115,8 @@ def variance_map_plot(report, ax=None, title: str | None = None, samples=None):
         s=8,
         marker="s",
         cmap="magma_r",
+        vmin=None if vlim is None else vlim[0],
+        vmax=None if vlim is None else vlim[1],
         edgecolors="none",
     )
     ax.figure.colorbar(sc, ax=ax, label="log10 prediction variance (σ²/n)")
