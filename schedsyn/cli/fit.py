@@ -34,8 +34,9 @@ def register(sub) -> None:
     p.add_argument(
         "--terms",
         default="auto",
-        help="auto (select by blocked cross-validation among t-only, g1, g2, full; "
-        "default), a set name, or a comma list of terms from 1,t,g,t2,tg,g2,t3,t2g,tg2,g3",
+        help="auto (select by BIC under a white + random-walk noise model among t-only, "
+        "g1, g2, full; default), a set name, or a comma list of terms from "
+        "1,t,g,t2,tg,g2,t3,t2g,tg2,g3",
     )
     p.add_argument("--holdout", metavar="LOG2.csv", default=None, help="a second run to check on")
     p.add_argument(
