@@ -46,6 +46,7 @@ import pandas as pd
 
 from .checkpoints import SheetSettings, parse_start
 from .coverage import coverage_report
+from .design import DesignSpace, plan_design, programme_design
 from .errors import InfeasiblePlanError, ParameterError, SchedsynError
 from .export import ExportSettings
 from .params import Limits, ThermalParams
@@ -441,6 +442,8 @@ def _baseline_row(
             "baseline_coverage": np.nan,
             "baseline_min_levels": np.nan,
             "baseline_coverage_delta_0p1": np.nan,
+            "baseline_d_efficiency_pct": np.nan,
+            "baseline_i_efficiency_pct": np.nan,
         }
     prog = read_steps(path)
     traj = simulate(prog, params, t0_c=limits.t_init_c)
@@ -448,6 +451,22 @@ def _baseline_row(
         traj.t_c, traj.g_c_per_min, spec.grid, spec.levels_required, spec.delta_c_per_min
     )
     rep01 = coverage_report(traj.t_c, traj.g_c_per_min, spec.grid, spec.levels_required, 0.1)
+    design = _design_columns(
+        lambda: programme_design(
+            prog,
+            DesignSpace(
+                spec.working_lo_c,
+                spec.working_hi_c,
+                spec.approx_lo_c,
+                spec.approx_hi_c,
+                params,
+                limits,
+                spec.max_cool_c_per_min,
+                spec.max_heat_c_per_min,
+            ),
+        ),
+        "baseline_",
+    )
     return {
         "baseline": Path(path).name,
         "baseline_duration_min": prog.total_min,
@@ -455,6 +474,20 @@ def _baseline_row(
         "baseline_coverage": rep.coverage,
         "baseline_min_levels": rep.min_levels,
         "baseline_coverage_delta_0p1": rep01.coverage,
+        **design,
+    }
+
+
+def _design_columns(report, prefix: str = "") -> dict:
+    """D- and I-efficiency (percent) of a plan's samples for the full drift model
+    (:mod:`schedsyn.design`); NaN where the design space cannot be built."""
+    try:
+        r = report()
+    except SchedsynError:
+        return {f"{prefix}d_efficiency_pct": np.nan, f"{prefix}i_efficiency_pct": np.nan}
+    return {
+        f"{prefix}d_efficiency_pct": r.d_efficiency_pct,
+        f"{prefix}i_efficiency_pct": r.i_efficiency_pct,
     }
 
 
@@ -472,12 +505,16 @@ SUMMARY_COLUMNS = (
     "coverage_delta_0p1",
     "complete",
     "status",
+    "d_efficiency_pct",
+    "i_efficiency_pct",
     "baseline",
     "baseline_duration_min",
     "baseline_steps",
     "baseline_coverage",
     "baseline_min_levels",
     "baseline_coverage_delta_0p1",
+    "baseline_d_efficiency_pct",
+    "baseline_i_efficiency_pct",
 )
 
 
@@ -525,6 +562,7 @@ class CampaignResult:
                     )
                 }
                 row["status"] = plan.status
+                row.update(_design_columns(lambda plan=plan: plan_design(plan)))
             else:
                 row = {
                     "experiment": spec.name,
@@ -540,6 +578,8 @@ class CampaignResult:
                     "coverage_delta_0p1": 0.0,
                     "complete": False,
                     "status": "infeasible",
+                    "d_efficiency_pct": np.nan,
+                    "i_efficiency_pct": np.nan,
                 }
             row.update(base)
             rows.append(row)

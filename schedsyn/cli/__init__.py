@@ -31,6 +31,7 @@ COMMANDS = (
     "estimate",
     "compare",
     "diagnose",
+    "fit",
     "monitor",
     "plan",
     "campaign",

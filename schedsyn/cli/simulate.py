@@ -19,6 +19,7 @@ from ..params import ThermalParams
 from ..programme import read_step_meta, read_steps
 from ..simulate import end_soak_min, simulate
 from . import _common
+from . import fit as fit_cli
 
 NAMES = ("trajectory.csv", "coverage.csv", "program.png", "phase.png", "coverage.png")
 
@@ -44,6 +45,7 @@ def register(sub) -> None:
         help="augmented model file (from schedsyn diagnose --out DIR); --tau-s/--dt0-c "
         "then override its base (default: the model the step table records)",
     )
+    fit_cli.add_simulate_options(p)
     p.set_defaults(func=run)
 
 
@@ -150,6 +152,9 @@ def run(args: argparse.Namespace) -> int:
         out.path("phase.png"),
     )
     plots.save_figure(plots.coverage_plot(report), out.path("coverage.png"))
+    extra, fit_lines = fit_cli.simulate_hook(
+        args, programme, params, limits, traj, (lo, hi), out, [args.steps]
+    )
     out.commit()
 
     lines.append(f"internal temperature: min {traj.t_c.min():.2f} °C, max {traj.t_c.max():.2f} °C")
@@ -161,6 +166,7 @@ def run(args: argparse.Namespace) -> int:
             f"{limits.device_min_c:g} .. {limits.device_max_c:g} °C"
         )
     lines.append(report.summary())
-    lines.append(f"wrote {out.target}/" + ", ".join(NAMES))
+    lines += fit_lines
+    lines.append(f"wrote {out.target}/" + ", ".join([*NAMES, *extra]))
     _common.say(*lines)
     return 0

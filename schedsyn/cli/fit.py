@@ -1,0 +1,182 @@
+"""``schedsyn fit LOG.csv --region LO HI``: fit the drift polynomial b(T, g) to a run.
+
+Writes ``coefficients.json`` (coefficients in physical units with standard errors,
+condition number, noise model, term selection, held-out check), ``compensation.csv``
+(``t_c, g_c_per_min, drift_dph`` over the gradients the run reached), ``residuals.csv``
+and the plots ``residuals_t.png``, ``residuals_g.png``, ``surface.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from ..driftfit import ESTIMATORS, FitSettings, fit_drift
+from ..io import write_frame_atomic, write_json_atomic
+from ..logs import read_log
+from . import _common
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "fit",
+        help="fit the drift polynomial b(T, g) to a log with drift_dph",
+        description=__doc__,
+    )
+    p.add_argument("log", metavar="LOG.csv", help="measured log with t_int_c and drift_dph")
+    p.add_argument(
+        "--region",
+        nargs=2,
+        type=float,
+        required=True,
+        metavar=("LO_C", "HI_C"),
+        help="approximation region to fit over, °C",
+    )
+    p.add_argument(
+        "--terms",
+        default="auto",
+        help="auto (select by BIC under a white + random-walk noise model among t-only, "
+        "g1, g2, full; default), a set name, or a comma list of terms from "
+        "1,t,g,t2,tg,g2,t3,t2g,tg2,g3",
+    )
+    p.add_argument("--holdout", metavar="LOG2.csv", default=None, help="a second run to check on")
+    p.add_argument(
+        "--estimator",
+        choices=ESTIMATORS,
+        default="auto",
+        help="gradient estimator (auto: model-based when the log has tk_set_c)",
+    )
+    p.add_argument(
+        "--no-eiv",
+        action="store_true",
+        help="plain least squares on the estimates (no errors-in-variables correction)",
+    )
+    p.add_argument(
+        "--min-points-per-bin",
+        type=int,
+        default=5,
+        help="samples every 1 °C bin of the region needs (default 5)",
+    )
+    p.add_argument("--out", default=None, help="output directory (default out/fit)")
+    _common.add_model_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from .. import fitplots
+
+    settings = FitSettings(
+        terms=args.terms,
+        eiv="none" if args.no_eiv else "als",
+        estimator=args.estimator,
+        min_points_per_bin=args.min_points_per_bin,
+    )
+    log = read_log(args.log)
+    holdout = read_log(args.holdout) if args.holdout else None
+    params = _common.thermal_params(args)
+    fit = fit_drift(log, tuple(args.region), settings, params, holdout=holdout)
+    out = _common.out_dir(args.out, "out/fit")
+    inputs = [args.log] + ([args.holdout] if args.holdout else [])
+    write_json_atomic(out / "coefficients.json", fit.to_json_dict(), inputs)
+    write_frame_atomic(out / "compensation.csv", fit.compensation_frame(), inputs)
+    write_frame_atomic(out / "residuals.csv", fit.residual_frame(), inputs)
+    fitplots.save_figure(
+        fitplots.fit_residual_plot(fit, "t", title="residuals against temperature"),
+        out / "residuals_t.png",
+        inputs,
+    )
+    fitplots.save_figure(
+        fitplots.fit_residual_plot(fit, "g", title="residuals against gradient"),
+        out / "residuals_g.png",
+        inputs,
+    )
+    fitplots.save_figure(fitplots.fit_surface_plot(fit), out / "surface.png", inputs)
+    for line in fit.summary_lines():
+        print(line)
+    print(
+        f"wrote {out}/coefficients.json, compensation.csv, residuals.csv, residuals_t.png, "
+        "residuals_g.png, surface.png"
+    )
+    return 0
+
+
+# -- hooks in `schedsyn simulate` (gyro log and the drift-fit design report) ----------------
+def add_simulate_options(p: argparse.ArgumentParser) -> None:
+    """``--gyro``, ``--log-out``, ``--log-sample-s``, ``--seed``, ``--approx`` of simulate."""
+    p.add_argument(
+        "--gyro",
+        default=None,
+        metavar="GYRO.toml",
+        help="write a synthetic gyro log of this run ([gyro] table: drift polynomial, noise)",
+    )
+    p.add_argument(
+        "--log-out",
+        default=None,
+        metavar="LOG.csv",
+        help="where the gyro log goes (default OUT/log.csv; needs --gyro)",
+    )
+    p.add_argument("--log-sample-s", type=float, default=10.0, help="log sampling period, s")
+    p.add_argument("--seed", type=int, default=0, help="seed of the gyro log's noise")
+    p.add_argument(
+        "--approx",
+        nargs=2,
+        type=float,
+        default=None,
+        metavar=("LO_C", "HI_C"),
+        help="approximation region of the drift-fit design report, °C (default: the "
+        "working region widened by 10 °C each side, within the device limits)",
+    )
+
+
+def simulate_hook(
+    args, programme, params, limits, traj, region, out, inputs
+) -> tuple[list[str], list[str]]:
+    """Design report of the simulated run and, with ``--gyro``, its log, written into the
+    command's output folder ``out`` (an :class:`~schedsyn.io.OutputDir`; ``--log-out``
+    anywhere). Returns the names of the files written and the lines to print."""
+    from ..design import DesignSpace, design_report
+    from ..errors import ParameterError
+    from ..gyro import gyro_log, load_gyro
+
+    if args.log_out is not None and args.gyro is None:
+        raise ParameterError("--log-out needs --gyro GYRO.toml (the gyro to simulate)")
+    lo, hi = region
+    approx = tuple(args.approx) if args.approx else DesignSpace.default_approx(lo, hi, limits)
+    written: list[str] = []
+    lines: list[str] = []
+    try:
+        space = DesignSpace(lo, hi, approx[0], approx[1], params, limits)
+    except ParameterError as exc:
+        if args.approx:  # the user's own request: an error
+            raise
+        lines.append(f"drift-fit design: not reported ({exc}); give --approx LO HI")
+    else:
+        report = design_report(traj.t_c, traj.g_c_per_min, space)
+        write_frame_atomic(out.path("design.csv"), report.to_frame())
+        lines.append(report.summary())
+        written.append("design.csv")
+    if args.gyro is not None:
+        if getattr(args, "model", None) is not None:
+            raise ParameterError(
+                "--gyro simulates the first-order model (--tau-s, --dt0-c); drop --model"
+            )
+        gyro = load_gyro(args.gyro)
+        frame = gyro_log(
+            programme,
+            gyro,
+            params,
+            sample_s=args.log_sample_s,
+            seed=args.seed,
+            t0_c=limits.t_init_c,
+        )
+        if args.log_out is not None:
+            path = write_frame_atomic(args.log_out, frame, [*inputs, args.gyro])
+        else:
+            path = write_frame_atomic(out.path("log.csv"), frame)
+            path = out.final("log.csv")
+        lines.append(
+            f"gyro log {path}: {len(frame)} rows every {args.log_sample_s:g} s, drift of "
+            f"{gyro.name} (truth columns t_true_c, g_true_c_per_min, drift_true_dph, "
+            "bias_walk_dph for checks)"
+        )
+        written.append(str(path))
+    return written, lines

@@ -1,0 +1,550 @@
+"""How informative a plan is for the drift fit, before it is run.
+
+The drift model is linear in its coefficients, ``drift = x(T, g)' c`` with ``x`` the terms
+of :mod:`schedsyn.terms`. A run's samples ``(T_k, g_k)`` inside the approximation region
+give the (per-sample) information matrix::
+
+    M = (1/n) sum_k x_k x_k'          x_k = x(T_k, g_k) in coded variables
+
+(with white drift noise sigma^2, ``cov(c_hat) = sigma^2 M^-1 / n``). The coded variables
+map the approximation region ``[A_lo, A_hi]`` and the reachable gradients ``[G_lo, G_hi]``
+(below) to [-1, 1]: ``u = (T - A_mid)/A_half``, ``v = (g - G_mid)/G_half``. Criteria:
+
+* **D-efficiency** ``100 det(M)^(1/p)`` and **A-efficiency** ``100 p / tr(M^-1)`` (percent;
+  pyDOE3's ``d_efficiency`` and ``a_efficiency``): 100 % for an orthogonal design with
+  unit-variance columns, e.g. a two-level factorial for a linear model;
+* **prediction variance** ``d(T, g) = x(T, g)' M^-1 x(T, g)`` over the working region and
+  the reachable gradients (the map; units of ``sigma^2 / n``), its mean (the
+  **I-criterion**, pyDOE3's ``i_optimality`` with the uniform moment matrix ``W`` of that
+  region) and maximum (G);
+* **I-efficiency** ``100 I* / I``, where ``I*`` is the I-criterion of the I-optimal
+  approximate design on the reachable part of the approximation region (multiplicative
+  algorithm, :func:`i_optimal_design`; 100 % = as good as any distribution of samples
+  the chamber could reach).
+
+All are per sample inside the approximation region; ``in_region_fraction`` says how much
+of the run that is (a whole-run efficiency is the product: samples outside the region
+carry no information for the fit over it).
+
+**Reachable gradients** (:func:`reachable_gradients`): at temperature ``T`` the planning
+model ``tau dT/dt + T = Tk + dT0``, ``dTk/dt = U`` bounds the gradient by
+
+* the chamber air limits: ``(Tk_min + dT0 - T)/tau <= g <= (Tk_max + dT0 - T)/tau``;
+* speeding up from rest at the far device limit at the full chamber rate ``U``: the
+  distance is ``tau (-v - U ln(1 - v/U))`` for speed ``v``;
+* stopping before the near device limit at the full reverse rate ``b``: the distance is
+  ``tau (v - b ln(1 + v/b))``;
+* the fastest cooling and heating gradients a plan uses (``max_cool_c_per_min``,
+  ``max_heat_c_per_min``, by default those of the planner's ``ExperimentSpec``: 0.85 and
+  1.0 degC/min; faster sweeps cost long turnarounds).
+
+The planner's own bands keep inside these bounds (it uses 85-90 % of the rates and 92 %
+of the chamber-limited gradient).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+import pandas as pd
+
+from .errors import ParameterError
+from .params import Limits, ThermalParams
+from .programme import Programme
+from .simulate import simulate
+from .terms import monomials, parse_terms, term_set_name
+
+#: Fastest cooling / heating gradient a plan uses, degC/min (the defaults of the planner's
+#: ExperimentSpec: max_cool_c_per_min, max_heat_c_per_min; a test keeps them equal).
+MAX_COOL_C_PER_MIN = 0.85
+MAX_HEAT_C_PER_MIN = 1.0
+#: Grid of the prediction-variance map and of the I-criterion's region, degC and degC/min.
+MAP_T_STEP_C = 0.5
+MAP_G_STEP_C_PER_MIN = 0.025
+#: Candidate grid of the I-optimal design, degC and degC/min.
+CANDIDATE_T_STEP_C = 1.0
+CANDIDATE_G_STEP_C_PER_MIN = 0.05
+#: The I-optimal design is found to within this relative accuracy of its criterion.
+I_OPTIMAL_TOL = 0.005
+#: A coded information matrix with a larger condition number counts as singular.
+SINGULAR_COND = 1e12
+#: Planned samples are taken every minute (the planner's sample spacing).
+SAMPLE_MIN = 1.0
+
+
+# -- reachable gradients ----------------------------------------------------------------
+def _invert(dist, room: np.ndarray, v_max: float) -> np.ndarray:
+    """Largest ``v`` in ``[0, v_max)`` with ``dist(v) <= room`` (``dist`` increasing)."""
+    room = np.asarray(room, dtype=float)
+    lo = np.zeros_like(room)
+    hi = np.full_like(room, v_max)
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        ok = dist(mid) <= room
+        lo = np.where(ok, mid, lo)
+        hi = np.where(ok, hi, mid)
+    return np.where(room > 0, lo, 0.0)
+
+
+def _speed_up_distance(v: np.ndarray, rate: float, tau_min: float) -> np.ndarray:
+    # from rest at full rate U: dv/dt = (U - v)/tau  =>  distance tau (-v - U ln(1 - v/U))
+    return tau_min * (-v - rate * np.log1p(-np.minimum(v / rate, 1.0 - 1e-15)))
+
+
+def _stop_distance(v: np.ndarray, rate: float, tau_min: float) -> np.ndarray:
+    # reversing at full rate b: dv/dt = -(b + v)/tau  =>  distance tau (v - b ln(1 + v/b))
+    return tau_min * (v - rate * np.log1p(v / rate))
+
+
+def reachable_gradients(
+    t_c: np.ndarray,
+    params: ThermalParams | None = None,
+    limits: Limits | None = None,
+    max_cool_c_per_min: float = MAX_COOL_C_PER_MIN,
+    max_heat_c_per_min: float = MAX_HEAT_C_PER_MIN,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(g_lo, g_hi)``: the gradients a run can have at each temperature (degC/min).
+
+    See the module docstring: chamber air limits, speeding up from the far device limit
+    and stopping before the near one at the full chamber rates, and the plan's fastest
+    gradients. ``g_lo <= 0 <= g_hi``; both are 0 at and beyond the device limits.
+    """
+    params = ThermalParams() if params is None else params
+    limits = Limits() if limits is None else limits
+    for name, v in (
+        ("max_cool_c_per_min", max_cool_c_per_min),
+        ("max_heat_c_per_min", max_heat_c_per_min),
+    ):
+        if not (math.isfinite(v) and v > 0):
+            raise ParameterError(f"{name} must be > 0 °C/min, got {v!r}")
+    t = np.asarray(t_c, dtype=float)
+    tau = params.tau_min
+    up, down = limits.rate_max_c_per_min, -limits.rate_min_c_per_min
+    below = t - limits.device_min_c  # room below T (to the device floor)
+    above = limits.device_max_c - t  # room above T
+    big = 50.0
+    heat = np.minimum.reduce(
+        [
+            np.full_like(t, max_heat_c_per_min),
+            (limits.chamber_max_c + params.dt0_c - t) / tau,
+            _invert(lambda v: _speed_up_distance(v, up, tau), below, up),
+            _invert(lambda v: _stop_distance(v, down, tau), above, big),
+        ]
+    )
+    cool = np.minimum.reduce(
+        [
+            np.full_like(t, max_cool_c_per_min),
+            (t - limits.chamber_min_c - params.dt0_c) / tau,
+            _invert(lambda v: _speed_up_distance(v, down, tau), above, down),
+            _invert(lambda v: _stop_distance(v, up, tau), below, big),
+        ]
+    )
+    return -np.maximum(cool, 0.0), np.maximum(heat, 0.0)
+
+
+# -- the design space -------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class DesignSpace:
+    """Where the drift model is fitted and where it must predict well.
+
+    Parameters
+    ----------
+    working_lo_c, working_hi_c : float
+        Working region, degC: the prediction-variance map and the I-criterion cover it.
+    approx_lo_c, approx_hi_c : float
+        Approximation region, degC (contains the working region): samples in it count,
+        and it is coded to [-1, 1].
+    params, limits : ThermalParams, Limits
+        Device model and chamber limits that bound the reachable gradients.
+    max_cool_c_per_min, max_heat_c_per_min : float
+        Fastest cooling / heating gradient of a plan, degC/min (> 0).
+    """
+
+    working_lo_c: float
+    working_hi_c: float
+    approx_lo_c: float
+    approx_hi_c: float
+    params: ThermalParams = field(default_factory=ThermalParams)
+    limits: Limits = field(default_factory=Limits)
+    max_cool_c_per_min: float = MAX_COOL_C_PER_MIN
+    max_heat_c_per_min: float = MAX_HEAT_C_PER_MIN
+
+    def __post_init__(self) -> None:
+        for name in ("working_lo_c", "working_hi_c", "approx_lo_c", "approx_hi_c"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+                raise ParameterError(f"{name} must be a finite number of °C, got {v!r}")
+            object.__setattr__(self, name, float(v))
+        if not self.working_lo_c < self.working_hi_c:
+            raise ParameterError(
+                f"the working region needs lo < hi, got {self.working_lo_c:g} .. "
+                f"{self.working_hi_c:g} °C"
+            )
+        if not (self.approx_lo_c <= self.working_lo_c and self.working_hi_c <= self.approx_hi_c):
+            raise ParameterError(
+                f"the approximation region {self.approx_lo_c:g} .. {self.approx_hi_c:g} °C "
+                f"must contain the working region {self.working_lo_c:g} .. "
+                f"{self.working_hi_c:g} °C"
+            )
+        t = np.linspace(self.working_lo_c, self.working_hi_c, 41)
+        g_lo, g_hi = reachable_gradients(
+            t, self.params, self.limits, self.max_cool_c_per_min, self.max_heat_c_per_min
+        )
+        if not (np.any(g_hi > 0) and np.any(g_lo < 0)):
+            raise ParameterError(
+                f"no gradient is reachable in the working region {self.working_lo_c:g} .. "
+                f"{self.working_hi_c:g} °C with the device limits "
+                f"{self.limits.device_min_c:g} .. {self.limits.device_max_c:g} °C; keep the "
+                "working region inside the device limits"
+            )
+
+    @staticmethod
+    def default_approx(
+        working_lo_c: float, working_hi_c: float, limits: Limits | None = None
+    ) -> tuple[float, float]:
+        """The paper's approximation region: 10 degC wider on each side, within the device
+        limits (W1 = [-50, -30] gives [-52, -20])."""
+        limits = Limits() if limits is None else limits
+        return (
+            max(working_lo_c - 10.0, limits.device_min_c),
+            min(working_hi_c + 10.0, limits.device_max_c),
+        )
+
+    def gradient_band(self, t_c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Reachable ``(g_lo, g_hi)`` at ``t_c`` (see :func:`reachable_gradients`)."""
+        return reachable_gradients(
+            t_c, self.params, self.limits, self.max_cool_c_per_min, self.max_heat_c_per_min
+        )
+
+    @property
+    def gradient_range_c_per_min(self) -> tuple[float, float]:
+        """Envelope ``(G_lo, G_hi)`` of the reachable gradients over the approximation region."""
+        t = np.linspace(self.approx_lo_c, self.approx_hi_c, 401)
+        lo, hi = self.gradient_band(t)
+        return float(lo.min()), float(hi.max())
+
+    def code(self, t_c: np.ndarray, g_c_per_min: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Coded ``(u, v)`` in [-1, 1] over the approximation region and gradient envelope."""
+        g_lo, g_hi = self.gradient_range_c_per_min
+        u = (np.asarray(t_c, dtype=float) - 0.5 * (self.approx_lo_c + self.approx_hi_c)) / (
+            0.5 * (self.approx_hi_c - self.approx_lo_c)
+        )
+        v = (np.asarray(g_c_per_min, dtype=float) - 0.5 * (g_lo + g_hi)) / (0.5 * (g_hi - g_lo))
+        return u, v
+
+    def grid(
+        self, region: str = "working", t_step_c: float = MAP_T_STEP_C, g_step: float | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Points ``(T, g)`` on a regular grid inside the reachable band of a region.
+
+        ``region`` is ``"working"`` or ``"approx"``; the grid is uniform in (T, g), so a
+        plain mean over it is the mean over the region's area.
+        """
+        g_step = MAP_G_STEP_C_PER_MIN if g_step is None else g_step
+        lo, hi = (
+            (self.working_lo_c, self.working_hi_c)
+            if region == "working"
+            else (self.approx_lo_c, self.approx_hi_c)
+        )
+        n_t = max(int(round((hi - lo) / t_step_c)), 1)
+        t = np.linspace(lo, hi, n_t + 1)
+        g_lo, g_hi = self.gradient_range_c_per_min
+        g = np.arange(math.floor(g_lo / g_step), math.ceil(g_hi / g_step) + 1) * g_step
+        tt, gg = np.meshgrid(t, g, indexing="ij")
+        b_lo, b_hi = self.gradient_band(t)
+        inside = (gg >= b_lo[:, None] - 1e-12) & (gg <= b_hi[:, None] + 1e-12)
+        return tt[inside], gg[inside]
+
+    def to_dict(self) -> dict:
+        g_lo, g_hi = self.gradient_range_c_per_min
+        return {
+            "working_lo_c": self.working_lo_c,
+            "working_hi_c": self.working_hi_c,
+            "approx_lo_c": self.approx_lo_c,
+            "approx_hi_c": self.approx_hi_c,
+            "g_lo_c_per_min": g_lo,
+            "g_hi_c_per_min": g_hi,
+            "max_cool_c_per_min": self.max_cool_c_per_min,
+            "max_heat_c_per_min": self.max_heat_c_per_min,
+        }
+
+
+# -- criteria ---------------------------------------------------------------------------
+def model_matrix(
+    t_c: np.ndarray, g_c_per_min: np.ndarray, space: DesignSpace, terms: str | tuple = "full"
+) -> np.ndarray:
+    """Coded model matrix of the samples inside the approximation region (n_in x p)."""
+    t = np.asarray(t_c, dtype=float)
+    g = np.asarray(g_c_per_min, dtype=float)
+    inside = np.isfinite(t) & np.isfinite(g) & (t >= space.approx_lo_c) & (t <= space.approx_hi_c)
+    u, v = space.code(t[inside], g[inside])
+    return monomials(u, v, parse_terms(terms))
+
+
+def information_matrix(
+    t_c: np.ndarray, g_c_per_min: np.ndarray, space: DesignSpace, terms: str | tuple = "full"
+) -> tuple[np.ndarray, int]:
+    """``(M, n)``: per-sample information ``X'X/n`` of the ``n`` samples in the region.
+
+    A pure function of the planned samples (the planner's objective can call it).
+    """
+    x = model_matrix(t_c, g_c_per_min, space, terms)
+    n = x.shape[0]
+    if n == 0:
+        return np.zeros((x.shape[1], x.shape[1])), 0
+    return x.T @ x / n, n
+
+
+def log_det_information(
+    t_c: np.ndarray, g_c_per_min: np.ndarray, space: DesignSpace, terms: str | tuple = "full"
+) -> float:
+    """``log det(sum_k x_k x_k')`` over the samples in the region (-inf if singular).
+
+    Unnormalised: more informative samples always raise it (concave in the sample
+    weights: the D-criterion an ``informative`` planner objective maximises).
+    """
+    m, n = information_matrix(t_c, g_c_per_min, space, terms)
+    if n == 0:
+        return -math.inf
+    sign, logdet = np.linalg.slogdet(m * n)
+    return float(logdet) if sign > 0 else -math.inf
+
+
+def moment_matrix(space: DesignSpace, terms: tuple[str, ...]) -> np.ndarray:
+    """Uniform moment matrix ``W = mean x x'`` over the working region's reachable grid."""
+    t, g = space.grid("working")
+    u, v = space.code(t, g)
+    x = monomials(u, v, terms)
+    return x.T @ x / x.shape[0]
+
+
+def i_optimal_design(
+    candidates: np.ndarray, weight_matrix: np.ndarray, tol: float = I_OPTIMAL_TOL
+) -> tuple[float, np.ndarray]:
+    """``(I*, w)``: the I-optimal approximate design on the candidate rows.
+
+    Minimises ``I(w) = tr(W M(w)^-1)``, ``M(w) = sum_i w_i c_i c_i'`` over weights on the
+    simplex by the multiplicative algorithm ``w_i <- w_i sqrt(d_i) / sum_j w_j sqrt(d_j)``,
+    ``d_i = c_i' M^-1 W M^-1 c_i`` (monotone for this criterion; Yu 2010). It stops when
+    ``max_i d_i <= (1 + tol) I(w)``: by convexity ``I* >= 2 I(w) - max_i d_i``, so the
+    returned criterion is within ``tol`` of the optimum.
+    """
+    c = np.asarray(candidates, dtype=float)
+    n, p = c.shape
+    w = np.full(n, 1.0 / n)
+    phi = math.inf
+    for _ in range(20000):
+        m = c.T @ (w[:, None] * c)
+        m_inv = np.linalg.inv(m)
+        b = m_inv @ weight_matrix @ m_inv
+        d = np.einsum("ij,jk,ik->i", c, b, c)
+        phi = float(np.trace(weight_matrix @ m_inv))
+        if d.max() <= (1.0 + tol) * phi:
+            return phi, w
+        w = w * np.sqrt(np.maximum(d, 0.0))
+        w /= w.sum()
+    lower = 2.0 * phi - float(d.max())
+    raise ParameterError(  # pragma: no cover - the algorithm converges on these grids
+        f"the I-optimal design did not converge (criterion {phi:.4g}, bound {lower:.4g})"
+    )
+
+
+@lru_cache(maxsize=64)
+def _i_optimum(space: DesignSpace, terms: tuple[str, ...]) -> float:
+    t, g = space.grid("approx", CANDIDATE_T_STEP_C, CANDIDATE_G_STEP_C_PER_MIN)
+    u, v = space.code(t, g)
+    phi, _ = i_optimal_design(monomials(u, v, terms), moment_matrix(space, terms))
+    return phi
+
+
+@dataclass(frozen=True, slots=True)
+class DesignReport:
+    """Informativeness of a run's (planned) samples for the drift fit (module docstring).
+
+    Attributes
+    ----------
+    space : DesignSpace
+    terms : tuple of str
+        The drift model's terms.
+    n_samples, n_in_region : int
+        Samples of the run, and those inside the approximation region.
+    d_efficiency_pct, a_efficiency_pct : float
+        D- and A-efficiency per sample in the region, percent (pyDOE3); 0 if singular.
+    i_efficiency_pct : float
+        ``100 I*/I``, percent of the I-optimal design's; 0 if singular.
+    mean_variance, max_variance : float
+        Mean (I-criterion) and largest prediction variance over the working region's
+        reachable (T, g), in units of ``sigma^2 / n_in_region``; inf if singular.
+    i_optimal_variance : float
+        ``I*``, the mean prediction variance of the I-optimal design.
+    log_det : float
+        ``log det M`` of the per-sample information (-inf if singular).
+    condition_number : float
+        2-norm condition number of the coded model matrix.
+    variance_map : DataFrame
+        ``t_c, g_c_per_min, prediction_variance`` over the working region's grid.
+    """
+
+    space: DesignSpace
+    terms: tuple[str, ...]
+    n_samples: int
+    n_in_region: int
+    d_efficiency_pct: float
+    a_efficiency_pct: float
+    i_efficiency_pct: float
+    mean_variance: float
+    max_variance: float
+    i_optimal_variance: float
+    log_det: float
+    condition_number: float
+    variance_map: pd.DataFrame
+
+    @property
+    def in_region_fraction(self) -> float:
+        return self.n_in_region / self.n_samples if self.n_samples else 0.0
+
+    @property
+    def singular(self) -> bool:
+        return not math.isfinite(self.mean_variance)
+
+    def to_frame(self) -> pd.DataFrame:
+        """The prediction-variance map."""
+        return self.variance_map.copy()
+
+    def to_summary_dict(self) -> dict:
+        return {
+            "terms": term_set_name(self.terms),
+            **self.space.to_dict(),
+            "n_samples": self.n_samples,
+            "in_region_fraction": self.in_region_fraction,
+            "d_efficiency_pct": self.d_efficiency_pct,
+            "a_efficiency_pct": self.a_efficiency_pct,
+            "i_efficiency_pct": self.i_efficiency_pct,
+            "mean_prediction_variance": self.mean_variance,
+            "max_prediction_variance": self.max_variance,
+            "i_optimal_prediction_variance": self.i_optimal_variance,
+            "log_det_information": self.log_det,
+            "condition_number": self.condition_number,
+        }
+
+    def summary(self) -> str:
+        g_lo, g_hi = self.space.gradient_range_c_per_min
+        head = (
+            f"drift-fit design ({term_set_name(self.terms)} model over "
+            f"{self.space.approx_lo_c:g} .. {self.space.approx_hi_c:g} °C, gradients "
+            f"{g_lo:.2f} .. {g_hi:.2f} °C/min; {self.in_region_fraction:.0%} of the run in "
+            "the region): "
+        )
+        if self.singular:
+            return head + "singular: these samples cannot determine every term"
+        return head + (
+            f"D-efficiency {self.d_efficiency_pct:.1f} %, A-efficiency "
+            f"{self.a_efficiency_pct:.2f} %, I-efficiency {self.i_efficiency_pct:.0f} % of the "
+            f"I-optimal design; prediction variance over the working region mean "
+            f"{self.mean_variance:.1f}, max {self.max_variance:.1f} (units of σ²/n)"
+        )
+
+
+def design_report(
+    t_c: np.ndarray,
+    g_c_per_min: np.ndarray,
+    space: DesignSpace,
+    terms: str | tuple = "full",
+) -> DesignReport:
+    """Information of samples ``(T, g)`` (equally spaced in time) for the drift fit.
+
+    Parameters
+    ----------
+    t_c, g_c_per_min : arrays
+        Internal temperature (degC) and gradient (degC/min) of the run's samples; samples
+        outside the approximation region only count in ``n_samples``.
+    space : DesignSpace
+    terms : str or tuple
+        Model terms (:func:`schedsyn.terms.parse_terms`; default the full cubic).
+    """
+    from pyDOE3.doe_optimal import a_efficiency, d_efficiency, i_optimality
+
+    terms_t = parse_terms(terms)
+    t = np.asarray(t_c, dtype=float)
+    x = model_matrix(t, g_c_per_min, space, terms_t)
+    n_in, p = x.shape
+    gt, gg = space.grid("working")
+    gu, gv = space.code(gt, gg)
+    xg = monomials(gu, gv, terms_t)
+    i_star = _i_optimum(space, terms_t)
+    cond = float(np.linalg.cond(x)) if n_in >= p else math.inf
+    if n_in < p or not cond < math.sqrt(SINGULAR_COND):
+        inf_map = np.full(gt.size, math.inf)
+        return DesignReport(
+            space=space,
+            terms=terms_t,
+            n_samples=int(t.size),
+            n_in_region=int(n_in),
+            d_efficiency_pct=0.0,
+            a_efficiency_pct=0.0,
+            i_efficiency_pct=0.0,
+            mean_variance=math.inf,
+            max_variance=math.inf,
+            i_optimal_variance=i_star,
+            log_det=-math.inf,
+            condition_number=cond,
+            variance_map=pd.DataFrame(
+                {"t_c": gt, "g_c_per_min": gg, "prediction_variance": inf_map}
+            ),
+        )
+    m = x.T @ x / n_in
+    m_inv = np.linalg.inv(m)
+    var = np.einsum("ij,jk,ik->i", xg, m_inv, xg)
+    w = xg.T @ xg / xg.shape[0]
+    mean_var = -i_optimality(m, w)  # tr(W M^-1) = mean of var over the grid
+    return DesignReport(
+        space=space,
+        terms=terms_t,
+        n_samples=int(t.size),
+        n_in_region=int(n_in),
+        d_efficiency_pct=float(d_efficiency(x)),
+        a_efficiency_pct=float(a_efficiency(x)),
+        i_efficiency_pct=100.0 * i_star / mean_var,
+        mean_variance=float(mean_var),
+        max_variance=float(var.max()),
+        i_optimal_variance=i_star,
+        log_det=float(np.linalg.slogdet(m)[1]),
+        condition_number=cond,
+        variance_map=pd.DataFrame({"t_c": gt, "g_c_per_min": gg, "prediction_variance": var}),
+    )
+
+
+def programme_design(
+    programme: Programme,
+    space: DesignSpace,
+    terms: str | tuple = "full",
+    *,
+    sample_min: float = SAMPLE_MIN,
+) -> DesignReport:
+    """:func:`design_report` of a programme simulated every ``sample_min`` with the
+    space's device model, from the limits' initial temperature."""
+    traj = simulate(programme, space.params, dt_min=sample_min, t0_c=space.limits.t_init_c)
+    return design_report(traj.t_c, traj.g_c_per_min, space, terms)
+
+
+def plan_space(plan) -> DesignSpace:
+    """The :class:`DesignSpace` of a planner ``Plan`` (its regions, model, limits, caps)."""
+    spec = plan.spec
+    return DesignSpace(
+        spec.working_lo_c,
+        spec.working_hi_c,
+        spec.approx_lo_c,
+        spec.approx_hi_c,
+        plan.params,
+        plan.limits,
+        spec.max_cool_c_per_min,
+        spec.max_heat_c_per_min,
+    )
+
+
+def plan_design(plan, terms: str | tuple = "full") -> DesignReport:
+    """:func:`design_report` of a planner ``Plan``'s exported programme (1-min samples)."""
+    return programme_design(plan.programme, plan_space(plan), terms)

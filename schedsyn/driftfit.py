@@ -1,0 +1,1125 @@
+"""Fit the drift polynomial b(T, g) to a measured log, with honest uncertainties.
+
+Data flow::
+
+    log (t_int_c, tk_set_c, drift_dph) -> Kalman smoother (T_hat, g_hat)
+        -> error draws (covariance of the estimates' noise)
+        -> adjusted least squares over the approximation region [LO, HI]
+        -> term selection (blocked cross-validation), standard errors, compensation table
+
+**Regressors.** ``T`` and ``g`` come from :func:`schedsyn.estimate_gradient_model` (the
+thermal model driven by the logged chamber setpoint, when the log has ``tk_set_c``) or
+:func:`schedsyn.estimate_gradient` (kinematic). Coded variables: ``x = (T - t_ref)/t_half``
+(``t_ref``, ``t_half``: centre and half-width of the region) and ``y = g/g_half``
+(``g_half``: the largest |g_hat| in the region), so coded and physical coefficients differ
+by a factor ``t_half^a g_half^b`` per term (:func:`schedsyn.terms.coded_to_physical`).
+
+**Errors in variables.** The smoother's estimates carry noise that is independent of the
+drift: ``g_hat = g + e_g`` (plus a small smoothing bias). Plain least squares on
+``g_hat`` attenuates the gradient terms (by ``var(e_g)/var(g)`` for a linear term, more for
+``g^2``, ``g^3``). The fit removes that bias by **adjusted least squares** (Cheng &
+Schneeweiss 1998): in the normal equations every monomial is replaced by its unbiased
+version under Gaussian errors (:func:`schedsyn.terms.corrected_monomials`; e.g.
+``g_hat^2 - var(e_g)``), i.e. the normal matrix minus the estimation-error part::
+
+    A = sum_k [x x']*(x_hat_k; S_k),   b = sum_k x*(x_hat_k; S_k) d_k,   c = A^-1 b
+
+The error covariance ``S_k`` of ``(T_hat_k, g_hat_k)`` is measured, not assumed: the
+smoother is linear in the readings at fixed noise levels, so re-running it on the log
+with added white noise of the fitted measurement variance ``r`` (``n_error_draws`` times)
+gives draws of exactly the estimator's noise, ``g_hat(y + v') - g_hat(y) = L v'``. (The
+smoother's own posterior variance is a Bayesian figure that also counts its prior's
+smoothing bias; on synthetic logs it is about twice the actual error's standard
+deviation, while the draws match it.)
+
+**Standard errors.** Residuals of a gyro are not white: the bias random walk makes them
+correlated over hours. The noise is modelled as white noise plus a random walk, its two
+levels estimated by restricted maximum likelihood (:func:`noise_model`), and the
+coefficient covariance is the sandwich ``A^-1 B A^-1`` with the covariance of that noise
+model::
+
+    B = sigma^2 X'X + K^2 sum_k dt_k S_k S_k',   S_k = sum_{i >= k} x_i
+
+(``X'[K^2 min(t_i, t_j)]X``, exact for a random walk started at the first sample, whose
+start level the constant term absorbs).
+
+**Term selection.** Candidates nested by their order in g (``t-only`` -- the reference,
+a cubic in T -- ``g1``, ``g2``, ``full``; :data:`schedsyn.terms.CANDIDATES`) are compared
+by BIC under the white + random-walk noise model (:func:`select_terms`): the bias random
+walk is part of the likelihood, so gradient terms that would only follow its wander do
+not pay. (Plain cross-validation is fooled by it even when it leaves out whole passes:
+each pass has its own gradient level *and* its own stretch of the walk. Its
+leave-one-pass-out RMS is still reported beside the BIC.)
+
+**Compensation table.** The fitted drift on a grid of ``[LO, HI]`` (``t_step_c`` by
+``g_step_c_per_min``), at each temperature only over the gradients the run reached within
+``t_step_c / 2`` of it (no extrapolation in g).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+from scipy.optimize import minimize_scalar
+
+from .errors import LogFormatError, ParameterError
+from .estimate import GradientEstimate, estimate_gradient, estimate_gradient_model
+from .logs import MeasuredLog
+from .params import ThermalParams
+from .terms import (
+    CANDIDATES,
+    EXPONENTS,
+    coded_to_physical,
+    corrected_monomials,
+    monomials,
+    parse_terms,
+    term_set_name,
+    unit_of,
+)
+
+ESTIMATORS = ("auto", "model", "kinematic")
+EIV_METHODS = ("als", "none")
+
+
+@dataclass(frozen=True, slots=True)
+class FitSettings:
+    """How to fit the drift model.
+
+    Parameters
+    ----------
+    terms : str
+        ``"auto"`` (select among :data:`schedsyn.terms.CANDIDATES` by BIC, see
+        :func:`select_terms`), a set name (``t-only``, ``g1``, ``g2``, ``full``) or a
+        comma list of terms (``"1,t,t2,t3,g"``).
+    eiv : {"als", "none"}
+        Errors-in-variables correction: adjusted least squares, or none (plain least
+        squares on the estimates; for comparison).
+    estimator : {"auto", "model", "kinematic"}
+        Gradient estimator; ``auto`` uses the model-based one when the log has a complete
+        ``tk_set_c`` column.
+    n_error_draws : int
+        Re-runs of the smoother that measure its noise (2..200).
+    cv_folds : int
+        Blocks of the cross-validation check when the run has fewer than three passes
+        through the region (3..50; otherwise the passes are the blocks).
+    min_points_per_bin : int
+        Every 1 degC bin of the region needs at least this many samples (>= 1).
+    t_step_c, g_step_c_per_min : float
+        Grid of the compensation table, degC and degC/min (> 0).
+    seed : int
+        Seed of the error draws.
+    """
+
+    terms: str = "auto"
+    eiv: str = "als"
+    estimator: str = "auto"
+    n_error_draws: int = 8
+    cv_folds: int = 10
+    min_points_per_bin: int = 5
+    t_step_c: float = 1.0
+    g_step_c_per_min: float = 0.05
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.terms != "auto":
+            parse_terms(self.terms)  # validates
+        if self.eiv not in EIV_METHODS:
+            raise ParameterError(f"eiv must be one of {EIV_METHODS}, got {self.eiv!r}")
+        if self.estimator not in ESTIMATORS:
+            raise ParameterError(f"estimator must be one of {ESTIMATORS}, got {self.estimator!r}")
+        for name, lo, hi in (
+            ("n_error_draws", 2, 200),
+            ("cv_folds", 3, 50),
+            ("min_points_per_bin", 1, 10**6),
+        ):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+                raise ParameterError(f"{name} must be a whole number in {lo}..{hi}, got {v!r}")
+        for name in ("t_step_c", "g_step_c_per_min"):
+            v = getattr(self, name)
+            if (
+                isinstance(v, bool)
+                or not isinstance(v, int | float)
+                or not (math.isfinite(v) and v > 0)
+            ):
+                raise ParameterError(f"{name} must be a number > 0, got {v!r}")
+
+
+# -- the regression core (pure functions of samples) -------------------------------------
+@dataclass(frozen=True, slots=True)
+class Coding:
+    """``x = (T - t_ref_c)/t_half_c``, ``y = g/g_half_c_per_min``."""
+
+    t_ref_c: float
+    t_half_c: float
+    g_half_c_per_min: float
+
+    def code(self, t_c: np.ndarray, g_c_per_min: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return (
+            (np.asarray(t_c, dtype=float) - self.t_ref_c) / self.t_half_c,
+            np.asarray(g_c_per_min, dtype=float) / self.g_half_c_per_min,
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class Samples:
+    """Regression samples: time (s), estimates, drift, and the estimates' error covariance."""
+
+    time_s: np.ndarray
+    t_c: np.ndarray
+    g_c_per_min: np.ndarray
+    drift_dph: np.ndarray
+    var_t_c2: np.ndarray
+    cov_tg: np.ndarray
+    var_g: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return int(self.time_s.size)
+
+    def take(self, idx: np.ndarray) -> Samples:
+        return Samples(*(getattr(self, f.name)[idx] for f in dataclasses.fields(self)))
+
+
+def _powers(terms: tuple[str, ...]) -> list[tuple[int, int]]:
+    pw = {EXPONENTS[t] for t in terms}
+    for ti in terms:
+        for tj in terms:
+            (a1, b1), (a2, b2) = EXPONENTS[ti], EXPONENTS[tj]
+            pw.add((a1 + a2, b1 + b2))
+    return sorted(pw)
+
+
+@dataclass(frozen=True, slots=True)
+class _Sums:
+    """Per-sample pieces of the (adjusted) normal equations."""
+
+    a_k: np.ndarray  # (n, p, p): corrected x x' of each sample
+    b_k: np.ndarray  # (n, p): corrected x of each sample times its drift
+    x: np.ndarray  # (n, p): plain coded monomials of the estimates
+
+
+def _normal_pieces(s: Samples, coding: Coding, terms: tuple[str, ...], eiv: bool) -> _Sums:
+    x, y = coding.code(s.t_c, s.g_c_per_min)
+    if eiv:
+        sxx = s.var_t_c2 / coding.t_half_c**2
+        sxy = s.cov_tg / (coding.t_half_c * coding.g_half_c_per_min)
+        syy = s.var_g / coding.g_half_c_per_min**2
+    else:
+        sxx = sxy = syy = np.zeros_like(x)
+    u = corrected_monomials(x, y, sxx, sxy, syy, _powers(terms))
+    p = len(terms)
+    e = [EXPONENTS[t] for t in terms]
+    a_k = np.empty((x.size, p, p))
+    for i in range(p):
+        for j in range(p):
+            a_k[:, i, j] = u[(e[i][0] + e[j][0], e[i][1] + e[j][1])]
+    b_k = np.column_stack([u[e[i]] for i in range(p)]) * s.drift_dph[:, None]
+    return _Sums(a_k, b_k, monomials(x, y, terms))
+
+
+def _solve(a: np.ndarray, b: np.ndarray, what: str) -> np.ndarray:
+    w = np.linalg.eigvalsh(a)
+    if not w[0] > 1e-12 * max(w[-1], 1e-300):
+        raise ParameterError(
+            f"{what}: the samples cannot determine every term (normal matrix singular or not "
+            "positive definite after the errors-in-variables correction); use fewer terms "
+            "(--terms t-only or g1) or a run with more varied gradients"
+        )
+    return np.linalg.solve(a, b)
+
+
+#: The noise model is fitted on at most this many samples (an even stride of longer logs).
+NOISE_MAX_ROWS = 2000
+
+
+@dataclass(frozen=True, slots=True)
+class NoiseFit:
+    """White noise plus a bias random walk fitted with a regression (:func:`noise_fit`).
+
+    ``minus2_log_likelihood`` is the Gaussian ``-2 log L`` (ML fits; REML for ``reml``)
+    on ``n`` samples, ``n_params`` regression coefficients.
+    """
+
+    sigma_dph: float
+    walk_dph_per_rt_h: float
+    minus2_log_likelihood: float
+    n: int
+    n_params: int
+
+    @property
+    def bic(self) -> float:
+        """``-2 log L + (p + 2) log n`` (the coefficients, sigma and K)."""
+        return self.minus2_log_likelihood + (self.n_params + 2) * math.log(max(self.n, 2))
+
+
+def noise_model(
+    time_s: np.ndarray, drift_dph: np.ndarray, x: np.ndarray, max_rows: int = NOISE_MAX_ROWS
+) -> tuple[float, float]:
+    """``(sigma_dph, walk_dph_per_rt_h)`` by REML (:func:`noise_fit`)."""
+    fit = noise_fit(time_s, drift_dph, x, reml=True, max_rows=max_rows)
+    return fit.sigma_dph, fit.walk_dph_per_rt_h
+
+
+def noise_fit(
+    time_s: np.ndarray,
+    drift_dph: np.ndarray,
+    x: np.ndarray,
+    *,
+    reml: bool = True,
+    max_rows: int = NOISE_MAX_ROWS,
+) -> NoiseFit:
+    """White noise plus a bias random walk under a regression, by (RE)ML.
+
+    The model ``d_k = x_k' c + b_k + w_k``, ``b_k = b_k-1 + eta_k`` with ``var w = sigma^2``
+    and ``var eta_k = K^2 dt_k`` (dt in hours, ``b_0 = 0``: the constant term holds the
+    start level). For a ratio ``lambda = K^2/sigma^2`` a scalar Kalman filter (in units of
+    sigma^2: ``P <- P + lambda dt``, ``f = P + 1``, gain ``P/f``) whitens the drift and
+    every column of ``x`` alike (generalised least squares); the coefficients and
+    ``sigma^2`` are then profiled out and the restricted (``reml``) log-likelihood::
+
+        -1/2 [(n - p) log sigma^2 + sum_k log f_k + log det(E_x' F^-1 E_x)]
+
+    (``E_x``: the columns' innovations; ``sigma^2 = RSS/(n - p)``) or the plain one,
+    ``-1/2 [n log sigma^2 + sum_k log f_k]`` with ``sigma^2 = RSS/n``, is maximised over
+    ``log lambda`` (bounded scalar search). REML, unlike a fit to the residuals, does not
+    lose the part of the random walk the polynomial absorbs; the plain likelihood
+    compares different term sets (:func:`select_terms_bic`). Logs longer than
+    ``max_rows`` samples are strided.
+    """
+    n_all = int(np.asarray(drift_dph).size)
+    step = max(1, int(math.ceil(n_all / max_rows)))
+    t = np.asarray(time_s, dtype=float)[::step] / 3600.0
+    z = np.column_stack([np.asarray(drift_dph, dtype=float)[::step], np.asarray(x)[::step]])
+    n, p = z.shape[0], z.shape[1] - 1
+    if n <= p + 2:
+        return NoiseFit(float(np.std(z[:, 0])), 0.0, math.nan, n, p)
+    dt = np.diff(t, prepend=t[0]).tolist()
+
+    def whiten(lam: float) -> tuple[np.ndarray, np.ndarray]:
+        # the variance recursion is scalar (pure Python); the levels of all series follow
+        # level_k = (1 - gain_k) level_k-1 + gain_k z_k, solved in closed form blockwise:
+        # level_k = C_k [level_a-1 + sum_{i=a..k} gain_i z_i / C_i], C_k = prod (1 - gain),
+        # blocks cut before C underflows
+        var = 0.0
+        gains = np.empty(n)
+        f_all = np.empty(n)
+        for k in range(n):
+            var += lam * dt[k]
+            f = var + 1.0
+            g = var / f
+            f_all[k] = f
+            gains[k] = g
+            var *= 1.0 - g
+        log_c = np.cumsum(np.log1p(-gains))
+        innov = np.empty_like(z)
+        level = np.zeros(p + 1)
+        a = 0
+        while a < n:
+            base = log_c[a - 1] if a else 0.0
+            b = int(np.searchsorted(-(log_c[a:] - base), 200.0)) + a  # block a..b-1
+            b = max(b, a + 1)
+            rel = log_c[a:b] - base
+            acc = np.cumsum((gains[a:b] * np.exp(-rel))[:, None] * z[a:b], axis=0)
+            lv = np.exp(rel)[:, None] * (level[None, :] + acc)
+            innov[a:b] = z[a:b] - np.vstack([level[None, :], lv[:-1]])
+            level = lv[-1]
+            a = b
+        return innov, f_all
+
+    def profile(log_lam: float) -> tuple[float, float]:
+        innov, f = whiten(math.exp(log_lam))
+        w = innov / np.sqrt(f)[:, None]
+        a = w[:, 1:].T @ w[:, 1:]
+        sign, logdet = np.linalg.slogdet(a)
+        if sign <= 0:
+            return math.inf, math.nan
+        coef = np.linalg.lstsq(w[:, 1:], w[:, 0], rcond=None)[0]
+        rss = float(np.sum((w[:, 0] - w[:, 1:] @ coef) ** 2))
+        dof = n - p if reml else n
+        s2 = rss / dof
+        if not s2 > 0:
+            return math.inf, math.nan
+        half = 0.5 * (dof * math.log(s2) + float(np.sum(np.log(f))))
+        return (half + 0.5 * logdet if reml else half), s2
+
+    # the likelihood can have several local optima in lambda: scan a coarse grid (every
+    # factor of 10 from 1e-6 to 1e4 per hour: K up to 100 sigma per sqrt(h)), then refine
+    # around the best point
+    grid = np.log(10.0) * np.arange(-6.0, 4.5, 1.0)
+    best = min(grid, key=lambda v: profile(float(v))[0])
+    res = minimize_scalar(
+        lambda v: profile(v)[0],
+        bounds=(float(best) - math.log(10.0), float(best) + math.log(10.0)),
+        method="bounded",
+        options={"xatol": 0.02},
+    )
+    x_best = float(res.x) if profile(float(res.x))[0] <= profile(float(best))[0] else float(best)
+    obj, s2 = profile(x_best)
+    if not math.isfinite(s2):
+        return NoiseFit(float(np.std(z[:, 0])), 0.0, math.nan, n, p)
+    dof = n - p if reml else n
+    m2ll = 2.0 * obj + dof * (math.log(2.0 * math.pi) + 1.0)
+    return NoiseFit(math.sqrt(s2), math.sqrt(math.exp(x_best) * s2), m2ll, n, p)
+
+
+def walk_covariance(time_s: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``X' C X`` for ``C_ij = min(t_i, t_j) - t_0`` (hours): ``sum_k dt_k S_k S_k'``."""
+    t = np.asarray(time_s, dtype=float) / 3600.0
+    s = np.cumsum(x[::-1], axis=0)[::-1]  # S_k = sum_{i >= k} x_i
+    dt = np.diff(t)
+    return (s[1:] * dt[:, None]).T @ s[1:]
+
+
+@dataclass(frozen=True, slots=True)
+class PolyFit:
+    """One fitted term set (coded and physical coefficients, covariances, residuals).
+
+    Physical coefficients are about ``coding.t_ref_c``: term ``t^a g^b`` in deg/h per
+    degC^a per (degC/min)^b (:func:`schedsyn.terms.unit_of`).
+    """
+
+    terms: tuple[str, ...]
+    coding: Coding
+    coef_coded: np.ndarray
+    cov_coded: np.ndarray
+    coefficients_dph: np.ndarray
+    covariance: np.ndarray
+    white_sigma_dph: float
+    walk_dph_per_rt_h: float
+    residual_rms_dph: float
+    condition_number: float
+    n: int
+    eiv: bool
+
+    @property
+    def std_errors(self) -> np.ndarray:
+        return np.sqrt(np.maximum(np.diag(self.covariance), 0.0))
+
+    def predict(self, t_c: np.ndarray, g_c_per_min: np.ndarray) -> np.ndarray:
+        """Fitted drift, deg/h."""
+        x, y = self.coding.code(t_c, g_c_per_min)
+        return monomials(x, y, self.terms) @ self.coef_coded
+
+    def predict_std(self, t_c: np.ndarray, g_c_per_min: np.ndarray) -> np.ndarray:
+        """Standard deviation of the fitted drift (coefficient uncertainty only), deg/h."""
+        x, y = self.coding.code(t_c, g_c_per_min)
+        m = monomials(x, y, self.terms)
+        return np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", m, self.cov_coded, m), 0.0))
+
+    def to_frame(self) -> pd.DataFrame:
+        """One row per term: physical coefficient, standard error, unit, coded value."""
+        se = self.std_errors
+        return pd.DataFrame(
+            {
+                "term": list(self.terms),
+                "coefficient": self.coefficients_dph,
+                "std_error": se,
+                "unit": [unit_of(t) for t in self.terms],
+                "coded_coefficient_dph": self.coef_coded,
+            }
+        )
+
+
+def fit_coefficients(
+    samples: Samples, terms: str | tuple[str, ...], coding: Coding, *, eiv: bool = True
+) -> np.ndarray:
+    """Coded coefficients of one term set: ``A^-1 b`` of the (adjusted) normal equations.
+
+    The point estimate of :func:`fit_samples` without its standard errors (cheap).
+    """
+    terms_t = parse_terms(terms)
+    pieces = _normal_pieces(samples, coding, terms_t, eiv)
+    return _solve(pieces.a_k.sum(axis=0), pieces.b_k.sum(axis=0), "drift fit")
+
+
+def fit_samples(
+    samples: Samples,
+    terms: str | tuple[str, ...],
+    coding: Coding,
+    *,
+    eiv: bool = True,
+    what: str = "drift fit",
+) -> PolyFit:
+    """Adjusted least squares of one term set on ``samples`` (module docstring).
+
+    Samples must be in time order. ``eiv=False`` is plain least squares on the estimates.
+    """
+    terms_t = parse_terms(terms)
+    p = len(terms_t)
+    if samples.n < 2 * p:
+        raise ParameterError(
+            f"{what}: {samples.n} samples cannot fit {p} terms; use a longer log or fewer terms"
+        )
+    pieces = _normal_pieces(samples, coding, terms_t, eiv)
+    a = pieces.a_k.sum(axis=0)
+    coef = _solve(a, pieces.b_k.sum(axis=0), what)
+    resid = samples.drift_dph - pieces.x @ coef
+    sigma, walk = noise_model(samples.time_s, samples.drift_dph, pieces.x)
+    a_inv = np.linalg.inv(a)
+    middle = sigma**2 * (pieces.x.T @ pieces.x) + walk**2 * walk_covariance(
+        samples.time_s, pieces.x
+    )
+    cov = a_inv @ middle @ a_inv
+    j_full = coded_to_physical(
+        terms_t, coding.t_ref_c, coding.t_half_c, 0.0, coding.g_half_c_per_min
+    )
+    rows = [list(EXPONENTS).index(t) for t in terms_t]
+    j = j_full[rows]
+    return PolyFit(
+        terms=terms_t,
+        coding=coding,
+        coef_coded=coef,
+        cov_coded=cov,
+        coefficients_dph=j @ coef,
+        covariance=j @ cov @ j.T,
+        white_sigma_dph=sigma,
+        walk_dph_per_rt_h=walk,
+        residual_rms_dph=float(np.sqrt(np.mean(resid**2))),
+        condition_number=float(np.linalg.cond(pieces.x)),
+        n=samples.n,
+        eiv=eiv,
+    )
+
+
+#: A pass shorter than this share of the samples joins its predecessor (turnarounds).
+MIN_PASS_SHARE = 0.03
+#: A sampling step longer than this many median steps separates two passes (the run left
+#: the region and came back).
+PASS_GAP_FACTOR = 5.0
+
+
+def pass_blocks(samples: Samples, min_share: float = MIN_PASS_SHARE) -> np.ndarray:
+    """Block label of every sample: the **passes** through the region.
+
+    A pass is a maximal run of consecutive samples with one sign of the gradient and no
+    gap (a step longer than ``PASS_GAP_FACTOR`` median steps: the run left the region);
+    a pass with fewer than ``min_share`` of the samples is merged into the one before
+    (or after, for the first). Cross-validation leaves whole passes out: a pass has its
+    own gradient level and its own stretch of the bias random walk, so a model that
+    learned a pass's level through its gradient cannot predict it from the others.
+    """
+    n = samples.n
+    if n == 0:
+        return np.zeros(0, dtype=int)
+    step = np.diff(samples.time_s)
+    med = float(np.median(step)) if step.size else 1.0
+    gap = np.zeros(n, dtype=bool)
+    gap[1:] = step > PASS_GAP_FACTOR * med
+    sign = np.where(samples.g_c_per_min < 0, -1.0, 1.0)
+
+    def runs(sgn: np.ndarray) -> np.ndarray:
+        cut = gap.copy()
+        cut[1:] |= sgn[1:] != sgn[:-1]
+        return np.cumsum(cut)
+
+    # a short run of the other sign inside a stretch (a wobble, a turnaround) takes the
+    # sign of the run before it; then the passes are the runs of equal sign without gaps
+    label = runs(sign)
+    sizes = np.bincount(label)
+    starts = np.searchsorted(label, np.arange(sizes.size))
+    for k in range(1, sizes.size):
+        if sizes[k] < min_share * n and not gap[starts[k]]:
+            sign[label == k] = sign[starts[k] - 1]
+    label = runs(sign)
+    sizes = np.bincount(label)
+    keep = np.flatnonzero(sizes >= min_share * n)
+    if keep.size == 0:
+        return np.zeros(n, dtype=int)
+    # what is still short (a brief visit between gaps) joins the nearest pass before it
+    before = np.searchsorted(keep, np.arange(sizes.size), side="right") - 1
+    target = keep[np.maximum(before, 0)]
+    return np.unique(target[label], return_inverse=True)[1]
+
+
+def cross_validate(
+    samples: Samples,
+    candidates: tuple[tuple[str, ...], ...],
+    coding: Coding,
+    *,
+    folds: int = 10,
+    eiv: bool = True,
+    blocks: np.ndarray | None = None,
+) -> pd.DataFrame:
+    """Leave-one-block-out mean squared errors of each candidate.
+
+    ``blocks`` labels the samples (default :func:`pass_blocks`, the passes through the
+    region); with fewer than three blocks, ``folds`` contiguous blocks of equal size are
+    used instead. Returns a frame with one row per candidate and block: ``candidate,
+    fold, mse_dph2, n``. A candidate that cannot be fitted without a block gets NaN.
+    """
+    labels = pass_blocks(samples) if blocks is None else np.asarray(blocks)
+    if labels.size != samples.n or np.unique(labels).size < 3:
+        labels = np.repeat(
+            np.arange(folds), np.diff(np.linspace(0, samples.n, folds + 1).astype(int))
+        )
+    fold_ids = np.unique(labels)
+    rows = []
+    for terms in candidates:
+        pieces = _normal_pieces(samples, coding, terms, eiv)
+        a_tot, b_tot = pieces.a_k.sum(axis=0), pieces.b_k.sum(axis=0)
+        for f in fold_ids:
+            sl = labels == f
+            a = a_tot - pieces.a_k[sl].sum(axis=0)
+            b = b_tot - pieces.b_k[sl].sum(axis=0)
+            try:
+                coef = _solve(a, b, "cross-validation")
+                err = samples.drift_dph[sl] - pieces.x[sl] @ coef
+                mse = float(np.mean(err**2))
+            except ParameterError:
+                mse = math.nan
+            rows.append(
+                {
+                    "candidate": term_set_name(terms),
+                    "fold": int(f),
+                    "mse_dph2": mse,
+                    "n": int(sl.sum()),
+                }
+            )
+    return pd.DataFrame(rows)
+
+
+def select_terms(
+    samples: Samples,
+    candidates: tuple[str, ...],
+    coding: Coding,
+    *,
+    eiv: bool = True,
+    folds: int = 10,
+) -> tuple[str, pd.DataFrame]:
+    """The candidate with the smallest BIC under the white + random-walk noise model.
+
+    For each candidate (names in order of simplicity) the drift is regressed on its terms
+    by generalised least squares with white noise plus a bias random walk, both levels
+    fitted by maximum likelihood (:func:`noise_fit`), and ``BIC = -2 log L + (p + 2) log
+    n``. The random walk is in the likelihood, so terms that would only follow its wander
+    (through the pass-by-pass gradient levels) earn nothing. Leave-one-pass-out
+    cross-validation (:func:`cross_validate`) is reported beside it as a check.
+
+    Returns ``(name, table)``; the table has one row per candidate: ``candidate,
+    n_terms, minus2_log_likelihood, bic, delta_bic, white_sigma_dph,
+    walk_dph_per_rt_h, cv_rms_dph, chosen``.
+    """
+    terms = tuple(parse_terms(c) for c in candidates)
+    x, y = coding.code(samples.t_c, samples.g_c_per_min)
+    rows = []
+    for name, ts in zip(candidates, terms, strict=True):
+        nf = noise_fit(samples.time_s, samples.drift_dph, monomials(x, y, ts), reml=False)
+        rows.append(
+            {
+                "candidate": name,
+                "n_terms": len(ts),
+                "minus2_log_likelihood": nf.minus2_log_likelihood,
+                "bic": nf.bic,
+                "white_sigma_dph": nf.sigma_dph,
+                "walk_dph_per_rt_h": nf.walk_dph_per_rt_h,
+            }
+        )
+    table = pd.DataFrame(rows)
+    if not np.isfinite(table["bic"]).any():
+        raise ParameterError(
+            "no candidate model can be fitted to these samples; use a longer log or a "
+            "narrower region"
+        )
+    cv = cross_validate(samples, terms, coding, folds=folds, eiv=eiv)
+    cv_rms = cv.groupby("candidate", sort=False)["mse_dph2"].mean() ** 0.5
+    table["cv_rms_dph"] = [float(cv_rms.get(term_set_name(ts), math.nan)) for ts in terms]
+    best = int(np.nanargmin(table["bic"].to_numpy()))
+    table.insert(4, "delta_bic", table["bic"] - table["bic"].iloc[best])
+    table["chosen"] = np.arange(len(table)) == best
+    return str(table["candidate"].iloc[best]), table
+
+
+# -- from a log ------------------------------------------------------------------------------
+def _estimate(log: MeasuredLog, method: str, params: ThermalParams, **levels) -> GradientEstimate:
+    if method == "model":
+        return estimate_gradient_model(log, params, **levels)
+    return estimate_gradient(log, **levels)
+
+
+def choose_estimator(log: MeasuredLog, estimator: str = "auto") -> str:
+    """``"model"`` when asked, or for ``auto`` when ``tk_set_c`` is complete; else kinematic."""
+    if estimator == "model":
+        if log.tk_set_c is None:
+            raise LogFormatError(
+                f"{log.source}: the model-based gradient needs the chamber column tk_set_c, "
+                "which the log does not have; use --estimator kinematic"
+            )
+        return "model"
+    if estimator == "kinematic":
+        return "kinematic"
+    ok = log.tk_set_c is not None and not np.isnan(log.tk_set_c).any()
+    return "model" if ok else "kinematic"
+
+
+def estimation_errors(
+    log: MeasuredLog,
+    est: GradientEstimate,
+    params: ThermalParams,
+    n_draws: int = 8,
+    seed: int = 0,
+    smooth_rows: int = 21,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-row ``(var T_hat, cov(T_hat, g_hat), var g_hat)`` of the smoother's noise.
+
+    Re-runs the smoother at the fitted noise levels on the readings plus white noise of
+    variance ``r`` (module docstring): the differences are draws of the estimator's noise.
+    The per-row moments are averaged over the draws and over a centred window of
+    ``smooth_rows`` rows (odd; the noise level changes slowly: gaps and the ends).
+
+    The draws see only the readings' noise. The order-3 kinematic smoother also errs where
+    its random-jerk model meets a ramp corner; its posterior variances are calibrated
+    against the actual error (tests/test_calibration.py) and about a third larger than the
+    draws', so for it the variances are the posterior's and the draws give only the T-g
+    correlation. (The order-2 posterior is about twice too large, the model-based one close
+    to the draws: both keep the draws.)
+    """
+    smooth_rows = smooth_rows + 1 - smooth_rows % 2  # odd: a centred window
+    rng = np.random.default_rng(seed)
+    finite = np.isfinite(log.t_int_c)
+    sd = math.sqrt(est.r)
+    method = est.method
+    e_t = np.zeros((n_draws, log.n_rows))
+    e_g = np.zeros((n_draws, log.n_rows))
+    for m in range(n_draws):
+        y = np.array(log.t_int_c, dtype=float)
+        y[finite] += sd * rng.standard_normal(int(finite.sum()))
+        y.setflags(write=False)
+        noisy = dataclasses.replace(log, t_int_c=y)
+        e2 = _estimate(noisy, method, params, q=est.q, r=est.r, quant_c=est.noise.quant_c)
+        e_t[m] = e2.t_est_c - est.t_est_c
+        e_g[m] = e2.g_est_c_per_min - est.g_est_c_per_min
+    moments = [np.mean(e_t**2, 0), np.mean(e_t * e_g, 0), np.mean(e_g**2, 0)]
+    if smooth_rows > 1 and log.n_rows > smooth_rows:
+        kernel = np.ones(smooth_rows) / smooth_rows
+        pad = smooth_rows // 2
+        moments = [np.convolve(np.pad(v, pad, mode="edge"), kernel, mode="valid") for v in moments]
+    if est.method == "kinematic" and est.order == 3 and est.time_s.size == log.n_rows:
+        var_t = np.square(est.t_std_c)
+        var_g = np.square(est.g_std_c_per_min)
+        denominator = np.sqrt(moments[0] * moments[2])
+        corr = np.divide(moments[1], denominator, out=np.zeros_like(denominator),
+                         where=denominator > 0)  # fmt: skip
+        return var_t, corr * np.sqrt(var_t * var_g), var_g
+    return moments[0], moments[1], moments[2]
+
+
+@dataclass(frozen=True, slots=True)
+class Holdout:
+    """The fitted models on a second log, over its samples inside the fit's domain.
+
+    ``rms_dph`` and ``reference_rms_dph``: residual RMS of the model and of the T-only
+    cubic, deg/h; ``mean_dph``: the model's mean residual (an offset between the runs,
+    e.g. the bias walk's level), deg/h.
+    """
+
+    source: str
+    n_samples: int
+    n_in_domain: int
+    rms_dph: float
+    reference_rms_dph: float
+    mean_dph: float
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True, slots=True)
+class DriftFit:
+    """A fitted drift model (module docstring) and everything needed to judge it.
+
+    Attributes
+    ----------
+    source : str
+        The log.
+    region_c : (lo, hi)
+        Approximation region, degC.
+    estimator : str
+        ``"model"`` or ``"kinematic"``.
+    model : PolyFit
+        The chosen (or requested) term set.
+    reference : PolyFit
+        The T-only cubic (the reference model), fitted on the same samples.
+    selection : DataFrame
+        Cross-validation per candidate (``select_terms``); ``chosen`` marks the model.
+    samples : Samples
+        The regression samples (in the region, time order).
+    domain : DataFrame
+        ``t_c, g_min_c_per_min, g_max_c_per_min, n``: gradients the run reached at each
+        grid temperature (within ``t_step_c/2``).
+    gradient_error_std_c_per_min : float
+        Median standard deviation of the gradient estimate's noise (error draws).
+    attenuation : float
+        ``var(e_g)/var(g_hat)`` in the region: the relative bias of a linear g term
+        without the correction.
+    holdout : Holdout or None
+    settings : FitSettings
+    notes : tuple of str
+    """
+
+    source: str
+    region_c: tuple[float, float]
+    estimator: str
+    model: PolyFit
+    reference: PolyFit
+    selection: pd.DataFrame
+    samples: Samples
+    domain: pd.DataFrame
+    gradient_error_std_c_per_min: float
+    attenuation: float
+    holdout: Holdout | None
+    settings: FitSettings
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def terms(self) -> tuple[str, ...]:
+        return self.model.terms
+
+    def to_frame(self) -> pd.DataFrame:
+        """Coefficients of the model (physical units, standard errors)."""
+        return self.model.to_frame()
+
+    def predict(self, t_c: np.ndarray, g_c_per_min: np.ndarray) -> np.ndarray:
+        return self.model.predict(t_c, g_c_per_min)
+
+    def in_domain(self, t_c: np.ndarray, g_c_per_min: np.ndarray) -> np.ndarray:
+        """Mask of points inside the region and the gradients reached at their temperature."""
+        t = np.asarray(t_c, dtype=float)
+        g = np.asarray(g_c_per_min, dtype=float)
+        d = self.domain
+        lo, hi = self.region_c
+        inside = np.isfinite(t) & np.isfinite(g) & (t >= lo) & (t <= hi)
+        g_min = np.interp(t, d["t_c"], d["g_min_c_per_min"])
+        g_max = np.interp(t, d["t_c"], d["g_max_c_per_min"])
+        return inside & (g >= g_min) & (g <= g_max)
+
+    def residual_frame(self) -> pd.DataFrame:
+        """The regression samples with the fitted drift and residual."""
+        s = self.samples
+        fitted = self.predict(s.t_c, s.g_c_per_min)
+        return pd.DataFrame(
+            {
+                "time_s": s.time_s,
+                "t_est_c": s.t_c,
+                "g_est_c_per_min": s.g_c_per_min,
+                "drift_dph": s.drift_dph,
+                "fitted_dph": fitted,
+                "residual_dph": s.drift_dph - fitted,
+                "reference_fitted_dph": self.reference.predict(s.t_c, s.g_c_per_min),
+            }
+        )
+
+    def compensation_frame(self) -> pd.DataFrame:
+        """The compensation table ``t_c, g_c_per_min, drift_dph`` (module docstring)."""
+        step = self.settings.g_step_c_per_min
+        t_list, g_list = [], []
+        for t, g_min, g_max in zip(
+            self.domain["t_c"],
+            self.domain["g_min_c_per_min"],
+            self.domain["g_max_c_per_min"],
+            strict=True,
+        ):
+            ks = np.arange(math.ceil(g_min / step - 1e-9), math.floor(g_max / step + 1e-9) + 1)
+            g = np.round(ks * step, 10)
+            t_list.append(np.full(g.size, t))
+            g_list.append(g)
+        t_all = np.concatenate(t_list) if t_list else np.zeros(0)
+        g_all = np.concatenate(g_list) if g_list else np.zeros(0)
+        return pd.DataFrame(
+            {
+                "t_c": t_all,
+                "g_c_per_min": g_all,
+                "drift_dph": self.predict(t_all, g_all) if t_all.size else np.zeros(0),
+            }
+        )
+
+    def to_json_dict(self) -> dict:
+        m = self.model
+        coefs = [
+            {
+                "term": t,
+                "power_t": EXPONENTS[t][0],
+                "power_g": EXPONENTS[t][1],
+                "coefficient": float(c),
+                "std_error": float(se),
+                "unit": unit_of(t),
+            }
+            for t, c, se in zip(m.terms, m.coefficients_dph, m.std_errors, strict=True)
+        ]
+        ref = self.reference
+        return {
+            "source": self.source,
+            "model": "drift_dph = sum coefficient * (T - t_ref_c)^power_t * g^power_g",
+            "t_ref_c": m.coding.t_ref_c,
+            "region_c": list(self.region_c),
+            "terms": term_set_name(m.terms),
+            "coefficients": coefs,
+            "covariance": m.covariance.tolist(),
+            "coded": {
+                "x": "(T - t_ref_c) / t_half_c",
+                "y": "g / g_half_c_per_min",
+                "t_half_c": m.coding.t_half_c,
+                "g_half_c_per_min": m.coding.g_half_c_per_min,
+                "coefficients_dph": m.coef_coded.tolist(),
+            },
+            "condition_number": m.condition_number,
+            "n_samples": m.n,
+            "residual_rms_dph": m.residual_rms_dph,
+            "noise": {
+                "white_sigma_dph": m.white_sigma_dph,
+                "bias_walk_dph_per_rt_h": m.walk_dph_per_rt_h,
+                "standard_errors": "sandwich with a white + random-walk residual model",
+            },
+            "gradient_estimator": self.estimator,
+            "errors_in_variables": {
+                "method": "adjusted least squares" if m.eiv else "none",
+                "gradient_error_std_c_per_min": self.gradient_error_std_c_per_min,
+                "attenuation_without_correction": self.attenuation,
+            },
+            "selection": self.selection.to_dict(orient="records"),
+            "reference_t_only": {
+                "coefficients": dict(zip(ref.terms, map(float, ref.coefficients_dph), strict=True)),
+                "std_errors": dict(zip(ref.terms, map(float, ref.std_errors), strict=True)),
+                "residual_rms_dph": ref.residual_rms_dph,
+            },
+            "holdout": None if self.holdout is None else self.holdout.to_dict(),
+            "notes": list(self.notes),
+        }
+
+    def summary_lines(self) -> list[str]:
+        m, ref = self.model, self.reference
+        lo, hi = self.region_c
+        lines = [
+            f"fit of {self.source} over {lo:g} .. {hi:g} °C: {m.n} samples, gradient from the "
+            f"{self.estimator} Kalman smoother (noise std {self.gradient_error_std_c_per_min:.3g}"
+            f" °C/min; uncorrected attenuation {self.attenuation:.2%})",
+            f"model {term_set_name(m.terms)} ({len(m.terms)} terms): residual RMS "
+            f"{m.residual_rms_dph:.4g} °/h (T-only cubic {ref.residual_rms_dph:.4g} °/h); "
+            f"noise white {m.white_sigma_dph:.3g} °/h + bias walk {m.walk_dph_per_rt_h:.3g} "
+            f"°/h/√h; condition number {m.condition_number:.3g}",
+        ]
+        sel = self.selection
+        if len(sel) > 1:
+            parts = [
+                f"{r.candidate} {r.delta_bic:+.1f} (CV RMS {r.cv_rms_dph:.4g})"
+                + (" *" if r.chosen else "")
+                for r in sel.itertuples()
+            ]
+            lines.append("term selection, BIC - best: " + ", ".join(parts))
+        for t, c, se in zip(m.terms, m.coefficients_dph, m.std_errors, strict=True):
+            lines.append(f"  {t:>4} = {c: .6g} ± {se:.2g} {unit_of(t)}")
+        if self.holdout is not None:
+            h = self.holdout
+            lines.append(
+                f"held out {h.source}: RMS {h.rms_dph:.4g} °/h (T-only cubic "
+                f"{h.reference_rms_dph:.4g} °/h) over {h.n_in_domain} of {h.n_samples} samples "
+                "inside the fit's region and gradients"
+            )
+        lines += [f"note: {n}" for n in self.notes]
+        return lines
+
+
+def _bins_check(t: np.ndarray, region: tuple[float, float], min_points: int, source: str):
+    lo, hi = region
+    n_bins = max(int(math.ceil(hi - lo - 1e-9)), 1)
+    k = np.clip(np.floor(t - lo).astype(int), 0, n_bins - 1)
+    counts = np.bincount(k, minlength=n_bins)
+    short = np.flatnonzero(counts < min_points)
+    if short.size:
+        spans = []
+        start = prev = int(short[0])
+        for b in list(short[1:]) + [None]:
+            if b is not None and b == prev + 1:
+                prev = int(b)
+                continue
+            spans.append(f"{lo + start:g} .. {min(lo + prev + 1, hi):g}")
+            if b is not None:
+                start = prev = int(b)
+        raise ParameterError(
+            f"{source}: too few samples in the region {lo:g} .. {hi:g} °C: the 1 °C bins "
+            f"{', '.join(spans[:5])} °C have fewer than {min_points} samples each; narrow "
+            "--region to where the run went (or lower --min-points-per-bin)"
+        )
+
+
+def _samples_from_log(
+    log: MeasuredLog,
+    region: tuple[float, float],
+    settings: FitSettings,
+    params: ThermalParams,
+) -> tuple[Samples, GradientEstimate, str]:
+    if log.drift_dph is None:
+        raise LogFormatError(
+            f"{log.source}: no drift_dph column; fitting needs the gyro's drift in °/h next to "
+            "t_int_c (output minus the known reference rate)"
+        )
+    method = choose_estimator(log, settings.estimator)
+    est = _estimate(log, method, params)
+    var_t, cov_tg, var_g = (
+        estimation_errors(log, est, params, settings.n_error_draws, settings.seed)
+        if settings.eiv == "als"
+        else (np.zeros(log.n_rows),) * 3
+    )
+    t, g, d = est.t_est_c, est.g_est_c_per_min, np.asarray(log.drift_dph, dtype=float)
+    lo, hi = region
+    ok = np.isfinite(t) & np.isfinite(g) & np.isfinite(d)
+    if not ok.any():
+        raise LogFormatError(f"{log.source}: column drift_dph has no finite value")
+    t_min, t_max = float(np.nanmin(t[ok])), float(np.nanmax(t[ok]))
+    inside = ok & (t >= lo) & (t <= hi)
+    if not inside.any():
+        raise ParameterError(
+            f"{log.source}: the internal temperature spans {t_min:.1f} .. {t_max:.1f} °C and "
+            f"never enters the region {lo:g} .. {hi:g} °C; choose --region inside what the "
+            "run covered"
+        )
+    _bins_check(t[inside], region, settings.min_points_per_bin, log.source)
+    idx = np.flatnonzero(inside)
+    s = Samples(
+        np.asarray(log.time_s, dtype=float)[idx],
+        t[idx],
+        g[idx],
+        d[idx],
+        var_t[idx],
+        cov_tg[idx],
+        var_g[idx],
+    )
+    return s, est, method
+
+
+def _domain(s: Samples, region: tuple[float, float], t_step: float) -> pd.DataFrame:
+    lo, hi = region
+    n = max(int(math.floor((hi - lo) / t_step + 1e-9)), 0)
+    temps = lo + t_step * np.arange(n + 1)
+    rows = []
+    for t in temps:
+        near = np.abs(s.t_c - t) <= 0.5 * t_step
+        if near.sum() >= 2:
+            rows.append(
+                {
+                    "t_c": float(t),
+                    "g_min_c_per_min": float(s.g_c_per_min[near].min()),
+                    "g_max_c_per_min": float(s.g_c_per_min[near].max()),
+                    "n": int(near.sum()),
+                }
+            )
+    return pd.DataFrame(rows, columns=["t_c", "g_min_c_per_min", "g_max_c_per_min", "n"])
+
+
+def fit_drift(
+    log: MeasuredLog,
+    region_c: tuple[float, float],
+    settings: FitSettings | None = None,
+    params: ThermalParams | None = None,
+    *,
+    holdout: MeasuredLog | None = None,
+) -> DriftFit:
+    """Fit the drift polynomial to ``log`` over the approximation region ``region_c``.
+
+    Parameters
+    ----------
+    log : MeasuredLog
+        A run with ``drift_dph`` (deg/h) and ``t_int_c`` (and ideally ``tk_set_c``).
+    region_c : (lo, hi)
+        Approximation region, degC: samples whose estimated T lies in it are fitted.
+    settings : FitSettings, optional
+        Terms, errors-in-variables method, estimator, cross-validation, grid.
+    params : ThermalParams, optional
+        Thermal model of the model-based gradient estimator (default ThermalParams()).
+    holdout : MeasuredLog, optional
+        A second run: the fitted models' residual RMS on it (inside the fit's domain).
+
+    Raises
+    ------
+    LogFormatError
+        No ``drift_dph`` column, or no finite drift.
+    ParameterError
+        A region the log never enters, bins with fewer than ``min_points_per_bin``
+        samples, or samples that cannot determine the terms.
+    """
+    settings = FitSettings() if settings is None else settings
+    params = ThermalParams() if params is None else params
+    try:
+        lo, hi = (float(v) for v in region_c)
+    except (TypeError, ValueError):
+        raise ParameterError(f"region_c must be (lo, hi) in °C, got {region_c!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise ParameterError(f"the region needs finite lo < hi, got {lo:g} .. {hi:g} °C")
+    region = (lo, hi)
+    s, _est, method = _samples_from_log(log, region, settings, params)
+    eiv = settings.eiv == "als"
+    g_half = max(float(np.max(np.abs(s.g_c_per_min))), 0.05)
+    coding = Coding(0.5 * (lo + hi), 0.5 * (hi - lo), g_half)
+    notes: list[str] = []
+    if settings.terms == "auto":
+        names = CANDIDATES
+    else:
+        requested = parse_terms(settings.terms)
+        # the reference and the requested set
+        names = tuple(dict.fromkeys(["t-only", term_set_name(requested)]))
+    chosen, table = select_terms(s, names, coding, eiv=eiv, folds=settings.cv_folds)
+    if settings.terms != "auto":
+        chosen = term_set_name(parse_terms(settings.terms))
+        table["chosen"] = table["candidate"] == chosen
+    model = fit_samples(s, chosen, coding, eiv=eiv)
+    reference = fit_samples(s, "t-only", coding, eiv=eiv)
+    if model.condition_number > 1e6:
+        notes.append(
+            f"the coded design is ill-conditioned (condition number {model.condition_number:.3g});"
+            " coefficients are strongly correlated"
+        )
+    var_e = float(np.mean(s.var_g))
+    var_g = float(np.var(s.g_c_per_min))
+    domain = _domain(s, region, settings.t_step_c)
+    fit = DriftFit(
+        source=log.source,
+        region_c=region,
+        estimator=method,
+        model=model,
+        reference=reference,
+        selection=table,
+        samples=s,
+        domain=domain,
+        gradient_error_std_c_per_min=float(np.sqrt(np.median(s.var_g))),
+        attenuation=var_e / var_g if var_g > 0 else math.nan,
+        holdout=None,
+        settings=settings,
+        notes=tuple(notes),
+    )
+    if holdout is not None:
+        fit = dataclasses.replace(fit, holdout=evaluate_holdout(fit, holdout, params))
+    return fit
+
+
+def evaluate_holdout(fit: DriftFit, log: MeasuredLog, params: ThermalParams) -> Holdout:
+    """Residual RMS of the fitted model and of the T-only reference on a second log,
+    over its samples inside the fit's region and reached gradients."""
+    if log.drift_dph is None:
+        raise LogFormatError(
+            f"{log.source}: the held-out log has no drift_dph column; it needs the drift in °/h"
+        )
+    method = choose_estimator(log, fit.settings.estimator)
+    est = _estimate(log, method, params)
+    d = np.asarray(log.drift_dph, dtype=float)
+    ok = np.isfinite(d) & fit.in_domain(est.t_est_c, est.g_est_c_per_min)
+    if ok.sum() < 10:
+        raise ParameterError(
+            f"{log.source}: only {int(ok.sum())} held-out samples lie inside the fit's region "
+            f"{fit.region_c[0]:g} .. {fit.region_c[1]:g} °C and the gradients the fitted run "
+            "reached; hold out a run over the same region"
+        )
+    t, g = est.t_est_c[ok], est.g_est_c_per_min[ok]
+    r = d[ok] - fit.model.predict(t, g)
+    r_ref = d[ok] - fit.reference.predict(t, g)
+    return Holdout(
+        source=log.source,
+        n_samples=log.n_rows,
+        n_in_domain=int(ok.sum()),
+        rms_dph=float(np.sqrt(np.mean(r**2))),
+        reference_rms_dph=float(np.sqrt(np.mean(r_ref**2))),
+        mean_dph=float(np.mean(r)),
+    )

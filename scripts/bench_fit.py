@@ -1,0 +1,288 @@
+"""Benchmark of the drift fit: schedsyn's plans vs paper-like baselines, and term selection.
+
+For every region of the paper's campaign (W1..W4) and every seeded random gyro (with and
+without gradient terms; ``schedsyn.gyro.random_gyro`` over the approximation region),
+the gyro is run through
+
+* schedsyn's plan (``PLANS/<experiment>/steps.csv`` from ``schedsyn campaign --out PLANS``)
+* a paper-like programme of the same duration (``schedsyn.baseline.paper_like_programme``)
+
+with the device's thermal model drawn around the nominal one (tau 2200..2600 s, dT0
+2..4 degC; the Kalman estimator assumes the nominal 2400 s / 3 degC), logged every 10 s,
+and the drift fitted over the approximation region that both runs reached
+(``schedsyn.driftfit.fit_drift``, default settings). Reported per region:
+
+(a) the RMS error of the fitted drift (full model, and the selected one) against the
+    true polynomial over the working region x reachable gradients
+    (``DesignSpace.grid("working")``), for the plan and the baseline; also with the
+    mean offset removed (what is left when the random walk's average level is ignored);
+(b) on gyros with gradient terms: the error of the full model and of the T-only cubic
+    fitted on the plan's run, held out on the baseline's run (a different trajectory,
+    independent noise), over its samples inside the fit's domain: against the noise-free
+    truth at the true (T, g), and as measured residual RMS (noise included); on gyros
+    without them: how often term selection picks the T-only model.
+
+    python scripts/bench_fit.py --plans out/campaign [--gyros 20] [--regions W1 W2]
+        [--workers 2] [--out out/bench_fit] [--seed 0] [--no-walk]
+
+``--no-walk`` drops the bias random walk (white noise only): a diagnostic that shows how
+much of (a) the plan's design decides once the walk's offset is gone.
+
+Writes OUT/cases.csv (one row per gyro and region), OUT/summary.csv and OUT/summary.md.
+Timings are not the point here; the machine is shared.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+import schedsyn
+from schedsyn.baseline import paper_like_programme
+from schedsyn.design import DesignSpace, programme_design
+from schedsyn.driftfit import fit_drift, fit_samples
+from schedsyn.errors import ParameterError
+from schedsyn.gyro import gyro_log, random_gyro
+from schedsyn.io import write_frame_atomic, write_text_atomic
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE_S = 10.0
+TAU_RANGE_S = (2200.0, 2600.0)
+DT0_RANGE_C = (2.0, 4.0)
+
+
+@dataclass(frozen=True)
+class Case:
+    region: str
+    region_index: int
+    working: tuple[float, float]
+    approx: tuple[float, float]
+    plan_csv: str
+    duration_min: float
+    index: int
+    gradient: bool
+    seed: int
+    walk: bool = True
+
+
+def _rms(x) -> float:
+    x = np.asarray(x, dtype=float)
+    return float(np.sqrt(np.mean(x**2)))
+
+
+def _common_region(frames, approx):
+    """The approximation region shrunk to whole degrees both runs reached."""
+    lo = max(approx[0], max(float(f["t_true_c"].min()) for f in frames))
+    hi = min(approx[1], min(float(f["t_true_c"].max()) for f in frames))
+    return float(math.ceil(lo * 2) / 2), float(math.floor(hi * 2) / 2)
+
+
+def _fit(frame, region, source, holdout=None):
+    log = schedsyn.log_from_frame(frame, source)
+    lo, hi = region
+    for _ in range(6):  # shrink by 0.5 degC at an edge with too few samples
+        try:
+            return fit_drift(log, (lo, hi), holdout=holdout), (lo, hi)
+        except ParameterError as exc:
+            if "too few samples" not in str(exc):
+                raise
+            mid = 0.5 * (lo + hi)
+            t = frame["t_true_c"].to_numpy()
+            near_lo = np.sum((t >= lo) & (t < lo + 1))
+            near_hi = np.sum((t > hi - 1) & (t <= hi))
+            lo, hi = (lo + 0.5, hi) if near_lo <= near_hi and lo + 0.5 < mid else (lo, hi - 0.5)
+    raise RuntimeError(f"{source}: could not fit over {region}")
+
+
+def run_case(case: Case) -> dict:
+    rng = np.random.default_rng([case.seed, case.region_index, case.index, int(case.gradient)])
+    gyro = random_gyro(rng, case.approx, gradient_terms=case.gradient)
+    if not case.walk:  # diagnostic: white noise only
+        gyro = dataclasses.replace(gyro, bias_walk_dph_per_rt_h=0.0)
+    device = schedsyn.ThermalParams(
+        float(rng.uniform(*TAU_RANGE_S)), float(rng.uniform(*DT0_RANGE_C))
+    )
+    plan = schedsyn.read_steps(case.plan_csv)
+    base = paper_like_programme(*case.working, *case.approx, case.duration_min)
+    seeds = rng.integers(2**31, size=2)
+    f_plan = gyro_log(plan, gyro, device, sample_s=SAMPLE_S, seed=int(seeds[0]))
+    f_base = gyro_log(base, gyro, device, sample_s=SAMPLE_S, seed=int(seeds[1]))
+    region = _common_region([f_plan, f_base], case.approx)
+    log_base = schedsyn.log_from_frame(f_base, "baseline")
+    fit_p, region = _fit(f_plan, region, "plan", holdout=log_base)
+    fit_b, _ = _fit(f_base, region, "baseline")
+    space = DesignSpace(*case.working, *case.approx)
+    t_grid, g_grid = space.grid("working")
+    truth = gyro.drift_dph(t_grid, g_grid)
+    row = {
+        "region": case.region,
+        "gyro": case.index,
+        "gradient_terms": case.gradient,
+        "fit_lo_c": region[0],
+        "fit_hi_c": region[1],
+        "tau_s": device.tau_s,
+        "dt0_c": device.dt0_c,
+        "white_dph_per_rt_hz": gyro.white_noise_dph_per_rt_hz,
+        "walk_dph_per_rt_h": gyro.bias_walk_dph_per_rt_h,
+        "plan_selected": _name(fit_p),
+        "baseline_selected": _name(fit_b),
+    }
+    for tag, fit in (("plan", fit_p), ("baseline", fit_b)):
+        full = fit_samples(fit.samples, "full", fit.model.coding)
+        for mname, model in (("full", full), ("selected", fit.model), ("tonly", fit.reference)):
+            err = model.predict(t_grid, g_grid) - truth
+            row[f"{tag}_{mname}_rms_dph"] = _rms(err)
+            row[f"{tag}_{mname}_shape_rms_dph"] = _rms(err - err.mean())
+    # (b) held out on the baseline's run: inside the plan fit's domain
+    full_p = fit_samples(fit_p.samples, "full", fit_p.model.coding)
+    est = schedsyn.estimate_gradient_model(log_base)
+    inside = fit_p.in_domain(est.t_est_c, est.g_est_c_per_min)
+    t_true = f_base["t_true_c"].to_numpy()[inside]
+    g_true = f_base["g_true_c_per_min"].to_numpy()[inside]
+    d_true = f_base["drift_true_dph"].to_numpy()[inside]
+    d_meas = f_base["drift_dph"].to_numpy()[inside]
+    t_est, g_est = est.t_est_c[inside], est.g_est_c_per_min[inside]
+    row["holdout_n"] = int(inside.sum())
+    for mname, model in (("full", full_p), ("tonly", fit_p.reference)):
+        row[f"holdout_{mname}_truth_rms_dph"] = _rms(model.predict(t_true, g_true) - d_true)
+        row[f"holdout_{mname}_measured_rms_dph"] = _rms(d_meas - model.predict(t_est, g_est))
+    return row
+
+
+def _name(fit) -> str:
+    return str(fit.selection.loc[fit.selection["chosen"], "candidate"].iloc[0])
+
+
+def summarise(cases: pd.DataFrame, designs: dict) -> pd.DataFrame:
+    rows = []
+    for region, c in cases.groupby("region", sort=False):
+        g = c[c["gradient_terms"]]
+        n = c[~c["gradient_terms"]]
+        ratio_full = c["plan_full_rms_dph"] / c["baseline_full_rms_dph"]
+        ratio_sel = c["plan_selected_rms_dph"] / c["baseline_selected_rms_dph"]
+        ho = g["holdout_tonly_truth_rms_dph"] / g["holdout_full_truth_rms_dph"]
+        ho_m = g["holdout_tonly_measured_rms_dph"] / g["holdout_full_measured_rms_dph"]
+        d = designs[region]
+        rows.append(
+            {
+                "region": region,
+                "gyros": int(len(c)),
+                "plan_d_eff_pct": d["plan"].d_efficiency_pct,
+                "plan_i_eff_pct": d["plan"].i_efficiency_pct,
+                "baseline_d_eff_pct": d["baseline"].d_efficiency_pct,
+                "baseline_i_eff_pct": d["baseline"].i_efficiency_pct,
+                "plan_full_rms_dph_median": c["plan_full_rms_dph"].median(),
+                "baseline_full_rms_dph_median": c["baseline_full_rms_dph"].median(),
+                "ratio_full_median": ratio_full.median(),
+                "ratio_full_le_half_share": float((ratio_full <= 0.5).mean()),
+                "ratio_selected_median": ratio_sel.median(),
+                "selected_rms_dph_median_plan": c["plan_selected_rms_dph"].median(),
+                "selected_rms_dph_median_baseline": c["baseline_selected_rms_dph"].median(),
+                "plan_full_shape_rms_dph_median": c["plan_full_shape_rms_dph"].median(),
+                "baseline_full_shape_rms_dph_median": c["baseline_full_shape_rms_dph"].median(),
+                "ratio_shape_median": (
+                    c["plan_full_shape_rms_dph"] / c["baseline_full_shape_rms_dph"]
+                ).median(),
+                "holdout_full_truth_rms_dph_median": g["holdout_full_truth_rms_dph"].median(),
+                "holdout_tonly_truth_rms_dph_median": g["holdout_tonly_truth_rms_dph"].median(),
+                "holdout_tonly_over_full_median": ho.median(),
+                "holdout_tonly_over_full_ge_2_share": float((ho >= 2).mean()),
+                "holdout_measured_tonly_over_full_median": ho_m.median(),
+                "tonly_selected_share_no_gradient": float((n["plan_selected"] == "t-only").mean()),
+                "tonly_selected_share_gradient": float((g["plan_selected"] == "t-only").mean()),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def markdown(summary: pd.DataFrame) -> str:
+    cols = {
+        "region": "region",
+        "gyros": "gyros",
+        "plan_i_eff_pct": "I-eff plan, %",
+        "baseline_i_eff_pct": "I-eff baseline, %",
+        "plan_full_rms_dph_median": "(a) RMS plan, °/h",
+        "baseline_full_rms_dph_median": "(a) RMS baseline, °/h",
+        "ratio_full_median": "(a) ratio (target <= 0.5)",
+        "ratio_shape_median": "(a) ratio, offset removed",
+        "holdout_tonly_over_full_median": "(b) T-only / full held out (target >= 2)",
+        "holdout_measured_tonly_over_full_median": "(b) same, measured residuals",
+        "tonly_selected_share_no_gradient": "(b) T-only chosen, no g terms (target >= 90 %)",
+    }
+    s = summary[list(cols)].rename(columns=cols)
+    lines = ["| " + " | ".join(s.columns) + " |", "|" + "---|" * len(s.columns)]
+    for _, r in s.iterrows():
+        cells = []
+        for k, v in r.items():
+            if isinstance(v, float):
+                cells.append(f"{v:.0%}" if "chosen" in k else f"{v:.3g}")
+            else:
+                cells.append(str(v))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--plans", default="out/campaign", help="schedsyn campaign output folder")
+    ap.add_argument("--gyros", type=int, default=20, help="gyros per region and kind")
+    ap.add_argument("--regions", nargs="*", default=None, help="experiments (default all)")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", default="out/bench_fit")
+    ap.add_argument(
+        "--no-walk",
+        action="store_true",
+        help="diagnostic: gyros without the bias random walk (white noise only)",
+    )
+    args = ap.parse_args()
+    config = schedsyn.load_campaign(ROOT / "data" / "paper_campaign.toml")
+    cases, designs = [], {}
+    for k, spec in enumerate(config.experiments):
+        if args.regions and spec.name not in args.regions:
+            continue
+        plan_csv = Path(args.plans) / spec.name / "steps.csv"
+        plan = schedsyn.read_steps(plan_csv)
+        working = (spec.working_lo_c, spec.working_hi_c)
+        approx = (spec.approx_lo_c, spec.approx_hi_c)
+        base = paper_like_programme(*working, *approx, plan.total_min)
+        space = DesignSpace(*working, *approx)
+        designs[spec.name] = {
+            "plan": programme_design(plan, space),
+            "baseline": programme_design(base, space),
+        }
+        for i in range(args.gyros):
+            for gradient in (True, False):
+                case = Case(
+                    region=spec.name,
+                    region_index=k,
+                    working=working,
+                    approx=approx,
+                    plan_csv=str(plan_csv),
+                    duration_min=plan.total_min,
+                    index=i,
+                    gradient=gradient,
+                    seed=args.seed,
+                    walk=not args.no_walk,
+                )
+                cases.append(case)
+    rows = schedsyn.run_map(run_case, cases, "local", workers=args.workers, desc="gyros")
+    frame = pd.DataFrame(rows)
+    out = Path(args.out)
+    write_frame_atomic(out / "cases.csv", frame)
+    summary = summarise(frame, designs)
+    write_frame_atomic(out / "summary.csv", summary)
+    md = markdown(summary)
+    write_text_atomic(out / "summary.md", md)
+    print(md)
+    print(f"wrote {out}/cases.csv, summary.csv, summary.md")
+
+
+if __name__ == "__main__":
+    main()

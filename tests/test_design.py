@@ -1,0 +1,296 @@
+"""Informativeness of a plan for the drift fit: pyDOE3's criteria against hand formulas,
+the I-optimal reference design against an SDP solver, reachable gradients against ODE
+solutions, the campaign columns, and the paper-like baseline generator."""
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from schedsyn.baseline import paper_like_programme
+from schedsyn.coverage import trajectory_coverage
+from schedsyn.design import (
+    MAX_COOL_C_PER_MIN,
+    MAX_HEAT_C_PER_MIN,
+    DesignSpace,
+    design_report,
+    i_optimal_design,
+    log_det_information,
+    plan_design,
+    programme_design,
+    reachable_gradients,
+)
+from schedsyn.errors import ParameterError
+from schedsyn.params import Limits, ThermalParams
+from schedsyn.programme import Programme, read_steps
+from schedsyn.simulate import simulate
+from schedsyn.terms import monomials
+
+BASELINE = "data/baseline_exp1_steps.csv"
+W1 = DesignSpace(-50.0, -30.0, -52.0, -20.0)
+
+
+# -- pyDOE3's definitions ------------------------------------------------------------------
+def test_pydoe3_efficiencies_match_hand_computation():
+    from pyDOE3.doe_optimal import a_efficiency, d_efficiency
+
+    # quadratic in one factor on {-1, 0, 1}: X'X = [[3,0,2],[0,2,0],[2,0,2]], det 4;
+    # (X'X)^-1 has trace 1 + 1/2 + 3/2 = 3, so tr((X'X/3)^-1) = 9
+    x = np.array([[1.0, -1.0, 1.0], [1.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    assert d_efficiency(x) == pytest.approx(100.0 * (4.0 / 27.0) ** (1.0 / 3.0))
+    assert a_efficiency(x) == pytest.approx(100.0 * 3.0 / 9.0)
+    # a 2^2 factorial for a linear model is orthogonal: 100 % both
+    f = np.array([[1.0, a, b] for a in (-1.0, 1.0) for b in (-1.0, 1.0)])
+    assert d_efficiency(f) == pytest.approx(100.0)
+    assert a_efficiency(f) == pytest.approx(100.0)
+
+
+def test_design_report_matches_its_definitions(rng):
+    t = rng.uniform(-55.0, -18.0, 800)  # some samples outside the approximation region
+    g = rng.uniform(-0.8, 0.95, 800)
+    rep = design_report(t, g, W1, "full")
+    inside = (t >= -52.0) & (t <= -20.0)
+    g_lo, g_hi = W1.gradient_range_c_per_min
+    u = (t[inside] + 36.0) / 16.0
+    v = (g[inside] - 0.5 * (g_lo + g_hi)) / (0.5 * (g_hi - g_lo))
+    x = monomials(u, v, ("1", "t", "g", "t2", "tg", "g2", "t3", "t2g", "tg2", "g3"))
+    m = x.T @ x / x.shape[0]
+    assert rep.n_samples == 800 and rep.n_in_region == int(inside.sum())
+    assert rep.d_efficiency_pct == pytest.approx(100.0 * np.linalg.det(m) ** 0.1)
+    assert rep.a_efficiency_pct == pytest.approx(100.0 * 10 / np.trace(np.linalg.inv(m)))
+    vmap = rep.to_frame()
+    gu = (vmap["t_c"].to_numpy() + 36.0) / 16.0
+    gv = (vmap["g_c_per_min"].to_numpy() - 0.5 * (g_lo + g_hi)) / (0.5 * (g_hi - g_lo))
+    xg = monomials(gu, gv, rep.terms)
+    var = np.einsum("ij,jk,ik->i", xg, np.linalg.inv(m), xg)
+    np.testing.assert_allclose(vmap["prediction_variance"], var, rtol=1e-8)
+    assert rep.mean_variance == pytest.approx(var.mean())
+    assert rep.max_variance == pytest.approx(var.max())
+    assert rep.i_efficiency_pct == pytest.approx(100.0 * rep.i_optimal_variance / var.mean())
+    # the map covers the working region, inside the reachable gradients
+    lo, hi = reachable_gradients(vmap["t_c"].to_numpy())
+    assert vmap["t_c"].between(-50.0, -30.0).all()
+    assert np.all(vmap["g_c_per_min"] >= lo - 1e-9) and np.all(vmap["g_c_per_min"] <= hi + 1e-9)
+
+
+def test_singular_samples_are_reported_not_inverted():
+    t = np.linspace(-52, -20, 300)
+    rep = design_report(t, np.full_like(t, 0.3), W1, "full")  # one gradient: no g terms
+    assert rep.singular and rep.d_efficiency_pct == 0.0 and rep.i_efficiency_pct == 0.0
+    assert "singular" in rep.summary()
+    ok = design_report(t, np.full_like(t, 0.3), W1, "t-only")  # the T-only cubic is fine
+    assert not ok.singular and ok.d_efficiency_pct > 0
+
+
+def test_more_samples_never_lower_the_information(rng):
+    t = rng.uniform(-52, -20, 200)
+    g = rng.uniform(-0.8, 0.9, 200)
+    before = log_det_information(t, g, W1)
+    after = log_det_information(np.append(t, -40.0), np.append(g, 0.1), W1)
+    assert after >= before and math.isfinite(before)
+
+
+# -- the I-optimal reference design ---------------------------------------------------------
+def _sdp_i_optimum(c, w):
+    import cvxpy as cp
+
+    n = c.shape[0]
+    lam = cp.Variable(n, nonneg=True)
+    m = c.T @ cp.diag(lam) @ c
+    root = np.linalg.cholesky(w + 1e-12 * np.eye(w.shape[0]))
+    obj = sum(cp.matrix_frac(root[:, j], m) for j in range(w.shape[0]))
+    prob = cp.Problem(cp.Minimize(obj), [cp.sum(lam) == 1])
+    prob.solve(solver=cp.CLARABEL)
+    return prob.value
+
+
+def test_i_optimal_design_matches_an_sdp_solver():
+    # quadratic in one factor, uniform weight on [-1, 1]
+    x = np.linspace(-1, 1, 21)
+    c = monomials(x, np.zeros_like(x), ("1", "t", "t2"))
+    xs = np.linspace(-1, 1, 2001)
+    w_mat = monomials(xs, np.zeros_like(xs), ("1", "t", "t2"))
+    w = w_mat.T @ w_mat / xs.size
+    phi, weights = i_optimal_design(c, w, tol=1e-4)
+    assert phi == pytest.approx(_sdp_i_optimum(c, w), rel=2e-4)
+    assert weights[[0, 10, 20]].sum() > 0.99  # support at -1, 0, 1
+    # two factors, the full cubic, on a small grid of the W1 space
+    t, g = W1.grid("approx", 4.0, 0.2)
+    u, v = W1.code(t, g)
+    terms = ("1", "t", "g", "t2", "tg", "g2", "t3", "t2g", "tg2", "g3")
+    c2 = monomials(u, v, terms)
+    tw, gw = W1.grid("working")
+    xw = monomials(*W1.code(tw, gw), terms)
+    w2 = xw.T @ xw / xw.shape[0]
+    phi2, _ = i_optimal_design(c2, w2, tol=1e-3)
+    assert phi2 == pytest.approx(_sdp_i_optimum(c2, w2), rel=2e-3)
+
+
+# -- reachable gradients ----------------------------------------------------------------------
+def test_reachable_gradient_bounds_by_ode():
+    p, lim = ThermalParams(), Limits()
+    tau = p.tau_min
+    big = 99.0
+    # speeding up from rest at the device floor at the full heating rate: the gradient
+    # when the device passes -45 degC
+    sol = solve_ivp(
+        lambda t, y: [3.0, (y[0] + p.dt0_c - y[1]) / tau],
+        (0, 200),
+        [lim.device_min_c - p.dt0_c, lim.device_min_c],
+        events=lambda t, y: y[1] + 45.0,
+        rtol=1e-10,
+        atol=1e-10,
+        max_step=0.5,
+    )
+    tk, t_dev = sol.y_events[0][0]
+    g_at = (tk + p.dt0_c - t_dev) / tau
+    _, hi = reachable_gradients(np.array([-45.0]), p, lim, big, big)
+    assert hi[0] == pytest.approx(g_at, rel=1e-4)
+    # stopping from 0.8 degC/min with the full cooling rate: how far past T it goes
+    sol = solve_ivp(
+        lambda t, y: [-1.0, (y[0] + p.dt0_c - y[1]) / tau],
+        (0, 500),
+        [0.0 - p.dt0_c + 0.8 * tau, 0.0],
+        events=lambda t, y: y[0] + p.dt0_c - y[1],
+        rtol=1e-10,
+        atol=1e-10,
+        max_step=0.5,
+    )
+    overshoot = sol.y_events[0][0][1]
+    t0 = lim.device_max_c - overshoot  # from here 0.8 degC/min is just stoppable
+    _, hi = reachable_gradients(np.array([t0]), p, lim, big, big)
+    assert hi[0] == pytest.approx(min(0.8, (lim.chamber_max_c + p.dt0_c - t0) / tau), rel=1e-4)
+    # the chamber floor bounds cooling near -50: g >= (Tk_min + dT0 - T)/tau
+    lo, _ = reachable_gradients(np.array([-50.0]), p, lim, big, big)
+    assert lo[0] >= (lim.chamber_min_c + p.dt0_c + 50.0) / tau - 1e-12
+    # the caps are the planner's defaults
+    from schedsyn.planner import ExperimentSpec
+
+    spec = ExperimentSpec("x", -50, -30, -52, -20)
+    assert (spec.max_cool_c_per_min, spec.max_heat_c_per_min) == (
+        MAX_COOL_C_PER_MIN,
+        MAX_HEAT_C_PER_MIN,
+    )
+
+
+def test_runs_that_stay_in_the_device_limits_stay_in_the_reachable_band(rng):
+    """Random paper-style programmes (ramps at random rates to random setpoints, holds,
+    a final long hold): wherever the device stays inside its limits, every sample's
+    gradient lies in the reachable band."""
+    p, lim = ThermalParams(), Limits()
+    checked = 0
+    for _ in range(60):
+        durations, rates, tk = [], [], 20.0
+        for _ in range(int(rng.integers(2, 7))):
+            target = float(rng.uniform(-62.0, 66.0))
+            up = target > tk
+            rate = float(rng.uniform(0.2, 1.0) * (3.0 if up else 1.0))
+            durations += [abs(target - tk) / rate, float(rng.uniform(1.0, 60.0))]
+            rates += [rate if up else -rate, 0.0]
+            tk = target
+        durations[-1] = 400.0  # settle
+        traj = simulate(Programme(np.array(durations), np.array(rates)), p, dt_min=0.5)
+        if traj.t_c.min() < lim.device_min_c or traj.t_c.max() > lim.device_max_c:
+            continue
+        lo, hi = reachable_gradients(traj.t_c, p, lim, 99.0, 99.0)
+        assert np.all(traj.g_c_per_min <= hi + 1e-6) and np.all(traj.g_c_per_min >= lo - 1e-6)
+        checked += 1
+    assert checked >= 10
+
+
+def test_design_space_validation():
+    with pytest.raises(ParameterError, match="must contain the working region"):
+        DesignSpace(-50, -30, -45, -20)
+    with pytest.raises(ParameterError, match="no gradient is reachable"):
+        DesignSpace(-60, -53, -60, -20)
+    edge = DesignSpace(-52, -30, -52, -20)  # a working edge at the device limit is fine
+    assert edge.gradient_band(np.array([-52.0]))[1][0] == 0.0
+    assert DesignSpace.default_approx(-50, -30) == (-52.0, -20.0)
+    assert DesignSpace.default_approx(0, 30) == (-10.0, 40.0)
+
+
+# -- plans, the campaign, the baseline --------------------------------------------------------
+def test_plan_design_uses_the_plans_regions_and_programme():
+    from schedsyn.planner import ExperimentSpec
+
+    prog = read_steps(BASELINE)
+    spec = ExperimentSpec("W1", -50, -30, -52, -20, max_heat_c_per_min=0.9)
+    plan = SimpleNamespace(spec=spec, params=ThermalParams(), limits=Limits(), programme=prog)
+    rep = plan_design(plan)
+    space = DesignSpace(-50, -30, -52, -20, max_heat_c_per_min=0.9)
+    assert rep.space == space
+    assert rep.d_efficiency_pct == pytest.approx(programme_design(prog, space).d_efficiency_pct)
+
+
+def test_campaign_summary_has_design_columns():
+    from schedsyn.campaign import SUMMARY_COLUMNS, _baseline_row
+    from schedsyn.planner import ExperimentSpec
+
+    for col in ("d_efficiency_pct", "i_efficiency_pct", "baseline_d_efficiency_pct"):
+        assert col in SUMMARY_COLUMNS
+    spec = ExperimentSpec("W1", -50, -30, -52, -20)
+    row = _baseline_row(BASELINE, spec, ThermalParams(), Limits())
+    rep = programme_design(read_steps(BASELINE), W1)
+    assert row["baseline_d_efficiency_pct"] == pytest.approx(rep.d_efficiency_pct)
+    assert row["baseline_i_efficiency_pct"] == pytest.approx(rep.i_efficiency_pct)
+    assert math.isnan(
+        _baseline_row(None, spec, ThermalParams(), Limits())["baseline_d_efficiency_pct"]
+    )
+
+
+def _turning_points(traj):
+    s = np.sign(traj.g_c_per_min)
+    idx = np.flatnonzero((s[1:] != s[:-1]) & (s[1:] != 0))
+    return traj.t_c[idx]
+
+
+def test_paper_like_generator_reproduces_the_hand_made_w1_baseline():
+    hand = read_steps(BASELINE)
+    gen = paper_like_programme(-50, -30, -52, -20, hand.total_min)
+    lim = Limits()
+    assert gen.total_min == hand.total_min and gen.violations(lim) == []
+    assert np.allclose(gen.durations_min, np.round(gen.durations_min))
+    assert np.allclose(gen.boundary_temps_c * 10, np.round(gen.boundary_temps_c * 10))
+    tg, th = simulate(gen, dt_min=0.1), simulate(hand, dt_min=0.1)
+    # the same structure: a cooling, then heating and cooling cycles, the last heating the
+    # return; five turns inside the approximation region
+    turns_g = _turning_points(tg)[1:]  # (the first "turn" is the start at 20 degC)
+    turns_h = _turning_points(th)[1:]
+    assert len(turns_g) == len(turns_h) == 5
+    assert np.all((turns_g >= -52.0) & (turns_g <= -19.5))
+    assert tg.t_c.min() >= lim.device_min_c
+    cov_g = trajectory_coverage(tg, -50, -30).coverage
+    cov_h = trajectory_coverage(th, -50, -30).coverage
+    assert abs(cov_g - cov_h) <= 0.2 and cov_g < 1.0  # paper-like: not complete
+    i_g = programme_design(gen, W1).i_efficiency_pct
+    i_h = programme_design(hand, W1).i_efficiency_pct
+    assert abs(i_g - i_h) <= 15.0
+
+
+@pytest.mark.parametrize(
+    "region", [(-30, 0, -40, 10, 535), (0, 30, -10, 40, 535), (30, 60, 20, 60, 530)]
+)
+def test_paper_like_programmes_for_other_regions(region):
+    wl, wh, al, ah, dur = region
+    prog = paper_like_programme(wl, wh, al, ah, dur)
+    lim = Limits()
+    assert prog.total_min == dur and prog.violations(lim) == []
+    traj = simulate(prog, dt_min=0.1)
+    assert lim.device_min_c <= traj.t_c.min() and traj.t_c.max() <= lim.device_max_c
+    # it sweeps the approximation region, turning at both edges (within 2 degC) and at
+    # varied depths inside it, never outside it
+    turns = _turning_points(traj)[1:]
+    assert np.any(turns <= al + 2.0) and np.any(turns >= ah - 2.0) and len(turns) >= 4
+    assert np.all((turns >= al - 0.5) & (turns <= ah + 0.5))
+    assert traj.t_c.min() >= min(al, 20.0) - 0.5 and traj.t_c.max() <= max(ah, 20.0) + 0.5
+
+
+def test_paper_like_generator_rejects_bad_requests():
+    with pytest.raises(ParameterError, match="too short"):
+        paper_like_programme(-50, -30, -52, -20, 60)
+    with pytest.raises(ParameterError, match="heat_rates"):
+        paper_like_programme(-50, -30, -52, -20, 480, heat_rates_c_per_min=(4.0,))
+    with pytest.raises(ParameterError, match="device limits"):
+        paper_like_programme(-50, -30, -60, -20, 480)
