@@ -125,7 +125,7 @@ def discover(bench_dir: Path, only: list[str] | None) -> list[Path]:
     """The campaign files to plan, sorted by name; ``only``: these request names."""
     if not bench_dir.is_dir():
         raise ParameterError(f"--bench-dir {bench_dir} is not a folder of campaign files")
-    files = sorted(bench_dir.glob("*.toml"))
+    files = sorted(bench_dir.glob("*.toml"), key=lambda f: f.stem)
     if not files:
         raise ParameterError(f"--bench-dir {bench_dir} holds no *.toml campaign file")
     if only:
@@ -181,6 +181,7 @@ def plan_request(path: str, out_dir: str, progress: Progress | None) -> dict[str
     row: dict[str, Any] = {"request": spec.name, "steps_csv": None, "error": ""}
     row["duration_lower_bound_min"] = duration_lower_bound(spec, params, limits).lower_bound_min
     say(f"planning (lower bound {row['duration_lower_bound_min']:.0f} min)")
+    start = time.perf_counter()
     try:
         plan = plan_experiment(spec, params, limits, progress=say)
     except InfeasiblePlanError as exc:
@@ -204,7 +205,7 @@ def plan_request(path: str, out_dir: str, progress: Progress | None) -> dict[str
             solve_s=plan.solve_s,
             note=" | ".join(plan.notes),
         )
-    row["wall_s"] = time.perf_counter() - tic
+    row.setdefault("solve_s", time.perf_counter() - start)  # no plan: until it gave up
     say(f"done: {row['status']}")
     return row
 
@@ -436,10 +437,12 @@ def markdown_table(frame: pd.DataFrame) -> str:
     ]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for _, r in frame.iterrows():
-        if r["status"] in ("infeasible", "refused", "crashed"):
+        if r["complete"]:
+            done = "yes"
+        elif r["status"] in ("complete", "incomplete"):
+            done = "**no**"
+        else:  # infeasible, refused, crashed, limits violated
             done = f"**no** ({r['status']})"
-        else:
-            done = "yes" if r["complete"] else "**no**"
         if not r["recheck_agrees"]:
             done += " ⚠ planner says " + ("complete" if r["planner_complete"] else "incomplete")
         cov = "-" if math.isnan(r["coverage"]) else f"{r['coverage']:.0%}"
@@ -470,7 +473,7 @@ def headline_lines(head: dict[str, Any]) -> list[str]:
     lines = [
         f"- complete where the bound fits the budget: {head['complete_where_bound_fits']} of "
         f"{head['bound_fits_budget']} ({_num(100 * head['complete_share_where_bound_fits'])} "
-        f"%; target >= {TARGET_COMPLETE_SHARE:.0%}: {ok})"
+        f"%; target >= {100 * TARGET_COMPLETE_SHARE:.0f} %: {ok})"
         + (
             f"; not complete: {', '.join(head['incomplete_where_bound_fits'])}"
             if head["incomplete_where_bound_fits"]
@@ -581,6 +584,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
     out = args.out
+    commit, date = _git_commit(), time.strftime("%Y-%m-%d %H:%M")  # what is measured
     load_start = os.getloadavg()
     tic = time.perf_counter()
     # the widest regions first, so that the pool does not end waiting on one long request
@@ -612,14 +616,14 @@ def main(argv: list[str] | None = None) -> int:
     )
     load_end = os.getloadavg()
     head["meta"] = {
-        "commit": _git_commit(),
+        "commit": commit,
         "machine": platform.processor() or platform.machine(),
         "cores": os.cpu_count(),
         "workers": args.workers or os.cpu_count(),
         "load_average_start": list(load_start),
         "load_average_end": list(load_end),
         "requests_wall_s": plan_wall_s,
-        "date": time.strftime("%Y-%m-%d %H:%M"),
+        "date": date,
     }
 
     meta = head["meta"]

@@ -109,6 +109,43 @@ def test_a_request_with_two_experiments_is_refused(tmp_path, capsys):
     assert code == 2 and "exactly one [[experiment]]" in err and "two.toml" in err
 
 
+def test_a_planner_crash_is_a_row_with_its_traceback(tmp_path, monkeypatch):
+    """A crash (a planner bug) does not stop the benchmark; an old table is not re-used."""
+
+    def crash(*args, **kwargs):
+        raise ZeroDivisionError("planted")
+
+    monkeypatch.setattr(bench, "plan_experiment", crash)
+    folder = tmp_path / "w1"
+    folder.mkdir()
+    (folder / "steps.csv").write_text("left from an earlier run\n")
+    row = bench.plan_request(str(BENCH / "w1.toml"), str(tmp_path), None)
+    assert row["status"] == "crashed" and row["steps_csv"] is None
+    assert "ZeroDivisionError: planted" in row["error"] and row["solve_s"] >= 0
+    assert "planted" in (folder / "traceback.txt").read_text()
+    assert not (folder / "steps.csv").exists()
+    config = load_campaign(BENCH / "w1.toml")
+    out = bench.recheck(row, config, bench._check_tables_module())
+    assert not out["complete"] and out["status"] == "crashed"
+    head = bench.headline(pd.DataFrame([out], columns=list(bench.COLUMNS)))
+    assert head["crashed"] == ["w1"]
+    assert "CRASHED" in "\n".join(bench.headline_lines({**head, "paper": {}, "campaign": None}))
+
+
+def test_an_infeasible_request_is_a_row_with_the_planners_message(tmp_path, monkeypatch):
+    from schedsyn.errors import InfeasiblePlanError
+
+    def refuse(spec, *args, **kwargs):
+        raise InfeasiblePlanError(f"{spec.name}: nothing fits", best_coverage=0.25)
+
+    monkeypatch.setattr(bench, "plan_experiment", refuse)
+    row = bench.plan_request(str(BENCH / "w2-300.toml"), str(tmp_path), None)
+    assert row["status"] == "infeasible" and row["planner_coverage"] == 0.25
+    assert row["error"] == "w2-300: nothing fits"
+    out = bench.recheck(row, load_campaign(BENCH / "w2-300.toml"), bench._check_tables_module())
+    assert not out["complete"] and not out["bound_fits_budget"] and out["recheck_agrees"]
+
+
 # ---------------------------------------------------------------------------------------
 # the re-check, on hand-built step tables
 # ---------------------------------------------------------------------------------------
