@@ -38,8 +38,16 @@ def levels_per_bin(temp_c, grad, lo_c, hi_c, delta):
 
 
 def check(
-    steps_csv: Path, tau_s: float, dt0_c: float, lo_c: float, hi_c: float, levels: int, delta: float
+    steps_csv: Path,
+    tau_s: float,
+    dt0_c: float,
+    lo_c: float,
+    hi_c: float,
+    levels: int,
+    delta: float,
+    t0_c: float | None = None,
 ) -> dict:
+    """Simulate the table and count; ``t0_c``: device at t = 0 (default: the chamber's start)."""
     df = pd.read_csv(steps_csv, comment="#")  # the metadata lines at the top
     start = df["start_min"].to_numpy(float)
     dur = df["duration_min"].to_numpy(float)
@@ -55,7 +63,7 @@ def check(
     sol = solve_ivp(
         lambda x, y: [(tk(x) + dt0_c - y[0]) / tau],
         (0.0, end),
-        [tk0[0]],
+        [tk0[0] if t0_c is None else t0_c],
         t_eval=t,
         max_step=0.05,
         rtol=1e-9,
@@ -114,6 +122,7 @@ def main() -> int:
             spec["working_hi_c"],
             spec["levels_required"],
             spec["delta_c_per_min"],
+            plan["limits"]["t_init_c"],
         )
         same = abs(res["coverage"] - row["coverage"]) < 1e-9
         bad += not same
