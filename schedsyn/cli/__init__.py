@@ -34,6 +34,7 @@ COMMANDS = (
     "monitor",
     "plan",
     "campaign",
+    "chambers",
     "export",
     "sheet",
     "report",

@@ -82,8 +82,8 @@ def register(sub) -> None:
     p.add_argument(
         "--max-steps",
         type=int,
-        default=80,
-        help="most steps the exported table may have (default 80)",
+        default=None,
+        help="most steps the exported table may have (default: the --chamber preset's, else 80)",
     )
     p.add_argument(
         "--duration-max-min",
@@ -92,6 +92,14 @@ def register(sub) -> None:
         help="time limit of the experiment, min (default 540)",
     )
     _common.add_model_options(p)
+    p.add_argument(
+        "--chamber",
+        default=None,
+        metavar="NAME",
+        help="chamber preset: its rates, floor, ceiling and step limit (schedsyn chambers "
+        "lists them); the options below override it",
+    )
+    add_rate_options(p)
     p.add_argument(
         "--chamber-min-c",
         type=float,
@@ -138,6 +146,21 @@ def register(sub) -> None:
     p.add_argument("--out", default=None, help="output directory (default out/plan)")
     _common.add_quiet_option(p)
     p.set_defaults(func=run)
+
+
+def add_rate_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--rate-min-c-per-min",
+        type=float,
+        default=None,
+        help="fastest chamber cooling ramp, °C/min, < 0 (default: the preset's, else -1)",
+    )
+    p.add_argument(
+        "--rate-max-c-per-min",
+        type=float,
+        default=None,
+        help="fastest chamber heating ramp, °C/min, > 0 (default: the preset's, else 3)",
+    )
 
 
 def add_end_soak_option(p: argparse.ArgumentParser) -> None:
@@ -395,8 +418,19 @@ def build_spec(args, limits: Limits) -> ExperimentSpec:
         delta_c_per_min=args.delta_c_per_min,
         segment_min=args.segment_min,
         objective=args.objective,
-        max_steps=args.max_steps,
+        max_steps=_max_steps(args),
     )
+
+
+def _max_steps(args) -> int:
+    """``--max-steps``, else the ``--chamber`` preset's step limit, else 80."""
+    if args.max_steps is not None:
+        return args.max_steps
+    if getattr(args, "chamber", None):
+        from ..chambers import chamber_preset
+
+        return chamber_preset(args.chamber).max_steps
+    return 80
 
 
 def _pick(pairs, results):
@@ -414,13 +448,18 @@ def _pick(pairs, results):
 
 def run(args: argparse.Namespace) -> int:
     from ..campaign import chamber_frame, chamber_plans
+    from ..chambers import limits_with_preset
     from ..errors import InfeasiblePlanError
     from ..io import write_frame_atomic
     from ..planner import plan_experiment
 
-    base = Limits()
-    if args.duration_max_min is not None:
-        base = dataclasses.replace(base, duration_max_min=args.duration_max_min)
+    base = limits_with_preset(
+        args.chamber,
+        Limits(),
+        duration_max_min=args.duration_max_min,
+        rate_min_c_per_min=args.rate_min_c_per_min,
+        rate_max_c_per_min=args.rate_max_c_per_min,
+    )
     floors = args.chamber_min_c or [base.chamber_min_c]
     ceilings = args.chamber_max_c or [base.chamber_max_c]
     limits = dataclasses.replace(base, chamber_min_c=floors[0], chamber_max_c=ceilings[0])
