@@ -300,7 +300,7 @@ def _grid(start: float, stop: float, step: float) -> list[float]:
 
 def _knobs(spec: ExperimentSpec, limits: Limits, settings: AdviceSettings) -> dict[str, _Knob]:
     out: dict[str, _Knob] = {}
-    for name in settings.knobs:
+    for name in (k for k in KNOBS if k in settings.knobs):  # reported in KNOBS order
         if name == "duration":
             step = settings.duration_step_min
             cur = limits.duration_max_min

@@ -181,6 +181,15 @@ def add_advise_options(p: argparse.ArgumentParser) -> None:
         "plans in advice/<knob>/",
     )
     p.add_argument(
+        "--advise-knobs",
+        nargs="+",
+        default=None,
+        choices=("duration", "floor", "ceiling", "rates", "levels"),
+        metavar="KNOB",
+        help="which knobs --advise searches: duration, floor, ceiling, rates, levels "
+        "(default: all)",
+    )
+    p.add_argument(
         "--advise-budget-s",
         type=float,
         default=900.0,
@@ -199,7 +208,7 @@ ADVICE_FILES = ("advice.csv",) + tuple(
 def advise_plan(spec, params, limits, plan, args, progress, folder):
     """``--advise``: search what would make an incomplete request complete, write
     advice.csv and each verifying plan into ``folder``; returns ``(lines, advice dict)``."""
-    from ..advise import AdviceSettings, advise
+    from ..advise import KNOBS, AdviceSettings, advise
     from ..io import write_frame_atomic
 
     advice = advise(
@@ -208,7 +217,9 @@ def advise_plan(spec, params, limits, plan, args, progress, folder):
         limits,
         plan=plan,
         assume_incomplete=plan is None,
-        settings=AdviceSettings(time_budget_s=args.advise_budget_s),
+        settings=AdviceSettings(
+            knobs=tuple(args.advise_knobs or KNOBS), time_budget_s=args.advise_budget_s
+        ),
         progress=progress,
     )
     write_frame_atomic(folder / "advice.csv", advice.to_frame())
