@@ -34,6 +34,7 @@ COMMANDS = (
     "monitor",
     "plan",
     "campaign",
+    "split",
     "chambers",
     "export",
     "sheet",
