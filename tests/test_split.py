@@ -75,8 +75,9 @@ def test_approximation_regions_follow_the_paper_rule_inside_the_range(split_out)
 
 
 def test_each_region_but_the_last_is_the_widest_the_planner_completes(split_out):
-    _, out = split_out
+    rc, out = split_out
     frame = pd.read_csv(out / "split.csv")
+    assert rc == 0 and len(frame) >= 2 and frame["working_hi_c"].iloc[-1] == RANGE[1]
     params = ThermalParams()
     for _, row in frame.iloc[:-1].iterrows():
         a, b = row["working_lo_c"], row["working_hi_c"] + 1.0  # one degree wider
@@ -128,8 +129,9 @@ def test_proven_minimum_is_a_lower_bound_on_every_split_brute_force():
     assert n is not None and hi in best
     assert 1 <= n <= best[hi]
     assert n >= 3  # the case is meant to need a split
-    # each jump stops before an edge the bound really excludes
+    # each jump stops just before an edge the bound really excludes
     for x, r in jumps:
+        assert _bound_ok(float(x), float(r), budget)
         if r < hi:
             assert not _bound_ok(float(x), float(r + 1), budget)
 
