@@ -220,6 +220,8 @@ def advise_plan(spec, params, limits, plan, args, progress, folder):
         settings=AdviceSettings(
             knobs=tuple(args.advise_knobs or KNOBS), time_budget_s=args.advise_budget_s
         ),
+        backend=getattr(args, "backend", "local"),
+        workers=getattr(args, "workers", None),
         progress=progress,
     )
     write_frame_atomic(folder / "advice.csv", advice.to_frame())
