@@ -11,8 +11,9 @@ file: its [model], [chamber], [limits] and [settings]; its experiments are ignor
 the defaults; --chamber NAME takes a chamber preset (schedsyn chambers lists them).
 
 Writes to --out (default out/split): <name>/steps.csv, plan.json, program.png, phase.png,
-coverage.png per experiment, split.csv (one row per experiment) and campaign.toml, a
-campaign file that plans the same experiments again (schedsyn campaign campaign.toml).
+coverage.png per experiment, split.csv (one row per experiment), summary.csv (as a
+campaign's: scripts/check_tables.py re-checks the folder) and campaign.toml, a campaign
+file that plans the same experiments again (schedsyn campaign campaign.toml).
 
 Exit codes: 0 the range is covered, every plan complete; 1 it is not (the experiments
 found so far are written, and why it stopped); 2 bad input; 3 an environment fault.
@@ -143,6 +144,8 @@ def _request(args):
 
 
 def run(args: argparse.Namespace) -> int:
+    import pandas as pd
+
     from ..io import write_frame_atomic, write_text_atomic
     from ..split import SplitSettings, split_range
     from .plan import write_plan_outputs
@@ -157,7 +160,9 @@ def run(args: argparse.Namespace) -> int:
     )
     inputs = [args.config] if args.config else []
     # the experiment folders are known only at the end: check the fixed names now
-    out = _common.output_dir(args.out, "out/split", inputs, ["split.csv", "campaign.toml"])
+    out = _common.output_dir(
+        args.out, "out/split", inputs, ["split.csv", "summary.csv", "campaign.toml"]
+    )
     progress = None if args.quiet else _common.progress_of(args)
     result = split_range(
         args.range[0],
@@ -173,13 +178,16 @@ def run(args: argparse.Namespace) -> int:
     for e in result.experiments:
         write_plan_outputs(e.plan, out.folder(e.spec.name), inputs)
     write_frame_atomic(out.path("split.csv"), result.to_frame())
+    # as a campaign's summary.csv: scripts/check_tables.py re-checks the folder
+    summary = pd.DataFrame([e.plan.to_summary_dict() for e in result.experiments])
+    write_frame_atomic(out.path("summary.csv"), summary)
     write_text_atomic(out.path("campaign.toml"), result.campaign_toml())
     out.commit()
     names = ", ".join(e.spec.name for e in result.experiments) or "none"
     _common.say(
         *result.lines(),
         f"split searched in {result.wall_s:.0f} s ({result.plans} plans)",
-        f"wrote {out.target}/split.csv, campaign.toml and the experiments' folders "
+        f"wrote {out.target}/split.csv, summary.csv, campaign.toml and the experiments' folders "
         f"({names}: {', '.join(PLAN_FILES)})",
     )
     return 0 if result.covered else 1
