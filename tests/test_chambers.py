@@ -154,7 +154,8 @@ def test_chambers_command_lists_every_preset_with_sources(tmp_path, capsys):
         for figure, source in p.sources:
             assert f"  {figure}: {source}" in out
     # the paper's figures are not assumptions, the default floor is
-    line = next(x for x in out.splitlines() if x.startswith("  rates -1 .. +3 °C/min, chamber -70*"))
+    head = "  rates -1 .. +3 °C/min, chamber -70*"
+    line = next(x for x in out.splitlines() if x.startswith(head))
     assert "99*" in line
     frame = presets_frame()
     assert csv.read_text(encoding="utf-8").count("\n") == len(frame) + 1
