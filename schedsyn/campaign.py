@@ -6,6 +6,9 @@ with the package, :data:`PAPER_CAMPAIGN_TOML`, and is ``data/paper_campaign.toml
 repository; copy and edit it)::
 
     [model]        tau_s, dt0_c                        (ThermalParams)
+    [chamber]      preset = "binder-mk-56"             (optional: a chamber preset's rates,
+                   floor, ceiling and max_steps; [limits] and max_steps keys override it;
+                   see schedsyn.chambers)
     [limits]       chamber_min_c, duration_max_min ... (Limits; any field)
     [settings]     levels_required, delta_c_per_min, segment_min, objective, ...
                    (ExperimentSpec fields shared by every experiment)
@@ -44,6 +47,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from .chambers import LIMIT_FIELDS, ChamberPreset, chamber_preset
 from .checkpoints import SheetSettings, parse_start
 from .coverage import coverage_report
 from .design import DesignSpace, plan_design, programme_design
@@ -231,7 +235,9 @@ def campaign_from_dict(doc: dict, path: Path | str = "<config>") -> CampaignConf
     """Build a :class:`CampaignConfig` from a parsed TOML document (see module doc)."""
     path = Path(path)
     _check_keys(
-        doc, ("model", "limits", "settings", "robust", "experiment", "export", "sheet"), str(path)
+        doc,
+        ("model", "chamber", "limits", "settings", "robust", "experiment", "export", "sheet"),
+        str(path),
     )
     model = _table(doc, "model", path)
     _check_keys(model, ("tau_s", "dt0_c"), _where(path, "model"))
@@ -239,16 +245,26 @@ def campaign_from_dict(doc: dict, path: Path | str = "<config>") -> CampaignConf
         _where(path, "model"),
         lambda: ThermalParams(**{k: _value(v, k, _where(path, "model")) for k, v in model.items()}),
     )
+    preset = _chamber_table(_table(doc, "chamber", path), _where(path, "chamber"))
     lim = _table(doc, "limits", path)
     lim_keys = [f.name for f in dataclasses.fields(Limits)]
     _check_keys(lim, lim_keys, _where(path, "limits"))
+    # precedence: Limits' defaults < the chamber preset < the [limits] keys
+    base_limits = {} if preset is None else {f: getattr(preset, f) for f in LIMIT_FIELDS}
     limits = _wrap(
         _where(path, "limits"),
-        lambda: Limits(**{k: _value(v, k, _where(path, "limits")) for k, v in lim.items()}),
+        lambda: Limits(
+            **{
+                **base_limits,
+                **{k: _value(v, k, _where(path, "limits")) for k, v in lim.items()},
+            }
+        ),
     )
     settings = _table(doc, "settings", path)
     _check_keys(settings, _SETTING_KEYS, _where(path, "settings"))
     settings = {k: _value(v, k, _where(path, "settings")) for k, v in settings.items()}
+    if preset is not None:  # the preset's step limit, unless [settings] names one
+        settings = {"max_steps": preset.max_steps, **settings}
     robust = _table(doc, "robust", path)
     _check_keys(robust, ("tau_s", "dt0_c"), _where(path, "robust"))
     box = {k: _pair(v, _where(path, "robust", k)) for k, v in robust.items()}
@@ -303,6 +319,19 @@ def campaign_from_dict(doc: dict, path: Path | str = "<config>") -> CampaignConf
             sheet=sheet,
         ),
     )
+
+
+def _chamber_table(t: dict, where: str) -> ChamberPreset | None:
+    """``[chamber]``: ``preset = "NAME"`` (see :mod:`schedsyn.chambers`), or nothing."""
+    if not t:
+        return None
+    _check_keys(t, ("preset",), where)
+    name = t.get("preset")
+    if not isinstance(name, str):
+        raise ParameterError(
+            f'{where} preset must be a preset name (a string, e.g. "binder-mk-56"), got {name!r}'
+        )
+    return _wrap(where, partial(chamber_preset, name))
 
 
 def _export_table(t: dict, where: str) -> tuple[ExportSettings, ...]:

@@ -35,6 +35,8 @@ COMMANDS = (
     "monitor",
     "plan",
     "campaign",
+    "split",
+    "chambers",
     "export",
     "sheet",
     "report",

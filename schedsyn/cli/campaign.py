@@ -16,6 +16,11 @@ refused before any planning.
 With --end-soak each table ends with a hold until the device settles; an experiment
 whose soak does not fit in the time limit is written without it and reported.
 
+With --advise, for every experiment that is not complete (or cannot be planned), the
+least change of one knob (duration, chamber floor, ceiling, rates, levels) that makes it
+complete is searched and verified by a complete plan: printed, in <name>/advice.csv, in
+<name>/plan.json ('advice') and the verifying plans in <name>/advice/<knob>/.
+
 Exit codes: 0 every experiment is complete (independent check of its exported table);
 1 at least one experiment is incomplete or infeasible, or its end soak does not fit (its
 files, if any, are still written and the problem is printed); 2 bad input (config,
@@ -28,7 +33,7 @@ import argparse
 
 from ..errors import ParameterError
 from . import _common
-from .plan import PLAN_FILES, add_end_soak_option
+from .plan import ADVICE_FILES, PLAN_FILES, add_advise_options, add_end_soak_option
 
 
 def register(sub) -> None:
@@ -58,16 +63,19 @@ def register(sub) -> None:
         default=None,
         help="processes of the local pool (default: the number of cores)",
     )
+    add_advise_options(p)
     add_end_soak_option(p)
     _common.add_quiet_option(p)
     p.set_defaults(func=run)
 
 
-def campaign_outputs(config) -> list[str]:
+def campaign_outputs(config, advise: bool = False) -> list[str]:
     """Every file a campaign writes, relative to its output folder."""
     from ..export import default_export_path
 
     per_experiment: list[str] = [*PLAN_FILES, "sheet.html"]
+    if advise:
+        per_experiment += ADVICE_FILES
     per_experiment += [str(default_export_path("steps.csv", e.controller)) for e in config.exports]
     return ["summary.csv", "index.html"] + [
         f"{e.name}/{f}" for e in config.experiments for f in per_experiment
@@ -80,14 +88,27 @@ def run(args: argparse.Namespace) -> int:
     from ..campaign import default_campaign, load_campaign, plan_campaign, stderr_progress
     from ..export import default_export_path
     from ..io import write_frame_atomic
-    from .plan import end_soak_lines, report_plan, with_end_soak, write_plan_outputs
+    from .plan import (
+        advice_progress,
+        advise_plan,
+        end_soak_lines,
+        report_plan,
+        with_end_soak,
+        write_plan_outputs,
+    )
     from .sheet import write_campaign_index, write_plan_deliverables
 
     config = default_campaign() if args.config is None else load_campaign(args.config)
+    if args.advise and (config.robust_tau_s is not None or config.robust_dt0_c is not None):
+        raise ParameterError(
+            "--advise searches with the nominal model: remove the [robust] table or drop --advise"
+        )
     inputs = [args.config] if args.config else []
     inputs += [b for b in config.baseline_steps if b is not None]
     # checked before any planning: no output overwrites an input, the folder is writable
-    out = _common.output_dir(args.out, "out/campaign", inputs, campaign_outputs(config))
+    out = _common.output_dir(
+        args.out, "out/campaign", inputs, campaign_outputs(config, args.advise)
+    )
     result = plan_campaign(
         config,
         progress=None if args.quiet else stderr_progress,
@@ -102,8 +123,23 @@ def run(args: argparse.Namespace) -> int:
     for i, (spec, plan, err) in enumerate(
         zip(config.experiments, result.plans, result.errors, strict=True)
     ):
+        advice_json = None
+        if (plan is None or not plan.complete) and args.advise:
+            more, advice = advise_plan(
+                spec,
+                config.params,
+                config.limits,
+                plan,
+                args,
+                advice_progress(args, spec),
+                out.folder(spec.name),
+            )
+            advice_json = {"advice": advice}
+        else:
+            more = []
         if plan is None:
             lines.append(f"*** {spec.name} COULD NOT BE PLANNED: {err}")
+            lines += more
             continue
         if args.end_soak:
             try:
@@ -112,9 +148,10 @@ def run(args: argparse.Namespace) -> int:
                 no_soak.append(spec.name)
                 lines.append(f"*** {exc}; its table is written WITHOUT an end soak")
         folder = out.folder(spec.name)
-        write_plan_outputs(plan, folder)
+        write_plan_outputs(plan, folder, extra_json=advice_json)
         lines += report_plan(plan)
         lines += end_soak_lines(plan)
+        lines += more
         extra, links[spec.name], lost_one = write_plan_deliverables(
             plan, folder, config.exports, config.sheet, inputs
         )

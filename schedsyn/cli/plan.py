@@ -7,6 +7,13 @@ values it answers "what chamber do I need?": one plan per (floor, ceiling), the 
 ``chamber.csv``, and the files of the least demanding chamber that reaches full coverage
 (or of the best one when none does).
 
+--chamber NAME takes the chamber's rates, floor, ceiling and step limit from a preset
+(schedsyn chambers lists them); the options given beside it override it. With --advise,
+a plan that is not complete is followed by a search for the least change of one knob
+(duration, chamber floor, ceiling, rates, levels) that makes it complete, each verified
+by a complete plan: printed, in advice.csv, in plan.json ('advice'), and each verifying
+plan in advice/<knob>/.
+
 steps.csv starts with the plan's metadata (experiment, regions, model, limits, robust
 box, end_soak_min: how long the device needs at the end to settle), so that
 schedsyn simulate, compare and sweep read the region and model from it. --end-soak
@@ -82,8 +89,8 @@ def register(sub) -> None:
     p.add_argument(
         "--max-steps",
         type=int,
-        default=80,
-        help="most steps the exported table may have (default 80)",
+        default=None,
+        help="most steps the exported table may have (default: the --chamber preset's, else 80)",
     )
     p.add_argument(
         "--duration-max-min",
@@ -92,6 +99,14 @@ def register(sub) -> None:
         help="time limit of the experiment, min (default 540)",
     )
     _common.add_model_options(p)
+    p.add_argument(
+        "--chamber",
+        default=None,
+        metavar="NAME",
+        help="chamber preset: its rates, floor, ceiling and step limit (schedsyn chambers "
+        "lists them); the options below override it",
+    )
+    add_rate_options(p)
     p.add_argument(
         "--chamber-min-c",
         type=float,
@@ -134,10 +149,103 @@ def register(sub) -> None:
         help="plan with a linear augmented model file (from schedsyn diagnose); "
         "--tau-s/--dt0-c then override its base",
     )
+    add_advise_options(p)
     add_end_soak_option(p)
     p.add_argument("--out", default=None, help="output directory (default out/plan)")
     _common.add_quiet_option(p)
     p.set_defaults(func=run)
+
+
+def add_rate_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--rate-min-c-per-min",
+        type=float,
+        default=None,
+        help="fastest chamber cooling ramp, °C/min, < 0 (default: the preset's, else -1)",
+    )
+    p.add_argument(
+        "--rate-max-c-per-min",
+        type=float,
+        default=None,
+        help="fastest chamber heating ramp, °C/min, > 0 (default: the preset's, else 3)",
+    )
+
+
+def add_advise_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--advise",
+        action="store_true",
+        help="if the plan is not complete, search the least change of one knob (duration, "
+        "chamber floor, ceiling, rates, levels) that makes it complete, each verified by a "
+        "complete plan: printed, in advice.csv, in plan.json ('advice') and the verifying "
+        "plans in advice/<knob>/",
+    )
+    p.add_argument(
+        "--advise-knobs",
+        nargs="+",
+        default=None,
+        choices=("duration", "floor", "ceiling", "rates", "levels"),
+        metavar="KNOB",
+        help="which knobs --advise searches: duration, floor, ceiling, rates, levels "
+        "(default: all)",
+    )
+    p.add_argument(
+        "--advise-budget-s",
+        type=float,
+        default=900.0,
+        help="time budget of --advise, s (default 900; a plan under way is finished)",
+    )
+
+
+#: The files --advise may write, relative to the experiment's folder.
+ADVICE_FILES = ("advice.csv",) + tuple(
+    f"advice/{k}/{f}"
+    for k in ("duration", "floor", "ceiling", "rates", "levels")
+    for f in ("steps.csv", "plan.json", "program.png", "phase.png", "coverage.png")
+)
+
+
+def advise_plan(spec, params, limits, plan, args, progress, folder):
+    """``--advise``: search what would make an incomplete request complete, write
+    advice.csv and each verifying plan into ``folder``; returns ``(lines, advice dict)``."""
+    from ..advise import KNOBS, AdviceSettings, advise
+    from ..io import write_frame_atomic
+
+    advice = advise(
+        spec,
+        params,
+        limits,
+        plan=plan,
+        assume_incomplete=plan is None,
+        settings=AdviceSettings(
+            knobs=tuple(args.advise_knobs or KNOBS), time_budget_s=args.advise_budget_s
+        ),
+        backend=getattr(args, "backend", "local"),
+        workers=getattr(args, "workers", None),
+        progress=progress,
+    )
+    write_frame_atomic(folder / "advice.csv", advice.to_frame())
+    lines = [f"what would make {spec.name} complete (one change at a time):"]
+    for item in advice.items:
+        lines.append(f"  {item.line}")
+        if item.plan is not None:
+            sub = folder / "advice" / item.knob
+            sub.mkdir(parents=True, exist_ok=True)
+            write_plan_outputs(item.plan, sub)
+            changes = ", ".join(f"{k} = {v:g}" for k, v in item.changes.items())
+            lines.append(f"    ({changes}; the plan is in advice/{item.knob}/)")
+    return lines, advice.to_dict()
+
+
+def advice_progress(args, spec):
+    """A picklable progress callable for the advice's worker processes (None if quiet)."""
+    if args.quiet:
+        return None
+    from functools import partial
+
+    from ..campaign import _tagged
+
+    return partial(_tagged, _common.progress_of(args), spec.name)
 
 
 def add_end_soak_option(p: argparse.ArgumentParser) -> None:
@@ -157,10 +265,15 @@ PLAN_FILES = ("steps.csv", "plan.json", "program.png", "phase.png", "coverage.pn
 # outputs shared with `schedsyn campaign`
 # ---------------------------------------------------------------------------------------
 def write_plan_outputs(
-    plan: Plan, out: Path, inputs=(), model=None, model_json: dict | None = None
+    plan: Plan,
+    out: Path,
+    inputs=(),
+    model=None,
+    model_json: dict | None = None,
+    extra_json: dict | None = None,
 ) -> list[Path]:
     """Write steps.csv (with the plan's metadata), plan.json, program.png, phase.png,
-    coverage.png into ``out``.
+    coverage.png into ``out``; ``extra_json`` adds fields to plan.json (e.g. ``advice``).
 
     The phase portrait and the coverage plot show the same parameters, the plan's nominal
     ones (their titles say which); for a robust plan the coverage title also gives the
@@ -186,7 +299,11 @@ def write_plan_outputs(
     )
     written = [
         plan.programme.with_meta(meta).to_csv(out / "steps.csv", inputs),
-        write_json_atomic(out / "plan.json", {**plan.to_json_dict(), "end_soak_min": soak}, inputs),
+        write_json_atomic(
+            out / "plan.json",
+            {**plan.to_json_dict(), "end_soak_min": soak, **(extra_json or {})},
+            inputs,
+        ),
     ]
     state = "complete" if plan.complete else f"NOT COMPLETE ({plan.status})"
     model_text = f"tau {plan.params.tau_s:g} s, dT0 {plan.params.dt0_c:g} °C"
@@ -395,8 +512,19 @@ def build_spec(args, limits: Limits) -> ExperimentSpec:
         delta_c_per_min=args.delta_c_per_min,
         segment_min=args.segment_min,
         objective=args.objective,
-        max_steps=args.max_steps,
+        max_steps=_max_steps(args),
     )
+
+
+def _max_steps(args) -> int:
+    """``--max-steps``, else the ``--chamber`` preset's step limit, else 80."""
+    if args.max_steps is not None:
+        return args.max_steps
+    if getattr(args, "chamber", None):
+        from ..chambers import chamber_preset
+
+        return chamber_preset(args.chamber).max_steps
+    return 80
 
 
 def _pick(pairs, results):
@@ -414,13 +542,18 @@ def _pick(pairs, results):
 
 def run(args: argparse.Namespace) -> int:
     from ..campaign import chamber_frame, chamber_plans
+    from ..chambers import limits_with_preset
     from ..errors import InfeasiblePlanError
     from ..io import write_frame_atomic
     from ..planner import plan_experiment
 
-    base = Limits()
-    if args.duration_max_min is not None:
-        base = dataclasses.replace(base, duration_max_min=args.duration_max_min)
+    base = limits_with_preset(
+        args.chamber,
+        Limits(),
+        duration_max_min=args.duration_max_min,
+        rate_min_c_per_min=args.rate_min_c_per_min,
+        rate_max_c_per_min=args.rate_max_c_per_min,
+    )
     floors = args.chamber_min_c or [base.chamber_min_c]
     ceilings = args.chamber_max_c or [base.chamber_max_c]
     limits = dataclasses.replace(base, chamber_min_c=floors[0], chamber_max_c=ceilings[0])
@@ -434,8 +567,15 @@ def run(args: argparse.Namespace) -> int:
             "--model with several chamber floors/ceilings is not "
             "supported; give one --chamber-min-c/--chamber-max-c"
         )
+    if args.advise and (model is not None or robust_tau is not None or robust_dt0 is not None):
+        raise ParameterError(
+            "--advise searches with the nominal first-order model: drop --model and "
+            "--robust-tau-s/--robust-dt0-c, or drop --advise"
+        )
     inputs = [args.model] if args.model else []
     names = list(PLAN_FILES)
+    if args.advise:
+        names += ADVICE_FILES
     if several:
         names.append("chamber.csv")
     if robust_tau is not None or robust_dt0 is not None:
@@ -454,15 +594,24 @@ def run(args: argparse.Namespace) -> int:
 
     lines: list[str] = []
     if not several:
-        plan = plan_experiment(
-            spec,
-            params,
-            limits,
-            model=model,
-            robust_tau_s=robust_tau,
-            robust_dt0_c=robust_dt0,
-            progress=progress,
-        )
+        try:
+            plan = plan_experiment(
+                spec,
+                params,
+                limits,
+                model=model,
+                robust_tau_s=robust_tau,
+                robust_dt0_c=robust_dt0,
+                progress=progress,
+            )
+        except InfeasiblePlanError:
+            if args.advise:  # nothing planned: still say what would make it plannable
+                said, _ = advise_plan(
+                    spec, params, limits, None, args, advice_progress(args, spec), out.folder(".")
+                )
+                out.commit()
+                _common.say(*said, f"wrote {out.target}/advice.csv")
+            raise
     else:
         pairs, results = chamber_plans(
             spec,
@@ -495,14 +644,32 @@ def run(args: argparse.Namespace) -> int:
             f"files below are for the chamber {plan.limits.chamber_min_c:g} .. "
             f"{plan.limits.chamber_max_c:g} °C"
         )
+    advice_lines: list[str] = []
+    advice_json = None
+    if not plan.complete:
+        if args.advise:
+            advice_lines, advice = advise_plan(
+                spec, params, plan.limits, plan, args, advice_progress(args, spec), out.folder(".")
+            )
+            advice_json = {"advice": advice}
+        else:
+            advice_lines = [
+                "  run again with --advise to search what would make it complete "
+                "(duration, chamber floor, ceiling, rates or levels; each verified by a plan)"
+            ]
     if args.end_soak:
         plan = with_end_soak(plan, model)
-    write_plan_outputs(plan, out.folder("."), model=model, model_json=model_json)
+    write_plan_outputs(
+        plan, out.folder("."), model=model, model_json=model_json, extra_json=advice_json
+    )
     lines += report_plan(plan)
     lines += end_soak_lines(plan, model)
+    lines += advice_lines
     _common.say(*lines)  # the plan's report now; the price may take as long again
     lines = []
     wrote = ["steps.csv", "plan.json", "program.png", "phase.png", "coverage.png"]
+    if advice_json is not None:
+        wrote.append("advice.csv")
     if several:
         wrote.append("chamber.csv")
     if (robust_tau is not None or robust_dt0 is not None) and not args.no_price:

@@ -1,0 +1,169 @@
+"""Fewest experiments for a range: the experiments tile the range with no gap, each step
+table is complete by separate code (scipy's ODE solver and plain level counting), each
+region is as wide as the planner can make it, and the proven minimum never exceeds the
+fewest any split can have (checked against a brute force over every region)."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from independent import table_check
+
+from schedsyn.campaign import load_campaign
+from schedsyn.cli import main
+from schedsyn.errors import InfeasiblePlanError, ParameterError
+from schedsyn.params import Limits, ThermalParams
+from schedsyn.planner import ExperimentSpec, duration_lower_bound, plan_experiment
+from schedsyn.split import SplitSettings, proven_minimum, split_range
+
+pytestmark = [
+    pytest.mark.filterwarnings("ignore:Solution may be inaccurate:UserWarning"),
+    pytest.mark.slow,
+]
+
+# [-10, 10] degC, 3 levels: one 20-degC experiment needs about 225 min, so within 205 min
+# the range takes two
+RANGE = (-10.0, 10.0)
+LEVELS = 3
+LIMITS = dataclasses.replace(Limits(), duration_max_min=205.0)
+
+
+@pytest.fixture(scope="module")
+def split_out(tmp_path_factory):
+    out = tmp_path_factory.mktemp("split") / "out"
+    argv = ["split", "--range", "-10", "10", "--levels", str(LEVELS)]
+    argv += ["--duration-max-min", "205", "--backend", "serial", "--out", str(out), "--quiet"]
+    rc = main(argv)
+    return rc, out
+
+
+def test_split_covers_the_range_with_no_gap_each_plan_complete_by_separate_code(split_out):
+    rc, out = split_out
+    assert rc == 0
+    frame = pd.read_csv(out / "split.csv")
+    assert len(frame) >= 2  # one experiment cannot do it in 205 min (see below)
+    lo = frame["working_lo_c"].to_numpy()
+    hi = frame["working_hi_c"].to_numpy()
+    assert lo[0] == RANGE[0] and hi[-1] == RANGE[1]
+    assert np.array_equal(lo[1:], hi[:-1])  # consecutive: no gap, no overlap
+    assert np.all(hi > lo)
+    for name, a, b in zip(frame["experiment"], lo, hi, strict=True):
+        steps = out / name / "steps.csv"
+        res = table_check(steps, (a, b), LEVELS)  # scipy + plain counting
+        assert res["coverage"] == 1.0, name
+        assert res["duration_min"] <= LIMITS.duration_max_min
+        assert res["chamber_start_c"] == 20.0 and abs(res["chamber_end_c"] - 20.0) <= 0.5
+        rates = res["rates_c_per_min"]
+        assert rates.min() >= LIMITS.rate_min_c_per_min - 1e-3
+        assert rates.max() <= LIMITS.rate_max_c_per_min + 1e-3
+        doc = json.loads((out / name / "plan.json").read_text(encoding="utf-8"))
+        assert doc["complete"] and doc["spec"]["levels_required"] == LEVELS
+
+
+def test_approximation_regions_follow_the_paper_rule_inside_the_range(split_out):
+    _, out = split_out
+    frame = pd.read_csv(out / "split.csv")
+    for _, row in frame.iterrows():
+        assert row["approx_lo_c"] == max(row["working_lo_c"] - 10.0, RANGE[0])
+        assert row["approx_hi_c"] == min(row["working_hi_c"] + 10.0, RANGE[1])
+
+
+def test_each_region_but_the_last_is_the_widest_the_planner_completes(split_out):
+    rc, out = split_out
+    frame = pd.read_csv(out / "split.csv")
+    assert rc == 0 and len(frame) >= 2 and frame["working_hi_c"].iloc[-1] == RANGE[1]
+    params = ThermalParams()
+    for _, row in frame.iloc[:-1].iterrows():
+        a, b = row["working_lo_c"], row["working_hi_c"] + 1.0  # one degree wider
+        spec = ExperimentSpec("wider", a, b, max(a - 10, RANGE[0]), min(b + 10, RANGE[1]), LEVELS)
+        try:
+            complete = plan_experiment(spec, params, LIMITS).complete
+        except InfeasiblePlanError:
+            complete = False
+        assert not complete, (a, b)
+    # and the whole range in one experiment does not fit either
+    whole = ExperimentSpec("whole", *RANGE, *RANGE, levels_required=LEVELS)
+    assert not plan_experiment(whole, params, LIMITS).complete
+
+
+def test_the_campaign_file_plans_the_same_experiments_again(split_out):
+    _, out = split_out
+    cfg = load_campaign(out / "campaign.toml")
+    frame = pd.read_csv(out / "split.csv")
+    assert [e.name for e in cfg.experiments] == list(frame["experiment"])
+    for e, (_, row) in zip(cfg.experiments, frame.iterrows(), strict=True):
+        assert (e.working_lo_c, e.working_hi_c) == (row["working_lo_c"], row["working_hi_c"])
+        assert (e.approx_lo_c, e.approx_hi_c) == (row["approx_lo_c"], row["approx_hi_c"])
+        assert e.levels_required == LEVELS
+    assert cfg.limits == LIMITS and cfg.params == ThermalParams()
+
+
+@functools.cache
+def _bound_ok(a: float, b: float, budget: float) -> bool:
+    spec = ExperimentSpec("b", a, b, a, b, levels_required=6)
+    lim = dataclasses.replace(Limits(), duration_max_min=budget)
+    return duration_lower_bound(spec, ThermalParams(), lim).lower_bound_min <= budget
+
+
+def test_proven_minimum_is_a_lower_bound_on_every_split_brute_force():
+    """Brute force: the fewest consecutive regions (whole degrees) each of which the bound
+    does not exclude. Any split the planner could verify is one of these, so the proven
+    minimum must not exceed it; with the bound monotone in the width they are equal."""
+    lo, hi, budget = -40, -28, 200.0
+    n, jumps = proven_minimum(
+        lo, hi, None, dataclasses.replace(Limits(), duration_max_min=budget), {}
+    )
+    best = {lo: 0}
+    for a in range(lo, hi):
+        if a not in best:
+            continue
+        for b in range(a + 1, hi + 1):
+            if _bound_ok(float(a), float(b), budget):
+                best[b] = min(best.get(b, math.inf), best[a] + 1)
+    assert n is not None and hi in best
+    assert 1 <= n <= best[hi]
+    assert n >= 3  # the case is meant to need a split
+    # each jump stops just before an edge the bound really excludes
+    for x, r in jumps:
+        assert _bound_ok(float(x), float(r), budget)
+        if r < hi:
+            assert not _bound_ok(float(x), float(r + 1), budget)
+
+
+def test_an_uncoverable_bin_is_proven_and_nothing_is_planned():
+    lim = dataclasses.replace(Limits(), chamber_min_c=-52.0)  # the device cannot pass -49
+    res = split_range(-50, -40, None, lim, {"levels_required": 2}, backend="serial")
+    assert res.min_experiments is None and res.uncoverable_bin_c == -50.0
+    assert res.plans == 0 and not res.covered and res.experiments == ()
+    assert "cannot be covered by any experiment" in res.lines()[0]
+
+
+@pytest.mark.parametrize(
+    "kw, words",
+    [
+        ({"lo_c": 0.0, "hi_c": 0.5}, "whole number"),
+        ({"lo_c": 0.0, "hi_c": 80.0}, "outside its limits"),
+        ({"spec_settings": {"levels": 3}}, "unknown experiment setting"),
+    ],
+)
+def test_bad_input_is_a_one_line_error(kw, words):
+    args = {"lo_c": -10.0, "hi_c": 10.0, **kw}
+    with pytest.raises(ParameterError) as exc:
+        split_range(backend="serial", **args)
+    assert "\n" not in str(exc.value) and words in str(exc.value)
+
+
+@pytest.mark.parametrize(
+    "kw",
+    [{"max_experiments": 0}, {"max_plans": 0}, {"approx_margin_c": -1.0}, {"name_prefix": "a/b"}],
+)
+def test_bad_split_settings_are_refused(kw):
+    with pytest.raises(ParameterError) as exc:
+        SplitSettings(**kw)
+    assert "\n" not in str(exc.value)
