@@ -21,6 +21,7 @@ COMMANDS = (
     "compare",
     "diagnose",
     "monitor",
+    "replan",
     "plan",
     "campaign",
     "export",
