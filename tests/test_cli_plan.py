@@ -56,6 +56,8 @@ def test_plan_with_a_model_file_writes_outputs_and_its_coverage_survives_re_simu
     plan = json.loads((out / "plan.json").read_text())
     assert rc == (0 if plan["complete"] else 1)
     assert plan["experiment"] == "small" and plan["tau_s"] == 2400.0  # --tau-s overrides
+    # the model the plan was made with, as monitor/replan read it back
+    assert plan["model"] == {**spec.to_json_dict(), "tau_s": 2400.0}
     if not plan["complete"]:
         assert "NOT COMPLETE" in text
     # independent check: re-read the table, simulate through the model file's model

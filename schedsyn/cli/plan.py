@@ -134,8 +134,12 @@ def register(sub) -> None:
 # ---------------------------------------------------------------------------------------
 # outputs shared with `schedsyn campaign`
 # ---------------------------------------------------------------------------------------
-def write_plan_outputs(plan: Plan, out: Path, inputs=(), model=None) -> list[Path]:
-    """Write steps.csv, plan.json, program.png, phase.png, coverage.png into ``out``."""
+def write_plan_outputs(plan: Plan, out: Path, inputs=(), model=None, model_spec=None) -> list[Path]:
+    """Write steps.csv, plan.json, program.png, phase.png, coverage.png into ``out``.
+
+    ``model_spec`` (a :class:`~schedsyn.effects.ModelSpec`, the ``--model`` file) is
+    recorded in plan.json as ``model``, where ``schedsyn monitor``/``replan`` read it.
+    """
     from .. import plots
     from ..io import write_json_atomic
     from ..simulate import simulate
@@ -145,7 +149,12 @@ def write_plan_outputs(plan: Plan, out: Path, inputs=(), model=None) -> list[Pat
     region = (spec.working_lo_c, spec.working_hi_c)
     written = [
         plan.programme.to_csv(out / "steps.csv", inputs),
-        write_json_atomic(out / "plan.json", plan.to_json_dict(), inputs),
+        write_json_atomic(
+            out / "plan.json",
+            plan.to_json_dict()
+            | ({} if model_spec is None else {"model": model_spec.to_json_dict()}),
+            inputs,
+        ),
     ]
     traj = simulate(plan.programme, plan.params, model=model, dt_min=0.1, t0_c=plan.limits.t_init_c)
     state = "complete" if plan.complete else f"NOT COMPLETE ({plan.status})"
@@ -225,9 +234,9 @@ def _robust(text: str | None, name: str):
 
 
 def _model(args, params: ThermalParams, limits: Limits):
-    """``(params, limits, linear model or None)`` from ``--model`` (if given)."""
+    """``(params, limits, linear model, model spec)`` from ``--model`` (Nones without)."""
     if args.model is None:
-        return params, limits, None
+        return params, limits, None, None
     from ..models_io import load_model
 
     spec = load_model(args.model)
@@ -239,7 +248,7 @@ def _model(args, params: ThermalParams, limits: Limits):
             "needs a linear model (plan with the base model and check the plan with "
             "`schedsyn simulate --model`)"
         )
-    return params, spec.planner_limits(limits), spec.linear_model()
+    return params, spec.planner_limits(limits), spec.linear_model(), spec
 
 
 def build_spec(args, limits: Limits) -> ExperimentSpec:
@@ -287,7 +296,7 @@ def run(args: argparse.Namespace) -> int:
     floors = args.chamber_min_c or [base.chamber_min_c]
     ceilings = args.chamber_max_c or [base.chamber_max_c]
     limits = dataclasses.replace(base, chamber_min_c=floors[0], chamber_max_c=ceilings[0])
-    params, limits, model = _model(args, _common.thermal_params(args), limits)
+    params, limits, model, model_spec = _model(args, _common.thermal_params(args), limits)
     spec = build_spec(args, limits)
     robust_tau = _robust(args.robust_tau_s, "--robust-tau-s")
     robust_dt0 = _robust(args.robust_dt0_c, "--robust-dt0-c")
@@ -347,7 +356,7 @@ def run(args: argparse.Namespace) -> int:
             f"files below are for the chamber {plan.limits.chamber_min_c:g} .. "
             f"{plan.limits.chamber_max_c:g} °C"
         )
-    write_plan_outputs(plan, out, inputs, model=model)
+    write_plan_outputs(plan, out, inputs, model=model, model_spec=model_spec)
     print("\n".join(report_plan(plan)))
     print(f"wrote {out}/steps.csv, plan.json, program.png, phase.png, coverage.png")
     if (robust_tau is not None or robust_dt0 is not None) and not args.no_price:
