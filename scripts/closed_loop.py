@@ -42,9 +42,10 @@ from schedsyn.closed_loop import (
     device_label,
     grid_devices,
     run_loop,
+    true_device,
     true_plan,
 )
-from schedsyn.effects import ModelSpec
+from schedsyn.errors import SchedsynError
 from schedsyn.io import write_frame_atomic, write_json_atomic, write_text_atomic
 from schedsyn.monitor import read_plan_dir
 from schedsyn.params import Limits, ThermalParams
@@ -68,16 +69,25 @@ def nominal_plan_dir(name: str, plan_dirs: dict[str, str], out: Path) -> Path:
     return folder
 
 
-def one_device(job: tuple[str, str, ModelSpec, bool, int]) -> tuple[dict, list[dict]]:
-    """Open loop, closed loop and (optionally) the true plan of one device."""
-    name, plan_dir, dev, with_true_plan, seed = job
+def one_device(job: tuple[str, str, tuple[float, float, str], bool, int]) -> tuple[dict, list]:
+    """Open loop, closed loop and (optionally) the true plan of one device.
+
+    The device comes as ``(tau_s, dt0_c, effect)`` (a ModelSpec does not pickle).
+    """
+    name, plan_dir, (tau_s, dt0_c, effect), with_true_plan, seed = job
+    dev = true_device(tau_s, dt0_c, effect)
     rec = read_plan_dir(plan_dir)
     grid, req, delta = rec.grid, rec.levels_required, rec.delta_c_per_min
     open_ = run_loop(dev, rec.programme, grid, req, delta, seed=seed)
     with tempfile.TemporaryDirectory(prefix="closed_loop_") as work:
         replanner = CliReplanner(plan_dir, work)
         tic = time.perf_counter()
-        closed = run_loop(dev, rec.programme, grid, req, delta, replanner=replanner, seed=seed)
+        try:
+            closed = run_loop(dev, rec.programme, grid, req, delta, replanner=replanner, seed=seed)
+            error = ""
+        except SchedsynError as exc:  # reported in the table, the open loop stands
+            closed = open_
+            error = f"re-plan failed: {str(exc).splitlines()[0][:120]}"
         loop_s = time.perf_counter() - tic
         records = list(replanner.records)
     replan_s = [r.replan_s for r in records]
@@ -103,6 +113,7 @@ def one_device(job: tuple[str, str, ModelSpec, bool, int]) -> tuple[dict, list[d
         "median_planner_s": float(np.median(planner_s)) if planner_s else float("nan"),
         "max_replan_s": max(replan_s, default=float("nan")),
         "loop_s": loop_s,
+        "closed_error": error,
     }
     if with_true_plan:
         tic = time.perf_counter()
@@ -206,11 +217,14 @@ def main() -> None:
     for name in ns.regions:
         folder = str(nominal_plan_dir(name, plan_dirs, out))
         jobs += [
-            (name, folder, dev, ns.true_plans, ns.seed) for dev in grid_devices(taus, dt0s, effects)
+            (name, folder, (d.tau_s, d.dt0_c, d.effect), ns.true_plans, ns.seed)
+            for d in grid_devices(taus, dt0s, effects)
         ]
     rows, details = [], []
-    with ProcessPoolExecutor(max_workers=max(1, ns.jobs)) as pool:
-        for row, det in pool.map(one_device, jobs):
+    pool = ProcessPoolExecutor(max_workers=ns.jobs) if ns.jobs > 1 else None
+    results = pool.map(one_device, jobs) if pool is not None else map(one_device, jobs)
+    try:
+        for row, det in results:
             rows.append(row)
             details += det
             print(
@@ -221,6 +235,9 @@ def main() -> None:
                 + (f"; true plan complete: {row['true_plan_complete']}" if ns.true_plans else ""),
                 flush=True,
             )
+    finally:
+        if pool is not None:
+            pool.shutdown()
     table = pd.DataFrame(rows)
     det = pd.DataFrame(details)
     write_frame_atomic(out / "closed_loop.csv", table)
