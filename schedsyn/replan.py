@@ -1,16 +1,16 @@
-"""Re-plan the rest of a run from its log: everything the planner needs, checked.
+"""Re-plan the rest of a run from its log (``schedsyn replan LOG.csv PLAN_DIR --at-min M``).
 
-``schedsyn replan LOG.csv PLAN_DIR --at-min M`` re-plans a run at minute ``M``. This
-module prepares the request (:func:`prepare_replan`) and writes the result
-(:func:`write_replan_dir`); the continuation itself is planned by
-``schedsyn.planner.plan_experiment`` with a fixed prefix (the one call is in
-:func:`plan_continuation` once the planner offers it).
+:func:`replan_run` is the whole command: :func:`prepare_replan` checks the inputs and
+gathers what the log says up to ``M``; the rest is planned by
+:func:`schedsyn.planner.plan_experiment` as a continuation (:func:`planner_request`);
+:func:`write_replan_dir` writes the result as a plan folder.
 
 What :func:`prepare_replan` establishes, in order:
 
-1. **Inputs.** ``M`` lies inside the log and inside the plan; the log has data at ``M``
-   (no sampling gap or run of missing readings around it); the log up to ``M`` belongs to
-   the plan (:func:`schedsyn.monitor.check_log_belongs`). Each failure is one line.
+1. **Inputs.** ``M`` is a whole minute inside the log and inside the plan; the log has
+   data at ``M`` (no sampling gap or run of missing readings around it); the log up to
+   ``M`` belongs to the plan (:func:`schedsyn.monitor.check_log_belongs`). Each failure
+   is one line.
 2. **The steps as executed up to M**: the plan's programme cut at ``M``
    (:func:`cut_programme`); the logged ``tk_set_c`` up to ``M`` must follow it (rows after
    ``M`` may already follow a new programme and are not used).
@@ -28,6 +28,25 @@ What :func:`prepare_replan` establishes, in order:
    yet; the continuation passes that bin again), and is reported.
 6. ``start_correction_c = T_est(M) - T_model(M)``: the measured state minus where the
    chosen model, run from the start, puts the device at ``M``.
+
+What :func:`replan_run` then decides:
+
+* **The whole run is judged as it will end** (:func:`predict_run`): the smoothed log up to
+  ``M`` joined with the identified model's prediction from the state at ``M``, counted by
+  the coverage metric (a pass straddling ``M`` is one pass), checked against the plan's
+  limits. The plan's own rest and the planner's continuation are judged the same way.
+* **The plan is kept** when its own rest is predicted to complete every bin: nothing new
+  to type in.
+* **Otherwise new steps begin where the sweep in progress ends** (:func:`sweep_end_min`):
+  the first whole minute from ``M`` at which the device, going on with the plan, is
+  beyond the working region by the plan's edge margin (``M`` itself if it already is).
+  The planner's sweeps start and end beyond the region's edges, so new steps begun in the
+  middle of a sweep would abandon it and pass its bins once more for nothing; finishing
+  it as planned saves one whole sweep. The passes between ``M`` and there count as
+  measured (predicted by the identified model).
+* The better of the plan unchanged and the planner's continuation is chosen
+  (:meth:`RunPrediction.preference`: within limits, complete, coverage, fewest levels
+  missing, shorter), the plan unchanged on a tie or when no continuation fits.
 """
 
 from __future__ import annotations
@@ -563,8 +582,9 @@ def planner_request(request: ReplanRequest, from_min: float | None = None) -> tu
 class ReplanResult:
     """A re-plan at ``M``: the whole run chosen, its predicted end, and the alternatives.
 
-    ``choice`` is ``"new"`` (the planner's continuation) or ``"keep"`` (the plan's own
-    rest, unchanged: it is predicted to complete, or nothing better was found);
+    ``choice`` is ``"new"`` (the planner's continuation, whose steps differ from the
+    plan's from ``new_steps_from_min`` on) or ``"keep"`` (the plan's own rest, unchanged:
+    it is predicted to complete, or nothing better was found);
     ``prediction`` the chosen run predicted to its end (:func:`predict_run`);
     ``unchanged`` the same for the plan's own rest; ``planned`` the planner's
     continuation (``None`` when it was not needed or nothing fitted, then
@@ -719,10 +739,11 @@ def replan_run(
     :func:`prepare_replan` (inputs checked, state and model at ``M``, levels so far), then
     the plan's own rest is predicted with the identified model (:func:`predict_run`). If
     it completes every bin within the limits and ``keep_if_complete``, it is kept (no new
-    steps to type in). Otherwise :func:`schedsyn.planner.plan_experiment` plans the rest
-    as a continuation (:func:`planner_request`), and the whole run it returns is
-    predicted the same way; the better of the two (:meth:`RunPrediction.preference`) is
-    chosen, the unchanged plan on a tie.
+    steps to type in). Otherwise :func:`schedsyn.planner.plan_experiment` plans new steps
+    as a continuation from where the sweep in progress ends (:func:`sweep_end_min`,
+    :func:`planner_request`), and the whole run it returns is predicted the same way; the
+    better of the two (:meth:`RunPrediction.preference`) is chosen, the unchanged plan on
+    a tie or when no continuation fits (the planner's reason is kept in the result).
 
     Parameters
     ----------
