@@ -4,9 +4,10 @@ From the log up to minute ``M``: the steps executed so far, the chamber and devi
 at ``M``, tau and dT0 (and an effect, where it is material) identified from the log, and
 the gradient levels measured so far in each bin. The rest of the run is planned with the
 identified model, requiring only the levels still missing (new ones ``delta`` away from
-the measured ones) and ending at 20 °C within the plan's time limit; if the plan's own
-rest is predicted to complete the region, it is kept unchanged (``--always-replan`` asks
-the planner anyway).
+the measured ones) and ending at 20 °C within the plan's time limit. The new steps begin
+where the sweep in progress has left the region (the plan runs on until then). If the
+plan's own rest is predicted to complete the region, or nothing better fits, it is kept
+unchanged (``--always-replan`` asks the planner anyway).
 
 Writes ``--out DIR`` (default ``out/replan``), itself a plan folder, so the run can be
 re-planned again later: ``steps.csv`` (the whole run: the executed steps, then the new
