@@ -352,7 +352,9 @@ def prepare_replan(
         )
     else:
         model, t0 = base, ident.t0_c
-        if eff.effect != "none":
+        if eff.effect != "none" and eff.max_shift_c > material_c:  # not identified
+            notes.append(eff.warnings[-1])
+        elif eff.effect != "none":
             notes.append(
                 f"{eff.effect} found but not material (moves T by at most "
                 f"{eff.max_shift_c:.2f} °C <= {material_c:g} °C over the rest): the base "

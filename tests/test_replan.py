@@ -466,3 +466,55 @@ def test_a_run_that_follows_its_model_keeps_its_plan(tmp_path):
     np.testing.assert_allclose(
         read_plan_dir(out).programme.chamber_at(t), plan_programme().chamber_at(t), atol=2e-3
     )
+
+
+def test_an_effect_whose_near_equal_rival_predicts_otherwise_is_not_planned_with(plan, monkeypatch):
+    """The diagnosis names an effect but another fits nearly as well: if the two predict
+    the rest of the plan more than 0.2 degC apart, the log does not identify the future
+    yet and the base model is used; rivals predicting the same (a chamber lag and a
+    second time constant of equal length) leave the effect in use."""
+    from types import SimpleNamespace
+
+    import schedsyn.discrepancy as disc
+    from schedsyn.monitor import check_effect
+
+    base = ModelSpec(2400.0, 3.0)
+    rate = ModelSpec(
+        2400.0,
+        3.0,
+        "chamber_rate_limit",
+        {"max_cool_rate_c_per_min": 0.5, "max_heat_rate_c_per_min": 1e6},
+    )
+    lag = ModelSpec(2400.0, 3.0, "chamber_lag", {"tau_chamber_s": 200.0})
+    twin = ModelSpec(2400.0, 3.0, "second_time_constant", {"tau2_s": 200.0})
+
+    def diagnosis(chosen, rival):
+        fits = tuple(SimpleNamespace(effect=m.effect, model=m, t0_c=20.0) for m in (chosen, rival))
+        return lambda log: SimpleNamespace(
+            effect=chosen.effect,
+            model=chosen,
+            parameters=dict(chosen.parameters),
+            candidates=fits,
+            ambiguous_with=(rival.effect,),
+            warnings=(),
+        )
+
+    log = log_from_frame(effect_log(base, seed=1).query("time_s <= 6000"), "r")
+    t_now = float(base.predict(plan.programme, np.array([100.0])).t_c[0])
+    rest = np.arange(100.0, plan.programme.total_min, 0.5)
+    apart = np.max(
+        np.abs(rate.predict(plan.programme, rest).t_c - lag.predict(plan.programme, rest).t_c)
+    )
+    assert apart > 0.2  # the two really disagree about the rest
+    monkeypatch.setattr(disc, "diagnose", diagnosis(rate, lag))
+    eff = check_effect(log, plan, 100.0, base, 20.0, t_now)
+    assert eff.max_shift_c > 0.2 and not eff.material
+    assert "not identified" in eff.warnings[-1] and "chamber_lag" in eff.warnings[-1]
+    monkeypatch.setattr(disc, "diagnose", diagnosis(lag, twin))
+    eff = check_effect(log, plan, 100.0, base, 20.0, t_now)
+    assert eff.material and eff.model.effect == "chamber_lag"
+    req = prepare_replan(log, plan, 100.0)
+    assert req.model.effect == "chamber_lag"
+    monkeypatch.setattr(disc, "diagnose", diagnosis(rate, lag))
+    req = prepare_replan(log, plan, 100.0)
+    assert req.model.effect == "none" and any("not identified" in n for n in req.notes)
