@@ -45,8 +45,9 @@ What :func:`replan_run` then decides:
   it as planned saves one whole sweep. The passes between ``M`` and there count as
   measured (predicted by the identified model).
 * The better of the plan unchanged and the planner's continuation is chosen
-  (:meth:`RunPrediction.preference`: within limits, complete, coverage, fewest levels
-  missing, shorter), the plan unchanged on a tie or when no continuation fits.
+  (:meth:`RunPrediction.preference`: within limits, complete, coverage, lowest level
+  count, fewest levels missing), the plan unchanged on a tie or when no continuation
+  fits.
 """
 
 from __future__ import annotations
@@ -421,18 +422,12 @@ class RunPrediction:
         c = self.coverage
         return int(np.maximum(c.levels_required - c.levels, 0).sum())
 
-    def preference(self) -> tuple[bool, bool, float, int, int, float]:
-        """Sort key, larger is better: within limits, complete, coverage, the fewest
-        levels missing, then the shorter run."""
+    def preference(self) -> tuple[bool, bool, float, int, int]:
+        """Sort key, larger is better: within limits, complete, coverage, the lowest level
+        count, the fewest levels missing. (Not the duration: a new programme only for a
+        shorter run with the same coverage is not worth typing in mid-run.)"""
         c = self.coverage
-        return (
-            not self.problems,
-            c.complete,
-            c.coverage,
-            c.min_levels,
-            -self.levels_missing,
-            -self.programme.total_min,
-        )
+        return (not self.problems, c.complete, c.coverage, c.min_levels, -self.levels_missing)
 
     def to_dict(self) -> dict[str, Any]:
         c = self.coverage
