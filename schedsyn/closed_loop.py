@@ -10,6 +10,8 @@ re-planner and runs the programme it returns; the final coverage is always compu
 the true device's dense T and g (0.1 min, :func:`true_coverage`), never on estimates.
 
 Open loop is :func:`run_loop` without a re-planner: the nominal plan runs unchanged.
+Closed loop is :func:`run_loop` with a :class:`CliReplanner`: ``schedsyn replan``'s own
+code path, through its files, each re-plan starting from the folder the last one wrote.
 :func:`true_plan` plans for the true device itself (linear effects through the planner's
 exact model, a rate limit as planner limits), the reference the closed loop is judged by.
 """

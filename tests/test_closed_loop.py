@@ -1,8 +1,8 @@
 """The closed-loop harness: true devices, their logs, re-planning times, true coverage.
 
 Truth is checked against scipy's solve_ivp and a pass count written here; the loop's
-mechanics with a re-planner that keeps the plan (the closed loop proper needs the
-planner's continuation and comes with it).
+mechanics with a re-planner that keeps the plan, then the closed loop proper through
+``schedsyn replan``'s code path (CliReplanner).
 """
 
 from __future__ import annotations
