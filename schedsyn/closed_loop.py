@@ -10,6 +10,8 @@ re-planner and runs the programme it returns; the final coverage is always compu
 the true device's dense T and g (0.1 min, :func:`true_coverage`), never on estimates.
 
 Open loop is :func:`run_loop` without a re-planner: the nominal plan runs unchanged.
+Closed loop is :func:`run_loop` with a :class:`CliReplanner`: ``schedsyn replan``'s own
+code path, through its files, each re-plan starting from the folder the last one wrote.
 :func:`true_plan` plans for the true device itself (linear effects through the planner's
 exact model, a rate limit as planner limits), the reference the closed loop is judged by.
 """
@@ -18,6 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from types import MappingProxyType
 
 import numpy as np
@@ -134,6 +137,95 @@ def replan_times(total_min: float, first_min: float = 60.0, every_min: float = 9
 
 #: ``replanner(log_so_far, programme_so_far, at_min) -> whole-run programme`` (prefix kept).
 Replanner = Callable[[pd.DataFrame, Programme, float], Programme]
+
+
+@dataclass(frozen=True, slots=True)
+class ReplanRecord:
+    """One call of :class:`CliReplanner`: what ``schedsyn replan`` decided, and its time."""
+
+    at_min: float
+    choice: str
+    predicted_coverage: float
+    predicted_complete: bool
+    levels_missing_at_m: int
+    planner_called: bool
+    replan_s: float
+    planner_s: float
+    out_dir: Path
+
+
+class CliReplanner:
+    """A re-planner that does what ``schedsyn replan LOG PLAN_DIR --at-min M --out DIR``
+    does, through the same files.
+
+    Each call writes the log so far to ``work_dir`` as CSV and reads it back
+    (:func:`schedsyn.logs.read_log`), re-plans against the current plan folder
+    (:func:`schedsyn.replan.replan_run`) and writes the new plan folder
+    (:func:`schedsyn.replan.write_replan_dir`), which the next call re-plans again -- the
+    operator's loop. ``records`` collects one :class:`ReplanRecord` per call.
+
+    Parameters
+    ----------
+    plan_dir : Path or str
+        The plan folder of the programme the run starts with.
+    work_dir : Path or str
+        Where the logs and the re-planned folders go (``replan_<M>/``).
+    find_effect, keep_if_complete : bool
+        As for :func:`schedsyn.replan.replan_run`.
+    """
+
+    def __init__(
+        self,
+        plan_dir: Path | str,
+        work_dir: Path | str,
+        *,
+        find_effect: bool = True,
+        keep_if_complete: bool = True,
+    ) -> None:
+        self.plan_dir = Path(plan_dir)
+        self.work_dir = Path(work_dir)
+        self.find_effect = find_effect
+        self.keep_if_complete = keep_if_complete
+        self.records: list[ReplanRecord] = []
+
+    def __call__(self, log: pd.DataFrame, programme: Programme, at_min: float) -> Programme:
+        from .io import write_frame_atomic
+        from .logs import read_log
+        from .monitor import read_plan_dir
+        from .replan import replan_run, write_replan_dir
+
+        plan = read_plan_dir(self.plan_dir)
+        t = np.linspace(0.0, programme.total_min, 2001)
+        if np.max(np.abs(plan.programme.chamber_at(t) - programme.chamber_at(t))) > 0.01:
+            raise ParameterError(
+                f"the programme being run is not the one in {self.plan_dir}; start the "
+                "re-planner from the plan folder of the programme the loop runs"
+            )
+        path = write_frame_atomic(self.work_dir / f"log_{at_min:g}.csv", log)
+        result = replan_run(
+            read_log(path),
+            plan,
+            at_min,
+            find_effect=self.find_effect,
+            keep_if_complete=self.keep_if_complete,
+        )
+        out = self.work_dir / f"replan_{at_min:g}"
+        write_replan_dir(out, result, [path])
+        self.records.append(
+            ReplanRecord(
+                at_min=at_min,
+                choice=result.choice,
+                predicted_coverage=result.prediction.coverage.coverage,
+                predicted_complete=result.complete,
+                levels_missing_at_m=int(result.request.missing_levels.sum()),
+                planner_called=result.planner_s > 0.0,
+                replan_s=result.replan_s,
+                planner_s=result.planner_s,
+                out_dir=out,
+            )
+        )
+        self.plan_dir = out
+        return read_plan_dir(out).programme
 
 
 @dataclass(frozen=True, slots=True)

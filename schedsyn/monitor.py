@@ -487,28 +487,55 @@ def check_effect(
 ) -> EffectCheck:
     """Diagnose the log; the effect is material if, started from ``T(now) = t_now_c``,
     its model and the base fit predict device temperatures more than ``material_c``
-    apart somewhere over the rest of the plan."""
+    apart somewhere over the rest of the plan.
+
+    An effect is not used (not material, with a warning saying why) when another effect
+    the diagnosis could not tell apart from it (``ambiguous_with``) predicts the rest more
+    than ``material_c`` differently: the log does not identify which future to plan for
+    yet (a short log often cannot, e.g. a rate limit against a chamber lag in the first
+    hour). Ambiguous effects that predict the same device temperatures (a chamber lag and
+    a second time constant of the same length) leave the chosen one in use.
+    """
     from .discrepancy import diagnose
 
     d = diagnose(log)
     if d.effect == "none":
         return EffectCheck("none", {}, 0.0, False, base, base_t0_c, tuple(d.warnings))
-    t0 = next(c.t0_c for c in d.candidates if c.effect == d.effect)
+    fits = {c.effect: c for c in d.candidates}
+    t0 = fits[d.effect].t0_c
     times = np.arange(now_min, plan.programme.total_min + 1e-9, 0.5)
+    warnings = list(d.warnings)
+    shift, disagree, rival = 0.0, 0.0, ""
     if times.size:
         t_eff, _ = predict_from_state(d.model, t0, plan.programme, now_min, t_now_c, times)
         t_base, _ = predict_from_state(base, base_t0_c, plan.programme, now_min, t_now_c, times)
         shift = float(np.max(np.abs(t_eff - t_base)))
-    else:
-        shift = 0.0
+        for name in d.ambiguous_with:
+            alt = fits.get(name)
+            if alt is None:
+                continue
+            t_alt, _ = predict_from_state(
+                alt.model, alt.t0_c, plan.programme, now_min, t_now_c, times
+            )
+            gap = float(np.max(np.abs(t_alt - t_eff)))
+            if gap > disagree:
+                disagree, rival = gap, name
+    material = shift > material_c
+    if material and disagree > material_c:
+        material = False
+        warnings.append(
+            f"{d.effect} and {rival} fit the log nearly equally but predict the device up "
+            f"to {disagree:.2f} °C apart over the rest of the plan: not identified yet, "
+            "the base model is used"
+        )
     return EffectCheck(
         d.effect,
         {k: float(v) for k, v in d.parameters.items()},
         shift,
-        shift > material_c,
+        material,
         d.model,
         t0,
-        tuple(d.warnings),
+        tuple(warnings),
     )
 
 
@@ -648,7 +675,12 @@ class MonitorReport:
         if e.effect == "none":
             return "effect beyond tau and dT0: none found"
         pars = ", ".join(f"{k} {v:.4g}" for k, v in e.parameters.items())
-        use = "used for the prediction" if e.material else "not material, not used"
+        if e.material:
+            use = "used for the prediction"
+        elif e.max_shift_c > MATERIAL_C:  # material, but rivals predict differently
+            use = "not identified yet (a rival fits as well), not used"
+        else:
+            use = "not material, not used"
         return f"effect: {e.effect} ({pars}); moves T by up to {e.max_shift_c:.2f} °C: {use}"
 
     def summary(self) -> str:

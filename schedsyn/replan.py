@@ -1,16 +1,16 @@
-"""Re-plan the rest of a run from its log: everything the planner needs, checked.
+"""Re-plan the rest of a run from its log (``schedsyn replan LOG.csv PLAN_DIR --at-min M``).
 
-``schedsyn replan LOG.csv PLAN_DIR --at-min M`` re-plans a run at minute ``M``. This
-module prepares the request (:func:`prepare_replan`) and writes the result
-(:func:`write_replan_dir`); the continuation itself is planned by
-``schedsyn.planner.plan_experiment`` with a fixed prefix (the one call is in
-:func:`plan_continuation` once the planner offers it).
+:func:`replan_run` is the whole command: :func:`prepare_replan` checks the inputs and
+gathers what the log says up to ``M``; the rest is planned by
+:func:`schedsyn.planner.plan_experiment` as a continuation (:func:`planner_request`);
+:func:`write_replan_dir` writes the result as a plan folder.
 
 What :func:`prepare_replan` establishes, in order:
 
-1. **Inputs.** ``M`` lies inside the log and inside the plan; the log has data at ``M``
-   (no sampling gap or run of missing readings around it); the log up to ``M`` belongs to
-   the plan (:func:`schedsyn.monitor.check_log_belongs`). Each failure is one line.
+1. **Inputs.** ``M`` is a whole minute inside the log and inside the plan; the log has
+   data at ``M`` (no sampling gap or run of missing readings around it); the log up to
+   ``M`` belongs to the plan (:func:`schedsyn.monitor.check_log_belongs`). Each failure
+   is one line.
 2. **The steps as executed up to M**: the plan's programme cut at ``M``
    (:func:`cut_programme`); the logged ``tk_set_c`` up to ``M`` must follow it (rows after
    ``M`` may already follow a new programme and are not used).
@@ -28,25 +28,48 @@ What :func:`prepare_replan` establishes, in order:
    yet; the continuation passes that bin again), and is reported.
 6. ``start_correction_c = T_est(M) - T_model(M)``: the measured state minus where the
    chosen model, run from the start, puts the device at ``M``.
+
+What :func:`replan_run` then decides:
+
+* **The whole run is judged as it will end** (:func:`predict_run`): the smoothed log up to
+  ``M`` joined with the identified model's prediction from the state at ``M``, counted by
+  the coverage metric (a pass straddling ``M`` is one pass), checked against the plan's
+  limits. The plan's own rest and the planner's continuation are judged the same way.
+* **The plan is kept** when its own rest is predicted to complete every bin: nothing new
+  to type in.
+* **Otherwise new steps begin where the sweep in progress ends** (:func:`sweep_end_min`):
+  the first whole minute from ``M`` at which the device, going on with the plan, is
+  beyond the working region by the plan's edge margin (``M`` itself if it already is).
+  The planner's sweeps start and end beyond the region's edges, so new steps begun in the
+  middle of a sweep would abandon it and pass its bins once more for nothing; finishing
+  it as planned saves one whole sweep. The passes between ``M`` and there count as
+  measured (predicted by the identified model).
+* The better of the plan unchanged and the planner's continuation is chosen
+  (:meth:`RunPrediction.preference`: within limits, complete, coverage, lowest level
+  count, fewest levels missing), the plan unchanged on a tie or when no continuation
+  fits.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from .compare import resample_run
-from .coverage import distinct_levels
+from .coverage import CoverageReport, coverage_report, distinct_levels
 from .effects import ModelSpec
 from .errors import LogFormatError, ParameterError
 from .estimate import estimate_gradient
-from .io import write_json_atomic
+from .io import write_frame_atomic, write_json_atomic
 from .logs import MeasuredLog, log_from_frame
+from .model import affine_response
 from .monitor import (
     DENSE_MIN,
     MATERIAL_C,
@@ -60,9 +83,11 @@ from .monitor import (
     closed_passes,
     identify,
     json_safe,
+    predict_from_state,
     with_plan_setpoint,
 )
 from .programme import Programme
+from .simulate import dense_times
 
 
 def cut_programme(programme: Programme, at_min: float) -> Programme:
@@ -155,6 +180,10 @@ class ReplanRequest:
     missing_levels: np.ndarray = field(repr=False)
     pass_in_progress: OpenPass | None = None
     notes: tuple[str, ...] = ()
+    #: the smoothed run up to ``at_min`` on the metric's 0.1 min grid: ``(time_min, T, g)``
+    measured: tuple[np.ndarray, np.ndarray, np.ndarray] = field(
+        repr=False, default=(np.zeros(0), np.zeros(0), np.zeros(0))
+    )
 
     @property
     def remaining_min(self) -> float:
@@ -216,6 +245,11 @@ def _check_at(log: MeasuredLog, plan: PlanRecord, at_min: float) -> None:
     src = log.source
     if not (isinstance(at_min, int | float) and math.isfinite(at_min) and at_min > 0):
         raise ParameterError(f"--at-min must be a time > 0 min into the run, got {at_min!r}")
+    if abs(at_min - round(at_min)) > 1e-9:
+        raise ParameterError(
+            f"--at-min must be a whole number of minutes (step tables are typed in whole "
+            f"minutes), got {at_min:g}; use {math.floor(at_min):g}"
+        )
     total = plan.programme.total_min
     if at_min >= total:
         raise ParameterError(
@@ -319,7 +353,9 @@ def prepare_replan(
         )
     else:
         model, t0 = base, ident.t0_c
-        if eff.effect != "none":
+        if eff.effect != "none" and eff.max_shift_c > material_c:  # not identified
+            notes.append(eff.warnings[-1])
+        elif eff.effect != "none":
             notes.append(
                 f"{eff.effect} found but not material (moves T by at most "
                 f"{eff.max_shift_c:.2f} °C <= {material_c:g} °C over the rest): the base "
@@ -346,27 +382,471 @@ def prepare_replan(
         missing_levels=missing,
         pass_in_progress=open_pass,
         notes=tuple(notes),
+        measured=(run.time_min, run.t_c, run.g_c_per_min),
+    )
+
+
+# --------------------------------------------------------------------------------------
+# the whole run predicted; the re-plan itself
+# --------------------------------------------------------------------------------------
+#: Slack of the device-limit check of a predicted run, degC (the prediction is an
+#: estimate; the planner checks its own model exactly).
+PREDICTED_DEVICE_TOL_C = 0.05
+
+
+@dataclass(frozen=True, slots=True)
+class RunPrediction:
+    """A whole run as it will end: measured up to ``M``, then predicted.
+
+    The smoothed run up to ``M`` (``ReplanRequest.measured``) and the model's prediction
+    from the state at ``M`` (:func:`schedsyn.monitor.predict_from_state`) form one series
+    on the metric's 0.1 min grid, so a pass straddling ``M`` is one pass, as the metric
+    will count it at the end of the run. ``problems``: every limit of the plan the whole
+    programme breaks, and a predicted device temperature after ``M`` outside the device
+    limits (by more than :data:`PREDICTED_DEVICE_TOL_C`).
+    """
+
+    programme: Programme
+    coverage: CoverageReport
+    device_min_c: float
+    device_max_c: float
+    problems: tuple[str, ...]
+
+    @property
+    def complete(self) -> bool:
+        return self.coverage.complete and not self.problems
+
+    @property
+    def levels_missing(self) -> int:
+        """Levels still missing over all bins at the end of the run."""
+        c = self.coverage
+        return int(np.maximum(c.levels_required - c.levels, 0).sum())
+
+    def preference(self) -> tuple[bool, bool, float, int, int]:
+        """Sort key, larger is better: within limits, complete, coverage, the lowest level
+        count, the fewest levels missing. (Not the duration: a new programme only for a
+        shorter run with the same coverage is not worth typing in mid-run.)"""
+        c = self.coverage
+        return (not self.problems, c.complete, c.coverage, c.min_levels, -self.levels_missing)
+
+    def to_dict(self) -> dict[str, Any]:
+        c = self.coverage
+        return {
+            "complete": self.complete,
+            "coverage": c.coverage,
+            "bins_covered": int(c.covered.sum()),
+            "min_levels": c.min_levels,
+            "levels_missing_total": self.levels_missing,
+            "short_bins": [
+                {"bin_lo_c": a, "bin_hi_c": b, "levels": n, "missing": c.levels_required - n}
+                for a, b, n in c.short_bins()
+            ],
+            "duration_min": self.programme.total_min,
+            "steps": self.programme.n_segments,
+            "device_min_after_c": self.device_min_c,
+            "device_max_after_c": self.device_max_c,
+            "problems": list(self.problems),
+        }
+
+
+def run_series(
+    request: ReplanRequest, programme: Programme
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(time_min, T, g)`` of the whole run on the metric's 0.1 min grid: the smoothed log
+    up to ``M``, then the request's model started from the state at ``M``.
+
+    After ``M``: ``T(t) = T_model(t) + d e^{-(t - M)/tau}``, ``g = g_model - (d/tau)
+    e^{-(t - M)/tau}``, ``d = T_est(M) - T_model(M)``
+    (:func:`schedsyn.monitor.predict_from_state`; the model with a material effect where
+    one was found, nonlinear effects included).
+    """
+    tm, tt, tg = request.measured
+    full = dense_times(programme.total_min, DENSE_MIN)
+    last = float(tm[-1]) if tm.size else request.at_min
+    rest = full[full > last + 1e-9]
+    if rest.size:
+        t_rest, g_rest = predict_from_state(
+            request.model, request.model_t0_c, programme, request.at_min, request.state.t_c, rest
+        )
+    else:
+        t_rest = g_rest = np.zeros(0)
+    return (
+        np.concatenate((tm, rest)),
+        np.concatenate((tt, t_rest)),
+        np.concatenate((tg, g_rest)),
+    )
+
+
+def predict_run(request: ReplanRequest, programme: Programme) -> RunPrediction:
+    """The whole run ``programme`` (executed steps, then the rest) predicted as it will end
+    (:func:`run_series`), counted by the coverage metric, and checked against the plan's
+    limits."""
+    plan = request.plan
+    time_min, temp, grad = run_series(request, programme)
+    cov = coverage_report(temp, grad, plan.grid, plan.levels_required, plan.delta_c_per_min)
+    after = temp[time_min > request.at_min + 1e-9]
+    lim = plan.limits
+    problems = list(programme.violations(lim))
+    lo = float(after.min()) if after.size else math.nan
+    hi = float(after.max()) if after.size else math.nan
+    if after.size and (
+        lo < lim.device_min_c - PREDICTED_DEVICE_TOL_C
+        or hi > lim.device_max_c + PREDICTED_DEVICE_TOL_C
+    ):
+        problems.append(
+            f"the device is predicted to reach {lo:.2f} .. {hi:.2f} °C after minute "
+            f"{request.at_min:g}, outside its limits {lim.device_min_c:g} .. "
+            f"{lim.device_max_c:g} °C"
+        )
+    return RunPrediction(programme, cov, lo, hi, tuple(problems))
+
+
+def sweep_end_min(request: ReplanRequest, edge_margin_c: float) -> float | None:
+    """The first whole minute from ``M`` at which the device, going on with the plan, is
+    outside the working region by ``edge_margin_c`` (``M`` itself if it already is).
+
+    New sweeps begin there: a sweep in progress at ``M`` is finished as planned rather
+    than abandoned (the planner's sweeps start beyond the region's edges, so one begun
+    from inside the region would pass its bins once more for nothing). ``None`` if the
+    device stays inside until the plan's end.
+    """
+    plan = request.plan
+    time_min, temp, _ = run_series(request, plan.programme)
+    lo = plan.working_lo_c - edge_margin_c
+    hi = plan.working_hi_c + edge_margin_c
+    minutes = np.arange(request.at_min, math.floor(plan.programme.total_min) + 0.5, 1.0)
+    # T at whole minutes (the 0.1 min grid holds them up to rounding)
+    at = np.interp(minutes, time_min, temp)
+    out = np.flatnonzero((at <= lo) | (at >= hi))
+    return float(minutes[out[0]]) if out.size else None
+
+
+def plan_spec(plan: PlanRecord) -> Any:
+    """The :class:`schedsyn.planner.ExperimentSpec` of a plan folder's ``plan.json``."""
+    from .planner import ExperimentSpec
+
+    fields = ExperimentSpec.__dataclass_fields__
+    raw = {k: v for k, v in plan.spec_dict.items() if k in fields}
+    raw["name"] = str(raw.get("name") or plan.name)
+    try:
+        return ExperimentSpec(**raw)
+    except TypeError as exc:  # a key the spec needs is missing
+        raise ParameterError(f"{plan.path}/plan.json spec: {exc}") from None
+
+
+def planner_request(request: ReplanRequest, from_min: float | None = None) -> tuple[Any, ...]:
+    """What :func:`schedsyn.planner.plan_experiment` is called with for the rest of a run.
+
+    Returns ``(spec, params, limits, model, continuation)``: the plan's
+    :class:`~schedsyn.planner.ExperimentSpec`; the identified model's first-order
+    equivalent (it shapes the bands and the decay of the start correction); the plan's
+    limits with the rates the model allows (a rate limit lowers them); the model's exact
+    linear part; and the :class:`~schedsyn.planner.Continuation`.
+
+    ``from_min`` (a whole minute >= ``M``, default ``M``): the new steps begin there; the
+    plan's steps run until then. The continuation's fixed steps are the plan's programme
+    up to ``from_min``, its existing gradients the passes ended by then (measured up to
+    ``M``, predicted after it, :func:`run_series`; a pass open at ``from_min`` left out),
+    and its start correction is the predicted ``T(from_min)`` minus where the planner's
+    linear model, run over the fixed steps from the fitted ``T0``, puts it.
+    """
+    from .planner import Continuation
+
+    plan = request.plan
+    spec = plan_spec(plan)
+    start = request.at_min if from_min is None else float(from_min)
+    if start == request.at_min:
+        prefix, grads, t_start = request.prefix, request.existing_gradients, request.state.t_c
+    else:
+        prefix = cut_programme(plan.programme, start)
+        time_min, temp, grad = run_series(request, plan.programme)
+        upto = time_min <= start + 1e-9
+        grads, _ = closed_passes(time_min[upto], temp[upto], grad[upto], plan.grid)
+        t_start = float(np.interp(start, time_min, temp))
+    model = request.model
+    linear = model.linear_model()
+    # the planner's state at the start: its linear part run over the fixed steps
+    t_lin = affine_response(
+        linear, prefix.durations_min, np.array([start]), prefix.start_c, request.model_t0_c
+    ).evaluate(prefix.rates_c_per_min)[0]
+    continuation = Continuation(
+        prefix, grads, start_correction_c=t_start - float(t_lin[0]), t0_c=request.model_t0_c
+    )
+    return spec, model.planner_params(), model.planner_limits(plan.limits), linear, continuation
+
+
+@dataclass(frozen=True, slots=True)
+class ReplanResult:
+    """A re-plan at ``M``: the whole run chosen, its predicted end, and the alternatives.
+
+    ``choice`` is ``"new"`` (the planner's continuation, whose steps differ from the
+    plan's from ``new_steps_from_min`` on) or ``"keep"`` (the plan's own rest, unchanged:
+    it is predicted to complete, or nothing better was found);
+    ``prediction`` the chosen run predicted to its end (:func:`predict_run`);
+    ``unchanged`` the same for the plan's own rest; ``planned`` the planner's
+    continuation (``None`` when it was not needed or nothing fitted, then
+    ``planner_error`` says why); ``replan_s`` the wall time of the whole re-plan and
+    ``planner_s`` of the planner call, s.
+    """
+
+    request: ReplanRequest
+    choice: str
+    reason: str
+    prediction: RunPrediction
+    unchanged: RunPrediction
+    planned: Any = None  # schedsyn.planner.Plan (imported lazily: cvxpy)
+    planner_error: str | None = None
+    new_steps_from_min: float | None = None
+    replan_s: float = 0.0
+    planner_s: float = 0.0
+
+    @property
+    def programme(self) -> Programme:
+        """The whole run: the executed steps, then the rest."""
+        return self.prediction.programme
+
+    @property
+    def complete(self) -> bool:
+        """The run is predicted to complete every bin within the limits."""
+        return self.prediction.complete
+
+    def to_frame(self) -> pd.DataFrame:
+        """Per bin: levels at ``M``, missing at ``M``, predicted at the end (chosen run and
+        the plan unchanged), and missing at the end."""
+        r = self.request
+        lo = r.plan.grid.lower_c
+        c, u = self.prediction.coverage, self.unchanged.coverage
+        frame = pd.DataFrame(
+            {
+                "bin_lo_c": lo,
+                "bin_hi_c": lo + r.plan.grid.bin_c,
+                "levels_at_m": r.existing_levels,
+                "missing_at_m": r.missing_levels,
+                "predicted_passes": c.pass_counts,
+                "predicted_levels": c.levels,
+                "predicted_missing": np.maximum(c.levels_required - c.levels, 0),
+                "unchanged_plan_levels": u.levels,
+            }
+        )
+        if self.planned is not None:
+            frame["planner_levels"] = self.planned.coverage.levels
+        return frame
+
+    def _planner_dict(self) -> dict[str, Any] | None:
+        p = self.planned
+        if p is None:
+            return None if self.planner_error is None else {"error": self.planner_error}
+        return {
+            "status": p.status,
+            "complete": p.complete,
+            "coverage": p.coverage.coverage,
+            "min_levels": p.coverage.min_levels,
+            "short_bins": [list(b) for b in p.coverage.short_bins()],
+            "duration_min": p.duration_min,
+            "steps": p.steps,
+            "continued_from_min": p.continued_from_min,
+            "lp_solves": p.n_lp,
+            "violations": list(p.violations),
+            "notes": list(p.notes),
+            "solve_s": p.solve_s,
+        }
+
+    def to_json_dict(self) -> dict[str, Any]:
+        out = self.request.to_json_dict()
+        out.update(
+            {
+                "choice": self.choice,
+                "reason": self.reason,
+                "complete": self.complete,
+                "predicted": self.prediction.to_dict(),
+                "unchanged_plan": self.unchanged.to_dict(),
+                "planner": self._planner_dict(),
+                "new_steps_from_min": self.new_steps_from_min,
+                "replan_s": self.replan_s,
+                "planner_s": self.planner_s,
+            }
+        )
+        return json_safe(out)
+
+    def summary(self) -> str:
+        r = self.request
+        p = r.plan
+        i = r.identified
+        c = self.prediction.coverage
+        if self.choice == "keep":
+            what = "the plan goes on unchanged"
+        elif self.new_steps_from_min == r.at_min:
+            what = f"new steps from minute {r.at_min:g}"
+        else:
+            what = (
+                f"the plan goes on to minute {self.new_steps_from_min:g} (the sweep in progress "
+                "ends), then new steps"
+            )
+        lines = [
+            f"{p.name}: re-planned at minute {r.at_min:g} ({r.remaining_min:g} min left of "
+            f"{p.limits.duration_max_min:g})",
+            f"identified from the log: tau {i.tau_s:.0f} ± {i.tau_std_s:.0f} s, dT0 "
+            f"{i.dt0_c:.2f} ± {i.dt0_std_c:.2f} °C (plan: {p.params.tau_s:g} s, "
+            f"{p.params.dt0_c:g} °C); model for the rest: {_model_text(r.model)}",
+            f"measured by minute {r.at_min:g}: {int((r.missing_levels == 0).sum())}/"
+            f"{p.grid.n_bins} bins with >= {p.levels_required} levels, "
+            f"{int(r.missing_levels.sum())} levels missing",
+            f"{what}: {self.reason}",
+            f"predicted at the end: {c.coverage:.0%} ({int(c.covered.sum())}/{p.grid.n_bins} "
+            f"bins, min {c.min_levels} levels), the run lasts {self.programme.total_min:g} min"
+            + ("" if self.complete else " -- NOT COMPLETE"),
+        ]
+        short = self.prediction.to_dict()["short_bins"]
+        if short:
+            lines.append(
+                "short: "
+                + ", ".join(
+                    f"[{b['bin_lo_c']:g}, {b['bin_hi_c']:g}) {b['levels']} levels "
+                    f"(missing {b['missing']})"
+                    for b in short[:10]
+                )
+                + (f" and {len(short) - 10} more" if len(short) > 10 else "")
+            )
+        lines.extend(f"problem: {x}" for x in self.prediction.problems)
+        lines.extend(f"note: {n}" for n in r.notes)
+        return "\n".join(lines)
+
+
+def _model_text(model: ModelSpec) -> str:
+    base = f"tau {model.tau_s:.0f} s, dT0 {model.dt0_c:.2f} °C"
+    if model.effect == "none":
+        return base
+    pars = ", ".join(f"{k} {v:.4g}" for k, v in model.parameters.items())
+    return f"{base} + {model.effect} ({pars})"
+
+
+def replan_run(
+    log: MeasuredLog,
+    plan: PlanRecord,
+    at_min: float,
+    *,
+    settings: MonitorSettings | None = None,
+    find_effect: bool = True,
+    material_c: float = MATERIAL_C,
+    keep_if_complete: bool = True,
+    progress: Callable[[str], None] | None = None,
+) -> ReplanResult:
+    """Re-plan the rest of a run at minute ``at_min`` (what ``schedsyn replan`` does).
+
+    :func:`prepare_replan` (inputs checked, state and model at ``M``, levels so far), then
+    the plan's own rest is predicted with the identified model (:func:`predict_run`). If
+    it completes every bin within the limits and ``keep_if_complete``, it is kept (no new
+    steps to type in). Otherwise :func:`schedsyn.planner.plan_experiment` plans new steps
+    as a continuation from where the sweep in progress ends (:func:`sweep_end_min`,
+    :func:`planner_request`), and the whole run it returns is predicted the same way; the
+    better of the two (:meth:`RunPrediction.preference`) is chosen, the unchanged plan on
+    a tie or when no continuation fits (the planner's reason is kept in the result).
+
+    Parameters
+    ----------
+    log, plan, at_min, settings, find_effect, material_c
+        As for :func:`prepare_replan`; ``at_min`` a whole minute.
+    keep_if_complete : bool
+        Keep the plan's own rest when it is predicted to complete (default); ``False``
+        always asks the planner.
+    progress : callable(str), optional
+        Receives short progress messages (the planner's too).
+
+    Raises
+    ------
+    ParameterError, LogFormatError
+        As :func:`prepare_replan` (bad ``at_min``, gaps, a log of another plan).
+    """
+    tic = time.perf_counter()
+    say = progress if progress is not None else (lambda _msg: None)
+    say(f"{plan.name}: the log up to minute {at_min:g}: state, levels so far, model")
+    request = prepare_replan(
+        log, plan, at_min, settings=settings, find_effect=find_effect, material_c=material_c
+    )
+    unchanged = predict_run(request, plan.programme)
+    planned, error, planner_s, new_from = None, None, 0.0, None
+    if keep_if_complete and unchanged.complete:
+        choice = "keep"
+        reason = (
+            "the plan's own rest is predicted to complete every bin with the identified "
+            "model; no new steps"
+        )
+        chosen = unchanged
+    else:
+        from .errors import InfeasiblePlanError
+        from .planner import plan_experiment
+
+        before = "completes" if unchanged.complete else f"reaches {unchanged.coverage.coverage:.0%}"
+        start = sweep_end_min(request, plan_spec(plan).edge_margin_c)
+        if start is None or start >= plan.limits.duration_max_min:
+            error = (
+                "the device stays inside the working region until the end of the plan: no "
+                "new sweep can begin"
+            )
+        else:
+            spec, params, limits, linear, continuation = planner_request(request, start)
+            say(
+                f"{plan.name}: planning new steps from minute {start:g} "
+                f"({int(request.missing_levels.sum())} levels missing at minute {at_min:g}, "
+                f"{plan.limits.duration_max_min - start:g} min left)"
+            )
+            t1 = time.perf_counter()
+            try:
+                planned = plan_experiment(
+                    spec, params, limits, model=linear, continuation=continuation, progress=progress
+                )
+            except InfeasiblePlanError as exc:
+                error = str(exc)
+            planner_s = time.perf_counter() - t1
+        new = None if planned is None else predict_run(request, planned.programme)
+        if new is not None and new.preference() > unchanged.preference():
+            choice, chosen, new_from = "new", new, start
+            reason = (
+                f"the planner's continuation is predicted to reach {new.coverage.coverage:.0%}"
+                f" (min {new.coverage.min_levels} levels) in {new.programme.total_min:g} min; "
+                f"the plan unchanged {before}"
+            )
+        else:
+            choice, chosen = "keep", unchanged
+            why = (
+                f"no continuation fits ({error})"
+                if new is None
+                else f"the planner's continuation would reach only {new.coverage.coverage:.0%}"
+                f" (min {new.coverage.min_levels} levels)"
+            )
+            reason = f"{why}; the plan unchanged {before}"
+    return ReplanResult(
+        request=request,
+        choice=choice,
+        reason=reason,
+        prediction=chosen,
+        unchanged=unchanged,
+        planned=planned,
+        planner_error=error,
+        new_steps_from_min=new_from,
+        replan_s=time.perf_counter() - tic,
+        planner_s=planner_s,
     )
 
 
 def write_replan_dir(
-    out: Path | str,
-    request: ReplanRequest,
-    programme: Programme,
-    *,
-    continuation: dict[str, Any] | None = None,
-    inputs: Sequence[Path | str] = (),
+    out: Path | str, result: ReplanResult, inputs: Sequence[Path | str] = ()
 ) -> list[Path]:
     """Write ``DIR`` as a plan directory of the whole run, plus ``replan.json``.
 
-    ``programme`` is the whole run: ``request.prefix`` then the new steps (checked). The
-    directory holds ``steps.csv`` (the usual step table), ``plan.json`` (the original
-    ``spec`` and ``limits``, the model the rest was planned with, and where it came from)
-    and ``replan.json`` (:meth:`ReplanRequest.to_json_dict` and ``continuation``: what
-    the planner reported). :func:`schedsyn.monitor.read_plan_dir` reads it back, so a
-    run can be re-planned again later.
+    The directory holds ``steps.csv`` (the whole run in the usual step-table format: the
+    executed steps, then the new ones), ``plan.json`` (the original ``spec`` and
+    ``limits``; ``tau_s``, ``dt0_c`` and ``model``: the model the rest was planned with;
+    the predicted coverage; where it came from), ``replan.json``
+    (:meth:`ReplanResult.to_json_dict`: what was identified, what is still missing, the
+    predicted end of the run and the alternatives) and ``bins.csv``
+    (:meth:`ReplanResult.to_frame`). :func:`schedsyn.monitor.read_plan_dir` reads it back,
+    so a run can be re-planned again later. Nothing is written if the programme does not
+    begin with the executed steps or breaks a limit of the plan.
     """
     out = Path(out)
+    request = result.request
+    programme = result.programme
     prefix = request.prefix
     # the same chamber path up to M (at every breakpoint of either, and between them)
     knots = np.concatenate(
@@ -384,6 +864,7 @@ def write_replan_dir(
         raise ParameterError("the whole-run programme breaks a limit: " + problems[0])
     inputs = list(inputs)
     raw = dict(request.plan.raw)
+    pred = result.prediction
     meta = {
         "experiment": request.plan.name,
         "tau_s": request.model.tau_s,
@@ -391,19 +872,28 @@ def write_replan_dir(
         "model": request.model.to_json_dict(),
         "spec": raw["spec"],
         "limits": request.plan.limits.to_dict(),
+        "status": "complete" if pred.complete else "incomplete",
+        "complete": pred.complete,
+        "coverage": pred.coverage.coverage,
+        "min_levels": pred.coverage.min_levels,
+        "short_bins": [list(b) for b in pred.coverage.short_bins()],
+        "coverage_basis": (
+            f"predicted: measured up to minute {request.at_min:g}, then the identified model"
+        ),
         "duration_min": programme.total_min,
         "steps": programme.n_segments,
+        "continued_from_min": result.new_steps_from_min,
         "replanned_from": {
             "plan": str(request.plan.path),
             "at_min": request.at_min,
             "log": request.log_source,
+            "choice": result.choice,
         },
     }
-    report = request.to_json_dict()
-    report["continuation"] = continuation
     written = [
         programme.to_csv(out / "steps.csv", inputs),
         write_json_atomic(out / "plan.json", json_safe(meta), inputs),
-        write_json_atomic(out / "replan.json", json_safe(report), inputs),
+        write_json_atomic(out / "replan.json", result.to_json_dict(), inputs),
+        write_frame_atomic(out / "bins.csv", result.to_frame(), inputs),
     ]
     return written

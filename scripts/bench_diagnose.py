@@ -74,8 +74,9 @@ def run_case(args):
         "ambiguous_with": ",".join(d.ambiguous_with),
         "correct": correct,
         "named_strictly": d.effect == effect,
-        "lag_ambiguity": ",".join(a.effect for a in d.lag_ambiguity),
-        "seen_in_air": ",".join(f.effect for f in d.air_findings),
+        # getattr: the same script runs on a version without these reports (before/after)
+        "lag_ambiguity": ",".join(a.effect for a in getattr(d, "lag_ambiguity", ())),
+        "seen_in_air": ",".join(f.effect for f in getattr(d, "air_findings", ())),
         "main_rel_error": err,
         "rms_before_c": d.rms_before_c,
         "rms_after_c": d.rms_after_c,

@@ -1,8 +1,8 @@
 """The closed-loop harness: true devices, their logs, re-planning times, true coverage.
 
 Truth is checked against scipy's solve_ivp and a pass count written here; the loop's
-mechanics with a re-planner that keeps the plan (the closed loop proper needs the
-planner's continuation and comes with it).
+mechanics with a re-planner that keeps the plan, then the closed loop proper through
+``schedsyn replan``'s code path (CliReplanner).
 """
 
 from __future__ import annotations
@@ -123,3 +123,46 @@ def test_a_plan_for_the_true_device_is_complete_on_it():
     # the same plan on the device without the second time constant is judged on that one
     other = run_loop(true_device(2400.0, 3.0), plan.programme, spec.grid, 2, spec.delta_c_per_min)
     assert other.effect_shift_c == 0.0 and res.effect_shift_c > 0.2
+
+
+def test_the_closed_loop_re_plans_through_the_command_and_completes_what_open_loop_misses(
+    tmp_path,
+):
+    """A device slower and hotter than the plan's model: open loop misses levels; the
+    re-planner (schedsyn replan's code path, through its files) completes every bin of the
+    executed programme -- checked by scipy on the true device and a pass count of ours."""
+    from test_monitor import write_plan_dir
+
+    from schedsyn.closed_loop import CliReplanner
+    from schedsyn.monitor import read_plan_dir
+
+    plan_dir = write_plan_dir(tmp_path / "plan")
+    prog = read_plan_dir(plan_dir).programme
+    dev = true_device(3000.0, 6.0)
+    open_ = run_loop(dev, prog, GRID, LEVELS, DELTA)
+    replanner = CliReplanner(plan_dir, tmp_path / "work")
+    closed = run_loop(dev, prog, GRID, LEVELS, DELTA, replanner=replanner)
+    assert not open_.complete and closed.complete
+    first = replanner.records[0]
+    assert first.at_min == 60.0 and first.choice == "new" and first.planner_called
+    assert (first.out_dir / "replan.json").is_file() and (
+        tmp_path / "work" / "log_60.csv"
+    ).is_file()
+    assert [r.at_min for r in replanner.records] == list(closed.replans_at_min)
+    prog = closed.programme
+    tau = dev.tau_s / 60.0
+    t = np.arange(0.0, prog.total_min + 1e-9, 0.1)
+    sol = solve_ivp(
+        lambda s, y: [(prog.chamber_at([s])[0] + dev.dt0_c - y[0]) / tau],
+        (0.0, prog.total_min),
+        [20.0],
+        t_eval=t,
+        rtol=1e-10,
+        atol=1e-10,
+        max_step=0.5,
+    )
+    g = (prog.chamber_at(t) + dev.dt0_c - sol.y[0]) / tau
+    found = own_passes(sol.y[0], g, *REGION)
+    for b in range(GRID.n_bins):
+        mine = np.array([gg for k, gg, _ in found if k == b])
+        assert distinct_levels(mine, DELTA) >= LEVELS, b

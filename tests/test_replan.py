@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from scipy.integrate import solve_ivp
-from test_monitor import LEVELS, REGION, own_passes, plan_programme, write_plan_dir
+from test_monitor import DELTA, LEVELS, REGION, own_passes, plan_programme, write_plan_dir
 
 from schedsyn.coverage import distinct_levels
 from schedsyn.effects import ModelSpec
@@ -22,10 +22,15 @@ from schedsyn.logs import log_from_frame
 from schedsyn.monitor import read_plan_dir
 from schedsyn.programme import Programme
 from schedsyn.replan import (
+    ReplanResult,
     cut_programme,
     join_programmes,
+    planner_request,
+    predict_run,
     prepare_replan,
     rest_of_programme,
+    run_series,
+    sweep_end_min,
     write_replan_dir,
 )
 from schedsyn.synth import synth_effect_log
@@ -145,12 +150,19 @@ def test_rows_after_m_may_follow_another_programme(plan):
     assert req.prefix.total_min == pytest.approx(190.0)
 
 
+def _kept(req, whole, reason="the plan's own rest"):
+    """A :class:`ReplanResult` for a given whole run (no planner)."""
+    return ReplanResult(
+        req, "keep", reason, predict_run(req, whole), predict_run(req, req.plan.programme)
+    )
+
+
 def test_the_replan_directory_is_a_plan_directory_that_can_be_replanned_again(plan, tmp_path):
     log = log_from_frame(effect_log(ModelSpec(2500.0, 2.5), seed=3), "r")
     req = prepare_replan(log, plan, 150.0, find_effect=False)
     whole = join_programmes(req.prefix, rest_of_programme(plan.programme, 150.0))
     out = tmp_path / "re"
-    write_replan_dir(out, req, whole, continuation={"note": "the plan's own rest"})
+    write_replan_dir(out, _kept(req, whole))
     again = read_plan_dir(out)
     t = np.linspace(0.0, whole.total_min, 3001)
     np.testing.assert_allclose(again.programme.chamber_at(t), whole.chamber_at(t), atol=0.006)
@@ -159,8 +171,8 @@ def test_the_replan_directory_is_a_plan_directory_that_can_be_replanned_again(pl
     meta = json.loads((out / "replan.json").read_text())
     assert meta["at_min"] == 150.0 and len(meta["bins"]) == 10
     assert meta["levels_missing_total"] == int(req.missing_levels.sum())
-    assert meta["continuation"] == {"note": "the plan's own rest"}
-    steps = pd.read_csv(out / "steps.csv")
+    assert meta["choice"] == "keep" and meta["reason"] == "the plan's own rest"
+    steps = pd.read_csv(out / "steps.csv", comment="#")
     assert list(steps.columns[:6]) == [
         "step",
         "start_min",
@@ -179,10 +191,333 @@ def test_the_writer_refuses_a_run_that_does_not_begin_with_the_executed_steps(pl
     req = prepare_replan(log, plan, 150.0, find_effect=False)
     other = Programme(np.array([150.0, 100.0]), np.array([-0.2, 0.2]))
     with pytest.raises(ParameterError, match="begin with the steps executed"):
-        write_replan_dir(tmp_path / "x", req, other)
+        write_replan_dir(tmp_path / "x", _kept(req, other))
     hot_end = join_programmes(
         req.prefix, Programme(np.array([100.0]), np.array([0.3]), req.prefix.end_c)
     )
     with pytest.raises(ParameterError, match="breaks a limit"):
-        write_replan_dir(tmp_path / "x", req, hot_end)
+        write_replan_dir(tmp_path / "x", _kept(req, hot_end))
     assert not (tmp_path / "x").exists()
+
+
+# --------------------------------------------------------------------------------------
+# the whole run predicted, where new steps begin, what the planner is asked
+# --------------------------------------------------------------------------------------
+def _ode(programme_edges_min, programme_temps_c, tau_s, dt0_c, t0_c, t_span, t_eval, y0=None):
+    """tau dT/dt + T = Tk + dT0 by scipy, Tk the piecewise-linear chamber path."""
+    tau = tau_s / 60.0
+
+    def tk(t):
+        return np.interp(t, programme_edges_min, programme_temps_c)
+
+    sol = solve_ivp(
+        lambda t, y: [(tk(t) + dt0_c - y[0]) / tau],
+        t_span,
+        [t0_c if y0 is None else y0],
+        t_eval=t_eval,
+        rtol=1e-10,
+        atol=1e-10,
+        max_step=0.5,
+    )
+    temp = sol.y[0]
+    return temp, (tk(t_eval) + dt0_c - temp) / tau
+
+
+def _edges(programme):
+    return (
+        np.concatenate(([0.0], np.cumsum(programme.durations_min))),
+        programme.boundary_temps_c,
+    )
+
+
+def test_the_predicted_run_is_the_log_then_the_model_from_the_state_at_m(plan):
+    """After M the prediction is the identified lag started from the estimated T(M)
+    (scipy), before M the smoothed log; its passes are counted by a plain loop."""
+    truth = ModelSpec(2900.0, 1.5)
+    req = prepare_replan(log_from_frame(effect_log(truth, seed=4), "r"), plan, 200.0)
+    time_min, temp, grad = run_series(req, plan.programme)
+    after = time_min > 200.0 + 1e-9
+    edges, temps = _edges(plan.programme)
+    t_ode, g_ode = _ode(
+        edges,
+        temps,
+        req.model.tau_s,
+        req.model.dt0_c,
+        None,
+        (200.0, time_min[-1]),
+        time_min[after],
+        y0=req.state.t_c,
+    )
+    np.testing.assert_allclose(temp[after], t_ode, atol=2e-4)
+    np.testing.assert_allclose(grad[after], g_ode, atol=2e-5)
+    tm, tt, _ = req.measured
+    np.testing.assert_array_equal(temp[~after], tt)
+    pred = predict_run(req, plan.programme)
+    found = own_passes(temp, grad, *REGION)
+    for b in range(10):
+        mine = np.array([g for k, g, _ in found if k == b])
+        assert pred.coverage.pass_counts[b] == mine.size
+        assert pred.coverage.levels[b] == distinct_levels(mine, plan.delta_c_per_min)
+
+
+def test_new_steps_begin_when_the_sweep_in_progress_has_left_the_region(plan):
+    """At 60 min the device is inside the region going down: the new steps begin at the
+    first whole minute it is 0.5 degC below it (by scipy on the identified model); the
+    planner's fixed steps are the plan's up to then, its levels those of the passes ended
+    by then, its start correction T(M') minus its own linear model's T(M')."""
+    truth = ModelSpec(3000.0, 6.0)
+    req = prepare_replan(log_from_frame(effect_log(truth, seed=1), "r"), plan, 60.0)
+    edges, temps = _edges(plan.programme)
+    t_eval = np.arange(60.0, 200.0 + 1e-9, 1.0)
+    t_ode, _ = _ode(
+        edges, temps, req.model.tau_s, req.model.dt0_c, None, (60.0, 200.0), t_eval, req.state.t_c
+    )
+    assert REGION[0] - 0.5 < t_ode[0] < REGION[1] + 0.5  # inside at M
+    outside = np.flatnonzero((t_ode <= REGION[0] - 0.5) | (t_ode >= REGION[1] + 0.5))
+    start = sweep_end_min(req, 0.5)
+    assert start == t_eval[outside[0]]
+    spec, params, limits, linear, cont = planner_request(req, start)
+    assert cont.at_min == start and spec.levels_required == LEVELS
+    np.testing.assert_allclose(
+        cont.prefix.chamber_at(t_eval[t_eval <= start]),
+        plan.programme.chamber_at(t_eval[t_eval <= start]),
+    )
+    # the planner's own model from t = 0 (fitted T0), corrected, lands on the prediction
+    t_lin, _ = _ode(edges, temps, params.tau_s, params.dt0_c, req.model_t0_c, (0.0, start), [start])
+    time_min, temp, grad = run_series(req, plan.programme)
+    t_pred = np.interp(start, time_min, temp)
+    assert t_lin[0] + cont.start_correction_c == pytest.approx(t_pred, abs=1e-3)
+    # passes ended by M': one more crossing than at M (counted by a plain loop)
+    upto = time_min <= start
+    found = own_passes(temp[upto], grad[upto], *REGION)
+    for b in range(10):
+        mine = sorted(g for k, g, closed in found if k == b and closed)
+        np.testing.assert_allclose(np.sort(cont.existing_gradients[b]), mine, atol=1e-9)
+    assert sum(g.size for g in cont.existing_gradients) > sum(
+        g.size for g in req.existing_gradients
+    )
+
+
+# --------------------------------------------------------------------------------------
+# schedsyn replan, end to end
+# --------------------------------------------------------------------------------------
+def _write_log(frame, path, at_min=None):
+    if at_min is not None:
+        frame = frame[frame["time_s"] <= at_min * 60.0]
+    frame.to_csv(path, index=False)
+    return path
+
+
+def _true_levels(steps_csv, truth):
+    """Per bin, the passes' gradients of the step table run on ``truth``: the table read
+    by pandas, the chamber path interpolated, the lag integrated by scipy, passes counted
+    by a plain loop."""
+    steps = pd.read_csv(steps_csv, comment="#")
+    edges = np.concatenate(([0.0], np.cumsum(steps["duration_min"].to_numpy())))
+    temps = np.concatenate((steps["tk_start_c"].to_numpy()[:1], steps["tk_end_c"].to_numpy()))
+    t = np.arange(0.0, edges[-1] + 1e-9, 0.1)
+    temp, grad = _ode(edges, temps, truth.tau_s, truth.dt0_c, 20.0, (0.0, edges[-1]), t)
+    found = own_passes(temp, grad, *REGION)
+    return [np.array([g for k, g, _ in found if k == b]) for b in range(10)], edges[-1]
+
+
+def test_replan_cli_keeps_the_executed_steps_and_the_true_run_reaches_its_claim(tmp_path, capsys):
+    """A device slower and hotter than the plan's model (the plan alone covers 60 %):
+    re-planned after the first hour, the whole run keeps the executed steps (and the
+    plan's steps until the sweep in progress ends), and on the true device (integrated
+    by scipy, counted by hand) it reaches what replan.json claims."""
+    from schedsyn.cli import main
+
+    plan_dir = write_plan_dir(tmp_path / "plan")
+    truth = ModelSpec(3000.0, 6.0)
+    log = _write_log(effect_log(truth, seed=1), tmp_path / "log.csv", 60.0)
+    out = tmp_path / "re"
+    rc = main(["replan", str(log), str(plan_dir), "--at-min", "60", "--out", str(out)])
+    printed = capsys.readouterr()
+    meta = json.loads((out / "replan.json").read_text())
+    assert rc == (0 if meta["complete"] else 1) == 0
+    assert meta["choice"] == "new" and meta["new_steps_from_min"] >= 60.0
+    assert "new steps" in printed.out and "replan [" in printed.err
+    # the executed steps, bit for bit up to the step cut at M, then the plan's path on to
+    # where the new steps begin
+    new, old = (
+        pd.read_csv(out / "steps.csv", comment="#"),
+        pd.read_csv(plan_dir / "steps.csv", comment="#"),
+    )
+    n_done = int((old["start_min"] + old["duration_min"] <= 60.0).sum())
+    cols = ["duration_min", "tk_start_c", "tk_end_c", "rate_c_per_min"]
+    pd.testing.assert_frame_equal(new[cols][:n_done], old[cols][:n_done])
+    whole = read_plan_dir(out).programme
+    t = np.arange(0.0, meta["new_steps_from_min"] + 1e-9, 0.5)
+    np.testing.assert_allclose(whole.chamber_at(t), plan_programme().chamber_at(t), atol=2e-3)
+    # on the true device
+    grads, total = _true_levels(out / "steps.csv", truth)
+    levels = np.array([distinct_levels(g, DELTA) for g in grads])
+    claimed = pd.read_csv(out / "bins.csv")["predicted_levels"].to_numpy()
+    assert np.all(np.abs(levels - claimed) <= 1)
+    assert np.all(levels >= LEVELS)  # replan.json says complete
+    assert total == pytest.approx(meta["predicted"]["duration_min"]) and total <= 540.0
+    # the plan unchanged would not have been complete on this device
+    old_grads, _ = _true_levels(plan_dir / "steps.csv", truth)
+    assert min(distinct_levels(g, DELTA) for g in old_grads) < LEVELS
+    # and the folder is a plan folder: the run on the new programme re-planned again later
+    run2 = synth_effect_log(whole, truth, sample_s=10.0, noise_c=0.01, seed=3)
+    log2 = _write_log(run2.drop(columns=["t_true_c", "g_true_c_per_min"]), tmp_path / "l2.csv")
+    out2 = tmp_path / "r2"
+    rc2 = main(["replan", str(log2), str(out), "--at-min", "200", "--out", str(out2), "--quiet"])
+    assert rc2 == 0
+    t = np.arange(0.0, 200.0 + 1e-9, 0.5)
+    np.testing.assert_allclose(read_plan_dir(out2).programme.chamber_at(t), whole.chamber_at(t))
+
+
+def test_replan_cli_says_how_far_an_incomplete_rest_falls_short_and_exits_1(tmp_path, capsys):
+    """Late in the run nothing new fits in the time left: the plan goes on, replan.json
+    lists the short bins with their missing levels, which the true run confirms."""
+    from schedsyn.cli import main
+
+    plan_dir = write_plan_dir(tmp_path / "plan")
+    meta = json.loads((plan_dir / "plan.json").read_text())
+    meta["limits"]["duration_max_min"] = 450.0  # the plan lasts 440 min
+    (plan_dir / "plan.json").write_text(json.dumps(meta))
+    truth = ModelSpec(3000.0, 6.0)
+    log = _write_log(effect_log(truth, seed=2), tmp_path / "log.csv", 400.0)
+    out = tmp_path / "re"
+    rc = main(["replan", str(log), str(plan_dir), "--at-min", "400", "--out", str(out)])
+    assert rc == 1
+    meta = json.loads((out / "replan.json").read_text())
+    assert meta["complete"] is False and meta["choice"] == "keep"
+    assert "no continuation fits" in meta["reason"]
+    short = {b["bin_lo_c"]: b["missing"] for b in meta["predicted"]["short_bins"]}
+    assert short and "NOT COMPLETE" in capsys.readouterr().out
+    grads, _ = _true_levels(out / "steps.csv", truth)
+    true_short = {
+        REGION[0] + b: LEVELS - distinct_levels(g, DELTA)
+        for b, g in enumerate(grads)
+        if distinct_levels(g, DELTA) < LEVELS
+    }
+    assert true_short == short
+
+
+def _gap(frame):
+    return frame[(frame["time_s"] < 5400) | (frame["time_s"] > 6600)]
+
+
+@pytest.mark.parametrize(
+    "make, at, words",
+    [
+        (lambda f: f[f["time_s"] <= 5000], "150", "beyond the end of the log"),
+        (lambda f: f, "445", "end of the plan"),
+        (lambda f: f, "150.5", "whole number of minutes"),
+        (_gap, "100", "gap"),
+        (lambda f: f.assign(tk_set_c=f["tk_set_c"] + 2.0), "150", "setpoint"),
+        (lambda f: f.assign(time_s=f["time_s"] + 3600.0), "150", "start"),
+        (lambda f: f.assign(t_int_c=f["t_int_c"] - 40.0), "150", "first reading"),
+        (
+            lambda f: f.assign(t_int_c=np.where(f["time_s"] > 1800, 45.0, f["t_int_c"])),
+            "150",
+            "never visits",
+        ),
+    ],
+    ids=[
+        "m-past-log",
+        "m-past-plan",
+        "fraction",
+        "gap",
+        "other-plan",
+        "other-start",
+        "other-start-temp",
+        "region",
+    ],
+)
+def test_replan_cli_refuses_bad_input_in_one_line_and_writes_nothing(
+    tmp_path, capsys, make, at, words
+):
+    from schedsyn.cli import main
+
+    plan_dir = write_plan_dir(tmp_path / "plan")
+    log = _write_log(make(effect_log(ModelSpec(2400.0, 3.0))), tmp_path / "log.csv")
+    out = tmp_path / "re"
+    rc = main(["replan", str(log), str(plan_dir), "--at-min", at, "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert words in err and err.count("\n") == 1 and err.startswith("schedsyn replan: error:")
+    assert not out.exists()
+
+
+def test_replan_cli_refuses_to_write_into_the_plan_it_reads(tmp_path, capsys):
+    from schedsyn.cli import main
+
+    plan_dir = write_plan_dir(tmp_path / "plan")
+    before = (plan_dir / "steps.csv").read_bytes()
+    log = _write_log(effect_log(ModelSpec(2400.0, 3.0)), tmp_path / "log.csv", 100)
+    rc = main(["replan", str(log), str(plan_dir), "--at-min", "100", "--out", str(plan_dir)])
+    assert rc == 2 and "plan folder being run" in capsys.readouterr().err
+    assert (plan_dir / "steps.csv").read_bytes() == before
+    assert not (plan_dir / "replan.json").exists()
+
+
+def test_a_run_that_follows_its_model_keeps_its_plan(tmp_path):
+    from schedsyn.cli import main
+
+    plan_dir = write_plan_dir(tmp_path / "plan")
+    log = _write_log(effect_log(ModelSpec(2400.0, 3.0), seed=5), tmp_path / "log.csv", 150)
+    out = tmp_path / "re"
+    assert main(["replan", str(log), str(plan_dir), "--at-min", "150", "--out", str(out)]) == 0
+    meta = json.loads((out / "replan.json").read_text())
+    assert meta["choice"] == "keep" and meta["planner"] is None and meta["planner_s"] == 0.0
+    t = np.linspace(0.0, plan_programme().total_min, 2001)
+    np.testing.assert_allclose(
+        read_plan_dir(out).programme.chamber_at(t), plan_programme().chamber_at(t), atol=2e-3
+    )
+
+
+def test_an_effect_whose_near_equal_rival_predicts_otherwise_is_not_planned_with(plan, monkeypatch):
+    """The diagnosis names an effect but another fits nearly as well: if the two predict
+    the rest of the plan more than 0.2 degC apart, the log does not identify the future
+    yet and the base model is used; rivals predicting the same (a chamber lag and a
+    second time constant of equal length) leave the effect in use."""
+    from types import SimpleNamespace
+
+    import schedsyn.discrepancy as disc
+    from schedsyn.monitor import check_effect
+
+    base = ModelSpec(2400.0, 3.0)
+    rate = ModelSpec(
+        2400.0,
+        3.0,
+        "chamber_rate_limit",
+        {"max_cool_rate_c_per_min": 0.5, "max_heat_rate_c_per_min": 1e6},
+    )
+    lag = ModelSpec(2400.0, 3.0, "chamber_lag", {"tau_chamber_s": 200.0})
+    twin = ModelSpec(2400.0, 3.0, "second_time_constant", {"tau2_s": 200.0})
+
+    def diagnosis(chosen, rival):
+        fits = tuple(SimpleNamespace(effect=m.effect, model=m, t0_c=20.0) for m in (chosen, rival))
+        return lambda log: SimpleNamespace(
+            effect=chosen.effect,
+            model=chosen,
+            parameters=dict(chosen.parameters),
+            candidates=fits,
+            ambiguous_with=(rival.effect,),
+            warnings=(),
+        )
+
+    log = log_from_frame(effect_log(base, seed=1).query("time_s <= 6000"), "r")
+    t_now = float(base.predict(plan.programme, np.array([100.0])).t_c[0])
+    rest = np.arange(100.0, plan.programme.total_min, 0.5)
+    apart = np.max(
+        np.abs(rate.predict(plan.programme, rest).t_c - lag.predict(plan.programme, rest).t_c)
+    )
+    assert apart > 0.2  # the two really disagree about the rest
+    monkeypatch.setattr(disc, "diagnose", diagnosis(rate, lag))
+    eff = check_effect(log, plan, 100.0, base, 20.0, t_now)
+    assert eff.max_shift_c > 0.2 and not eff.material
+    assert "not identified" in eff.warnings[-1] and "chamber_lag" in eff.warnings[-1]
+    monkeypatch.setattr(disc, "diagnose", diagnosis(lag, twin))
+    eff = check_effect(log, plan, 100.0, base, 20.0, t_now)
+    assert eff.material and eff.model.effect == "chamber_lag"
+    req = prepare_replan(log, plan, 100.0)
+    assert req.model.effect == "chamber_lag"
+    monkeypatch.setattr(disc, "diagnose", diagnosis(rate, lag))
+    req = prepare_replan(log, plan, 100.0)
+    assert req.model.effect == "none" and any("not identified" in n for n in req.notes)

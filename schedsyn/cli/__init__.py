@@ -33,6 +33,7 @@ COMMANDS = (
     "diagnose",
     "fit",
     "monitor",
+    "replan",
     "plan",
     "campaign",
     "split",

@@ -301,7 +301,13 @@ def write_plan_outputs(
         plan.programme.with_meta(meta).to_csv(out / "steps.csv", inputs),
         write_json_atomic(
             out / "plan.json",
-            {**plan.to_json_dict(), "end_soak_min": soak, **(extra_json or {})},
+            {
+                **plan.to_json_dict(),
+                "end_soak_min": soak,
+                # the --model file the plan was made with; monitor and replan predict with it
+                **({} if model_json is None else {"model": model_json}),
+                **(extra_json or {}),
+            },
             inputs,
         ),
     ]

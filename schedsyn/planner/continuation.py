@@ -11,7 +11,8 @@ the measured passes' gradients counted beside the new ones.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -25,7 +26,14 @@ from .check import CHECK_DT_MIN, DEVICE_TOL_C, REPORT_DELTA_C_PER_MIN
 from .lp import LpStats
 from .polish import polish
 from .request import Continuation, ExperimentSpec
-from .search import Search, synthesise, truncate
+from .search import (
+    SUBREGION_CUTS,
+    SUBREGION_CUTS_BOTH,
+    SUBREGION_WIDE_SHARES,
+    Search,
+    synthesise,
+    truncate,
+)
 
 
 def continuation_programme(
@@ -149,6 +157,47 @@ def plan_continuation(
             best = (key, programme, mg, mt, search if search.best else None, check)
         if key[0]:
             break
+    sub_note = ""
+    if best is None or not best[0][0]:
+        # nothing completes the region: sweeps designed for a narrower sub-region (the
+        # widest that fits, cut from the low, the high or both edges, as a fresh plan's
+        # fallback does) often still pass the whole region with margin
+        for side in ("low", "high", "both"):
+            for sub in _subregion_specs(spec, side):
+                search = synthesise(
+                    sub,
+                    [params],
+                    limits,
+                    models,
+                    None,
+                    stats,
+                    max_candidates=1,
+                    continuation=continuation,
+                    n_sweeps=need,
+                )
+                if search.best is None:
+                    continue
+                if progress:
+                    progress(
+                        f"continuation: sweeps for the sub-region [{sub.working_lo_c:g}, "
+                        f"{sub.working_hi_c:g}] °C fit"
+                    )
+                u, mg, mt = polish(search.ctx, search.best[0])
+                durations = search.ctx.responses.durations[: u.size]
+                programme = continuation_programme(u, durations, continuation, limits)
+                check = check_continuation(programme, spec, limits, params, model, continuation)
+                key = (check[0].complete and not check[2], check[0].coverage, check[0].min_levels)
+                if best is None or key > best[0]:
+                    best = (key, programme, mg, mt, search, check)
+                    sub_note = (
+                        f"sweeps designed for the sub-region [{sub.working_lo_c:g}, "
+                        f"{sub.working_hi_c:g}] °C (the full region did not fit in time)"
+                    )
+                break
+            if best is not None and best[0][0]:
+                break
+        if sub_note:
+            notes.append(sub_note)
     if best is None:
         raise InfeasiblePlanError(
             f"{spec.name}: no continuation from minute {continuation.at_min:g} fits in the "
@@ -158,3 +207,18 @@ def plan_continuation(
         )
     _, programme, mg, mt, search, check = best
     return programme, mg, mt, search, notes, check
+
+
+def _subregion_specs(spec: ExperimentSpec, side: str) -> Iterator[ExperimentSpec]:
+    """Narrower working regions cut from ``side`` (low, high or both), widest first, as
+    :func:`.search.subregions` cuts them."""
+    n = spec.grid.n_bins
+    wide = {round(share * n) for share in SUBREGION_WIDE_SHARES}
+    cuts = SUBREGION_CUTS if side != "both" else SUBREGION_CUTS_BOTH
+    for cut in sorted(set(cuts) | {c for c in wide if c > max(SUBREGION_CUTS)}):
+        if cut >= n - 1:
+            break
+        a = {"low": cut, "high": 0, "both": cut // 2}[side]
+        yield replace(
+            spec, working_lo_c=spec.working_lo_c + a, working_hi_c=spec.working_hi_c - (cut - a)
+        )
