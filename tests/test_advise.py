@@ -34,9 +34,9 @@ pytestmark = [
 ]
 
 PARAMS = ThermalParams()
-# 4 levels in [0, 6] degC do not fit in 200 min (the sweeps need about 220)
+# 4 levels in [0, 6] degC do not fit in 150 min (the planner needs about 170)
 SHORT = ExperimentSpec("short", 0.0, 6.0, -5.0, 11.0, levels_required=4)
-SHORT_LIMITS = dataclasses.replace(Limits(), duration_max_min=200.0)
+SHORT_LIMITS = dataclasses.replace(Limits(), duration_max_min=150.0)
 # a cold region with the chamber floor just below it: cooling gradients too small
 COLD = ExperimentSpec("cold", -48.0, -44.0, -52.0, -34.0, levels_required=2)
 COLD_LIMITS = dataclasses.replace(Limits(), chamber_min_c=-52.0)
@@ -135,7 +135,7 @@ def test_advised_change_plans_complete_and_one_step_less_does_not(
     spec_no, lim_no = _request(spec, limits, less)
     assert _fails(spec_no, lim_no, item.failing_reason)
     # the request itself is less generous still: it fails too
-    assert item.current == {"duration": 200.0, "levels": 4.0, "floor": -52.0}[knob]
+    assert item.current == {"duration": 150.0, "levels": 4.0, "floor": -52.0}[knob]
 
 
 def test_advice_lines_say_what_is_proven_and_what_is_verified(short_advice):
@@ -214,7 +214,7 @@ def test_bad_settings_are_one_line_errors(kw, words):
 
 def test_plan_advise_writes_advice_and_the_verifying_plan(tmp_path, capsys):
     out = tmp_path / "p"
-    argv = ["plan", "--working", "0", "6", "--levels", "4", "--duration-max-min", "200"]
+    argv = ["plan", "--working", "0", "6", "--levels", "4", "--duration-max-min", "150"]
     argv += ["--advise", "--advise-knobs", "levels", "--out", str(out), "--quiet"]
     assert main(argv) == 1  # the plan itself stays incomplete
     text = capsys.readouterr().out

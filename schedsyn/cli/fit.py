@@ -20,7 +20,7 @@ def register(sub) -> None:
     p = sub.add_parser(
         "fit",
         help="fit the drift polynomial b(T, g) to a log with drift_dph",
-        description=__doc__,
+        description=_common.plain(__doc__),
     )
     p.add_argument("log", metavar="LOG.csv", help="measured log with t_int_c and drift_dph")
     p.add_argument(

@@ -35,7 +35,7 @@ def register(sub) -> None:
     p = sub.add_parser(
         "replan",
         help="re-plan the rest of a run in progress from minute M (identified model)",
-        description=__doc__,
+        description=_common.plain(__doc__),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("log", metavar="LOG.csv", help="log of the run (time_s, t_int_c, tk_set_c, ...)")
