@@ -9,4 +9,5 @@ echo "ruff: lint and format" >&2
 .venv/bin/ruff format --check --quiet .
 echo "mypy: types of the package" >&2
 .venv/bin/mypy --no-error-summary
-exec .venv/bin/python -m pytest "$@"
+# -n auto: one worker per core (pytest-xdist); pass -n 0 to run in one process
+exec .venv/bin/python -m pytest -n auto "$@"
