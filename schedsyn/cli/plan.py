@@ -39,6 +39,9 @@ from ..params import Limits, ThermalParams
 from ..planner import OBJECTIVES, ExperimentSpec, Plan
 from . import _common
 
+#: ExperimentSpec's defaults (the CLI's are the same as a campaign file's)
+_SPEC_DEFAULTS = {f.name: f.default for f in dataclasses.fields(ExperimentSpec)}
+
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -77,14 +80,16 @@ def register(sub) -> None:
     p.add_argument(
         "--segment-min",
         type=float,
-        default=5.0,
-        help="decision segment length, whole min (default 5)",
+        default=_SPEC_DEFAULTS["segment_min"],
+        help=f"decision segment length, whole min (default {_SPEC_DEFAULTS['segment_min']:g})",
     )
     p.add_argument(
         "--objective",
         choices=OBJECTIVES,
         default="shortest",
-        help="shortest programme, or largest margin within the time limit",
+        help="shortest programme, largest margin within the time limit, or informative: "
+        "the shortest plan's sweeps run on to the time limit with every rate chosen for "
+        "the drift fit's information",
     )
     p.add_argument(
         "--max-steps",

@@ -74,6 +74,9 @@ class Plan:
     #: fewer levels than asked were planned because the target could not be met (graded
     #: partial plan): the level count every bin was planned for
     levels_planned: int | None = None
+    #: ``objective = "informative"``: what the extra time bought (:mod:`.informative`):
+    #: shortest plan's duration, price in minutes, information gain, D-efficiencies
+    informative: dict | None = None
 
     @property
     def gap_to_bound_min(self) -> float | None:
@@ -115,6 +118,9 @@ class Plan:
             "solve_s": self.solve_s,
             "duration_lower_bound_min": self.duration_lower_bound_min,
             "gap_to_bound_min": self.gap_to_bound_min,
+            # objective "informative": minutes over the shortest plan, information factor
+            "informative_price_min": (self.informative or {}).get("price_min"),
+            "information_factor": (self.informative or {}).get("information_factor"),
         }
 
     def to_json_dict(self) -> dict:
@@ -161,6 +167,7 @@ class Plan:
             ),
             "robust_fallback": self.robust_fallback,
             "levels_planned": self.levels_planned,
+            "informative": self.informative,
         }
 
 

@@ -24,6 +24,7 @@ from .bound import duration_lower_bound
 from .check import Plan, check_programme
 from .continuation import plan_continuation
 from .explain import explain_shortfall
+from .informative import informative_rates
 from .lp import Context, LpStats, require_solvable
 from .polish import honour_step_limits, merge_small_changes, polish, step_runs
 from .request import Continuation, ExperimentSpec, check_request
@@ -391,6 +392,9 @@ def plan_experiment(
         coverage_nominal=cov_nominal,
         robust_fallback=fallback,
     )
+    if spec.objective == "informative":
+        structure = best[0] if best is not None else None
+        plan = _make_informative(plan, model, ctx, structure, chosen, progress)
     if (
         programme.n_segments > spec.max_steps
         and cov.complete
@@ -472,6 +476,89 @@ def _plan_continued(
             t_max_c=t_hi,
             continued_from_min=continuation.at_min,
         )
+    )
+
+
+def _make_informative(
+    plan: Plan,
+    model: LinearThermalModel | None,
+    ctx: Context,
+    structure: Structure | None,
+    chosen: _Candidate,
+    progress: Callable[[str], None] | None,
+) -> Plan:
+    """``objective = "informative"``: the complete shortest ``plan`` run on to the budget
+    with every rate chosen for the drift fit (:mod:`.informative`), when the result checks
+    complete and within every limit; otherwise ``plan`` with a note saying why not."""
+    from ..design import plan_design, plan_space
+
+    spec, limits = plan.spec, plan.limits
+
+    def keep(why: str) -> Plan:
+        return dataclasses.replace(plan, notes=(*plan.notes, f"informative: {why}"))
+
+    if not plan.complete or structure is None:
+        return keep("only a complete plan is made more informative; this one is not")
+    if len(plan.scenarios) > 1:
+        return keep("not applied to robust plans (the information is a single model's)")
+    r = ctx.responses
+    n_ext = min(r.durations.size, r.max_segments(limits.duration_max_min))
+    space = plan_space(plan)
+    # the margins the shortest plan keeps, kept
+    res = informative_rates(
+        ctx, structure, chosen.u, space, n_ext, progress=progress,
+        margins=(0.8 * chosen.margin_g, 0.8 * chosen.margin_t),
+    )  # fmt: skip
+    if res is None:
+        return keep("no change of the rates raised the information; the shortest plan stands")
+    programme = operator_programme(res.u, spec, limits)
+    cov, cov01, problems, t_lo, t_hi = check_programme(
+        programme, spec, limits, [plan.params], model
+    )
+    if programme.n_segments > spec.max_steps:
+        problems.append(f"{programme.n_segments} steps > max_steps = {spec.max_steps}")
+    if np.any(programme.durations_min < spec.min_step_min - 1e-9):
+        problems.append(f"a step shorter than min_step_min = {spec.min_step_min:g} min")
+    if not cov.complete or problems:
+        why = "; ".join(problems) or f"coverage {cov.coverage:.1%} after rounding"
+        return keep(f"the informative programme failed its check ({why}); the shortest stands")
+    before = plan_design(plan)
+    candidate = dataclasses.replace(
+        plan, programme=programme, coverage=cov, coverage_0p1=cov01, t_min_c=t_lo, t_max_c=t_hi
+    )
+    after = plan_design(candidate)
+    p = len(before.terms)
+    # DesignReport.log_det is per sample (M = X'X/n): the total information adds p log n
+    info_factor = math.exp(
+        (
+            after.log_det
+            + p * math.log(max(after.n_in_region, 1))
+            - before.log_det
+            - p * math.log(max(before.n_in_region, 1))
+        )
+        / p
+    )
+    if not info_factor > 1.0:
+        return keep("the longer programme was not more informative; the shortest plan stands")
+    info = {
+        "shortest_duration_min": plan.duration_min,
+        "price_min": programme.total_min - plan.duration_min,
+        "information_factor": info_factor,
+        "d_efficiency_pct_shortest": before.d_efficiency_pct,
+        "d_efficiency_pct": after.d_efficiency_pct,
+        "i_efficiency_pct_shortest": before.i_efficiency_pct,
+        "i_efficiency_pct": after.i_efficiency_pct,
+        "slp_iterations": res.iterations,
+    }
+    note = (
+        f"informative: {programme.total_min - plan.duration_min:.0f} min longer than the "
+        f"shortest complete plan ({plan.duration_min:.0f} min) for {info_factor:.2f}x its "
+        f"information (D-efficiency {before.d_efficiency_pct:.1f} -> "
+        f"{after.d_efficiency_pct:.1f} %, I-efficiency {before.i_efficiency_pct:.0f} -> "
+        f"{after.i_efficiency_pct:.0f} %)"
+    )
+    return dataclasses.replace(
+        candidate, notes=(*plan.notes, note), informative=info, solve_s=plan.solve_s
     )
 
 

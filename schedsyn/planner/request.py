@@ -20,7 +20,7 @@ from ..model import LinearThermalModel
 from ..params import Limits, ThermalParams
 from ..programme import Programme
 
-OBJECTIVES = ("shortest", "margin")
+OBJECTIVES = ("shortest", "margin", "informative")
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,8 +44,10 @@ class ExperimentSpec:
         follows the guided speed profiles closely; longer segments give fewer, longer
         steps and longer plans).
     objective : str
-        ``"shortest"`` (shortest programme reaching the target) or ``"margin"`` (largest
-        margin within ``duration_max_min``).
+        ``"shortest"`` (shortest programme reaching the target), ``"margin"`` (largest
+        margin within ``duration_max_min``) or ``"informative"`` (the shortest plan's
+        sweeps, run on to ``duration_max_min`` with every rate chosen for the drift fit's
+        information; see :mod:`schedsyn.planner.informative`).
     max_steps : int
         Most steps the exported step table may have (after merging equal rates), >= 2; the
         planner merges steps to meet it.

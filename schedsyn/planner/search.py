@@ -405,9 +405,8 @@ def synthesise(
     base_sep = spec.delta_c_per_min + BAND_SAFETY_C_PER_MIN
     if len(params_list) > 1:
         base_sep += 2 * ROBUST_SLACK_C_PER_MIN
-    seps = (
-        [base_sep] if spec.objective == "shortest" else [base_sep + x for x in MARGIN_SEPARATIONS]
-    )
+    # "informative" starts from the shortest plan's sweeps (.informative runs them on)
+    seps = [base_sep + x for x in MARGIN_SEPARATIONS] if spec.objective == "margin" else [base_sep]
     for sep in seps:
         for first in first_directions(spec, limits, start_t):
             directions = sweep_directions(spec, first, n_sweeps)

@@ -1,0 +1,177 @@
+"""Stage 7 (``objective = "informative"``): spend the rest of the budget on the drift fit.
+
+The shortest complete plan stacks its gradient bands close under the fastest gradients the
+chamber allows and crosses the region at nearly constant speed: it meets the coverage
+target, but leaves the slow gradients in the middle of the region unvisited, and the
+drift fit (:mod:`schedsyn.design`) is only as good as the spread of its samples over the
+(T, g) plane. This stage keeps the shortest plan's sweep windows (so every band, hence
+every level of every bin, stays as planned) and lets the programme run on to the whole
+budget, choosing all the rates to maximise the total information of the samples in the
+approximation region::
+
+    D(u) = log det  sum_k x(T_k(u), g_k(u)) x(T_k(u), g_k(u))'
+
+(the drift polynomial's terms ``x`` in coded variables, 1-min samples). ``T_k`` and
+``g_k`` are affine in the rates ``u``, the terms are polynomials of them, so ``D`` is
+smooth but not concave in ``u``: it is raised by sequential linear programming -- each
+step maximises the first-order model of ``D`` (its gradient through the affine responses)
+minus ``L1_WEIGHT`` times the total rate change (few steps in the table) within a trust
+region around the current rates, subject to the same whole-programme constraints as the
+planner's own LPs (chamber and device limits, every sweep window, the end at the end
+setpoint). A step is kept only when the exact ``D`` rises; the trust region halves
+otherwise.
+
+The result is re-checked like every plan (rounded table, dense re-simulation): it is
+used only when it is complete and within every limit, otherwise the shortest plan stands
+and a note says why. The plan reports the price (minutes over the shortest plan) and the
+gain (``log det`` per term, D-efficiency per sample) in ``Plan.informative``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import cvxpy as cp
+import numpy as np
+
+from ..design import DesignSpace, log_det_information
+from ..terms import monomials, parse_terms
+from .lp import Context
+from .polish import whole_lp
+from .search import Structure
+
+#: Sequential-LP iterations (each one LP) and the trust region on the rates, degC/min.
+SLP_ITERATIONS = 20
+TRUST_START_C_PER_MIN = 0.4
+TRUST_MIN_C_PER_MIN = 0.01
+#: Weight of the total rate change against the normalised information gain (fewer steps).
+L1_WEIGHT = 0.01
+#: Step-size of the central differences of the coded terms (exact for polynomials
+#: up to rounding).
+CODED_H = 1e-4
+#: Stop when a step raises log det by less than this.
+GAIN_TOL = 1e-4
+
+
+@dataclass(frozen=True, slots=True)
+class InformativeResult:
+    """Rates of the informative programme and what they gained (module docstring)."""
+
+    u: np.ndarray
+    log_det_start: float
+    log_det_end: float
+    iterations: int
+    n_segments: int
+
+
+def _log_det_and_gradient(
+    t: np.ndarray, g: np.ndarray, space: DesignSpace, terms: tuple[str, ...]
+) -> tuple[float, np.ndarray, np.ndarray]:
+    """``D`` of samples (T, g) and its gradient with respect to each sample's T and g."""
+    inside = (t >= space.approx_lo_c) & (t <= space.approx_hi_c)
+    u, v = space.code(t[inside], g[inside])
+    x = monomials(u, v, terms)
+    m = x.T @ x
+    sign, logdet = np.linalg.slogdet(m)
+    d_t = np.zeros_like(t)
+    d_g = np.zeros_like(g)
+    if sign <= 0:
+        return -math.inf, d_t, d_g
+    m_inv = np.linalg.inv(m)
+    xu = (monomials(u + CODED_H, v, terms) - monomials(u - CODED_H, v, terms)) / (2 * CODED_H)
+    xv = (monomials(u, v + CODED_H, terms) - monomials(u, v - CODED_H, terms)) / (2 * CODED_H)
+    xm = x @ m_inv
+    # d log det(sum x x') / d u_k = 2 x_k' M^-1 dx_k/du_k; then the chain rule to degC
+    g_lo, g_hi = space.gradient_range_c_per_min
+    du_dt = 1.0 / (0.5 * (space.approx_hi_c - space.approx_lo_c))
+    dv_dg = 1.0 / (0.5 * (g_hi - g_lo))
+    d_t[inside] = 2.0 * np.einsum("ij,ij->i", xm, xu) * du_dt
+    d_g[inside] = 2.0 * np.einsum("ij,ij->i", xm, xv) * dv_dg
+    return float(logdet), d_t, d_g
+
+
+def informative_rates(
+    ctx: Context,
+    structure: Structure,
+    u_start: np.ndarray,
+    space: DesignSpace,
+    n_segments: int,
+    terms: str | tuple = "full",
+    progress: Callable[[str], None] | None = None,
+    margins: tuple[float, float] = (0.0, 0.0),
+) -> InformativeResult | None:
+    """Rates of ``n_segments`` segments keeping ``structure``'s sweep windows and
+    maximising the samples' information (module docstring); None when no LP solved.
+
+    ``u_start`` are the shortest plan's rates (its segments; the rest start as holds);
+    ``margins`` (band margin degC/min, edge margin degC) are kept as that plan's are.
+    """
+    terms_t = parse_terms(terms)
+    n_seg_short = structure.n_seg
+    if n_segments < n_seg_short or ctx.responses.n_fixed:
+        return None
+    lp = whole_lp(ctx, structure.windows, n_segments, extra=2)
+    fixed_margins = [(margins[0], margins[0]), (margins[1], margins[1])]
+    at, bt, ag, bg = lp.scen[0]
+    n = lp.n
+    x0 = np.zeros(n)
+    x0[: min(n, u_start.size)] = u_start[:n]
+
+    def samples(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return at @ x + bt, ag @ x + bg
+
+    d0, d_t, d_g = _log_det_and_gradient(*samples(x0), space, terms_t)
+    if not math.isfinite(d0):
+        return None
+    start = d0
+    rho = TRUST_START_C_PER_MIN
+    iterations = 0
+    for _ in range(SLP_ITERATIONS):
+        c = at.T @ d_t + ag.T @ d_g
+        scale = float(np.abs(c).sum()) or 1.0
+        cn = c / scale * n  # a gain of order one per unit mean rate change
+        centre, radius = x0.copy(), rho
+
+        def objective(x: cp.Variable, cn: np.ndarray = cn) -> cp.Expression:
+            return -(cn @ x[:n]) + L1_WEIGHT * cp.norm1(cp.diff(x[:n]))
+
+        def trust(x: cp.Variable, centre: np.ndarray = centre, radius: float = radius) -> list:
+            return [cp.abs(x[:n] - centre) <= radius]
+
+        x = lp.solve(objective, fixed_margins, trust)
+        iterations += 1
+        if x is None:
+            rho *= 0.5
+            if rho < TRUST_MIN_C_PER_MIN:
+                break
+            continue
+        d1, d_t1, d_g1 = _log_det_and_gradient(*samples(x[:n]), space, terms_t)
+        if d1 > d0 + GAIN_TOL:
+            x0, d0, d_t, d_g = x[:n], d1, d_t1, d_g1
+            if progress is not None:
+                progress(f"informative: log det {d0:.2f} (start {start:.2f})")
+        else:
+            rho *= 0.5
+            if rho < TRUST_MIN_C_PER_MIN:
+                break
+    if d0 <= start + GAIN_TOL:
+        return None
+    return InformativeResult(x0, start, d0, iterations, n)
+
+
+def information_gain(
+    t_before: np.ndarray,
+    g_before: np.ndarray,
+    t_after: np.ndarray,
+    g_after: np.ndarray,
+    space: DesignSpace,
+    terms: str | tuple = "full",
+) -> float:
+    """``exp((D_after - D_before)/p)``: the information gained, as a factor on the number of
+    equally informative samples (1.5 = as if the run had 50 % more of its samples)."""
+    p = len(parse_terms(terms))
+    d0 = log_det_information(t_before, g_before, space, terms)
+    d1 = log_det_information(t_after, g_after, space, terms)
+    return math.exp((d1 - d0) / p)
