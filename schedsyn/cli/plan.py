@@ -464,6 +464,20 @@ def report_plan(plan: Plan) -> list[str]:
         "  " + plan.coverage.summary(),
         f"  coverage at Δ 0.1 °C/min: {plan.coverage_0p1.coverage:.1%}",
     ]
+    if plan.duration_lower_bound_min is not None:
+        bound = plan.duration_lower_bound_min
+        lines.append(
+            f"  proven lower bound on any complete plan: {bound:.0f} min"
+            + (f" (this plan {plan.gap_to_bound_min:+.0f} min)" if math.isfinite(bound) else "")
+        )
+    if plan.coverage_nominal is not None:
+        p = plan.params
+        lines.append(
+            f"  robust: coverage {plan.coverage_nominal.coverage:.1%} at the nominal tau "
+            f"{p.tau_s:g} s, dT0 {p.dt0_c:g} °C; {plan.coverage.coverage:.1%} at the worst "
+            "design scenario of the box"
+            + (f"; planned for the {plan.robust_fallback}" if plan.robust_fallback else "")
+        )
     if not plan.complete:
         lines.insert(
             0,
@@ -471,7 +485,7 @@ def report_plan(plan: Plan) -> list[str]:
             "full calibration ***",
         )
         lines += [f"  violation: {v}" for v in plan.violations]
-        lines += [f"  note: {n}" for n in plan.notes]
+    lines += [f"  note: {n}" for n in plan.notes]
     return lines
 
 

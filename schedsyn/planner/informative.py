@@ -18,8 +18,10 @@ step maximises the first-order model of ``D`` (its gradient through the affine r
 minus ``L1_WEIGHT`` times the total rate change (few steps in the table) within a trust
 region around the current rates, subject to the same whole-programme constraints as the
 planner's own LPs (chamber and device limits, every sweep window, the end at the end
-setpoint). A step is kept only when the exact ``D`` rises; the trust region halves
-otherwise.
+setpoint) and with the gradients near the approximation region kept within the design
+space's envelope of reachable gradients (what the fit is coded over: faster sweeps would
+buy leverage from gradients the device never sees in use). A step is kept only when the
+exact ``D`` rises; the trust region halves otherwise.
 
 The result is re-checked like every plan (rounded table, dense re-simulation): it is
 used only when it is complete and within every limit, otherwise the shortest plan stands
@@ -51,6 +53,8 @@ L1_WEIGHT = 0.01
 #: Step-size of the central differences of the coded terms (exact for polynomials
 #: up to rounding).
 CODED_H = 1e-4
+#: Samples this close to the approximation region keep their gradients in its envelope, degC.
+NEAR_C = 2.0
 #: Stop when a step raises log det by less than this.
 GAIN_TOL = 1e-4
 
@@ -92,6 +96,27 @@ def _log_det_and_gradient(
     return float(logdet), d_t, d_g
 
 
+def _step_rows(
+    n: int,
+    centre: np.ndarray,
+    radius: float,
+    ag_near: np.ndarray,
+    bg_near: np.ndarray,
+    g_range: tuple[float, float],
+) -> Callable[[cp.Variable], list]:
+    """Constraints of one step: the trust region, and the gradient envelope at the samples
+    near the approximation region."""
+
+    def rows(x: cp.Variable) -> list:
+        out = [cp.abs(x[:n] - centre) <= radius]
+        if ag_near.shape[0]:
+            g_near = ag_near @ x[:n] + bg_near
+            out += [g_near >= g_range[0], g_near <= g_range[1]]
+        return out
+
+    return rows
+
+
 def informative_rates(
     ctx: Context,
     structure: Structure,
@@ -126,19 +151,26 @@ def informative_rates(
     if not math.isfinite(d0):
         return None
     start = d0
+    g_env = space.gradient_range_c_per_min
     rho = TRUST_START_C_PER_MIN
     iterations = 0
     for _ in range(SLP_ITERATIONS):
         c = at.T @ d_t + ag.T @ d_g
         scale = float(np.abs(c).sum()) or 1.0
         cn = c / scale * n  # a gain of order one per unit mean rate change
-        centre, radius = x0.copy(), rho
 
         def objective(x: cp.Variable, cn: np.ndarray = cn) -> cp.Expression:
             return -(cn @ x[:n]) + L1_WEIGHT * cp.norm1(cp.diff(x[:n]))
 
-        def trust(x: cp.Variable, centre: np.ndarray = centre, radius: float = radius) -> list:
-            return [cp.abs(x[:n] - centre) <= radius]
+        # gradients near the approximation region stay within the design space's envelope
+        # (the reachable gradients the fit is coded over; no worse than the start's): a
+        # D-criterion alone would buy leverage with ever faster sweeps
+        t_now, g_now = samples(x0)
+        near = (t_now >= space.approx_lo_c - NEAR_C) & (t_now <= space.approx_hi_c + NEAR_C)
+        g_lo = min(g_env[0], float(g_now[near].min(initial=0.0)))
+        g_hi = max(g_env[1], float(g_now[near].max(initial=0.0)))
+
+        trust = _step_rows(n, x0.copy(), rho, ag[near], bg[near], (g_lo, g_hi))
 
         x = lp.solve(objective, fixed_margins, trust)
         iterations += 1
