@@ -536,6 +536,8 @@ SUMMARY_COLUMNS = (
     "status",
     "d_efficiency_pct",
     "i_efficiency_pct",
+    "informative_price_min",
+    "information_factor",
     "baseline",
     "baseline_duration_min",
     "baseline_steps",
@@ -588,6 +590,8 @@ class CampaignResult:
                         "solve_s",
                         "coverage_delta_0p1",
                         "complete",
+                        "informative_price_min",
+                        "information_factor",
                     )
                 }
                 row["status"] = plan.status

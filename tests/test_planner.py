@@ -529,3 +529,14 @@ def test_the_step_table_carries_the_plan_and_simulates_with_its_model(tmp_path):
         traj = simulate(prog)
         rep = coverage_report(traj.t_c, traj.g_c_per_min, plan.spec.grid, 3)
         assert rep.coverage == plan.coverage.coverage and plan.complete
+
+
+def test_require_complete_never_returns_a_graded_plan():
+    """110 min fit 2 levels per bin of SMALL but not 3: graded, a plan with 2 levels comes
+    back; asked for a complete plan, the planner refuses instead."""
+    spec = ExperimentSpec(**SMALL)
+    limits = Limits(duration_max_min=110.0)
+    graded = plan_experiment(spec, limits=limits)
+    assert not graded.complete and graded.levels_planned == 2
+    with pytest.raises(InfeasiblePlanError, match="target cannot be met|no programme"):
+        plan_experiment(spec, limits=limits, require_complete=True)

@@ -296,8 +296,8 @@ def plan_experiment(
             chosen = _fallback(spec, limits, params_list, models, model, search, progress, stats)
         except InfeasiblePlanError:
             # nothing at all with these levels: fewer levels, if some count fits
-            fewer = None
-            if graded and model is None and not robust:
+            fewer = None  # (require_complete: a graded plan is not what was asked for)
+            if graded and model is None and not robust and not require_complete:
                 fewer = _graded(None, spec, params, limits, progress, tuple(notes))
             if fewer is None:
                 raise
@@ -504,7 +504,7 @@ def _make_informative(
     r = ctx.responses
     n_ext = min(r.durations.size, r.max_segments(limits.duration_max_min))
     space = plan_space(plan)
-    # the margins the shortest plan keeps, kept
+    # at least 80 % of the margins the shortest plan keeps (its rates meet them in full)
     res = informative_rates(
         ctx, structure, chosen.u, space, n_ext, progress=progress,
         margins=(0.8 * chosen.margin_g, 0.8 * chosen.margin_t),
