@@ -150,9 +150,15 @@ MUTATIONS: tuple[Mutation, ...] = (
         ("tests/test_lag.py::test_step_and_ramp_responses_match_the_matrix_exponential",),
         "the lag's unit-ramp response 1e-6 relative off",
     ),
-    # Slot for helper h-est's mutation (the lead adds it): the sign of the cross term in the
-    # model-based estimator's gradient variance, var g = P11/tau^2 - 2 P12/tau + P22 ->
-    # + 2 P12/tau, in schedsyn/estimate.py, killed by its sigma-calibration test.
+    Mutation(
+        "estimator-variance-sign",
+        "schedsyn/estimate.py",
+        "        return g, p11 / tau**2 - 2.0 * p12 / tau + p22",
+        "        return g, p11 / tau**2 + 2.0 * p12 / tau + p22",
+        ("tests/test_calibration.py::test_model_based_sigma_with_a_nearly_constant_correction",),
+        "the sign of the cross term in the model-based estimator's gradient variance "
+        "(var g = P11/tau^2 - 2 P12/tau + P22): the stated sigma several times too large",
+    ),
 )
 
 
