@@ -71,6 +71,8 @@ def test_a_request_too_short_for_its_levels_gets_the_most_levels_every_bin_can_h
     assert not plan.complete and plan.levels_planned is not None
     assert plan.levels_planned >= 4
     assert any(n.startswith("GRADED") for n in plan.notes)
+    # proven impossible, 6 levels are not searched at all (the graded search starts below)
+    assert any("6 levels were not searched" in n for n in plan.notes)
     check = table_check(plan.programme.to_csv(tmp_path / "g.csv"), (-12.0, -4.0), 6)
     assert check["min_levels"] >= plan.levels_planned == plan.coverage.min_levels
     # without graded plans nothing at all comes back: no 6-sweep programme fits

@@ -268,6 +268,21 @@ def plan_experiment(
                 f"min_step_min = {spec.min_step_min:g} min"
             )
             return _respec(inner, spec, note, require_complete)
+    if graded and not robust and model is None and continuation is None and not require_complete:
+        # proven impossible: the search for these levels (and its fallbacks) cannot succeed,
+        # and a graded plan for fewer levels beats any partial one (its weakest bin has more)
+        bound = duration_lower_bound(spec, params, limits).lower_bound_min
+        if bound > limits.duration_max_min:
+            note = (
+                f"no complete plan exists within {limits.duration_max_min:g} min: any plan "
+                f"whose sweeps cross the whole region needs at least {bound:.0f} min "
+                f"(proven lower bound); {spec.levels_required} levels were not searched"
+            )
+            if progress:
+                progress(f"{spec.name}: {note}")
+            fewer = _graded(None, spec, params, limits, progress, (note,))
+            if fewer is not None:
+                return with_table_meta(fewer)
     stats = LpStats()
     notes: list[str] = []
     fallback: str | None = None
