@@ -24,7 +24,7 @@ from .bound import duration_lower_bound
 from .check import Plan, check_programme
 from .continuation import plan_continuation
 from .explain import explain_shortfall
-from .informative import informative_rates
+from .informative import L1_WEIGHT_LADDER, informative_rates
 from .lp import Context, LpStats, require_solvable
 from .polish import honour_step_limits, merge_small_changes, polish, step_runs
 from .request import Continuation, ExperimentSpec, check_request
@@ -271,11 +271,11 @@ def plan_experiment(
     if graded and not robust and model is None and continuation is None and not require_complete:
         # proven impossible: the search for these levels (and its fallbacks) cannot succeed,
         # and a graded plan for fewer levels beats any partial one (its weakest bin has more)
-        bound = duration_lower_bound(spec, params, limits).lower_bound_min
-        if bound > limits.duration_max_min:
+        proven = duration_lower_bound(spec, params, limits).lower_bound_min
+        if proven > limits.duration_max_min:
             note = (
                 f"no complete plan exists within {limits.duration_max_min:g} min: any plan "
-                f"whose sweeps cross the whole region needs at least {bound:.0f} min "
+                f"whose sweeps cross the whole region needs at least {proven:.0f} min "
                 f"(proven lower bound); {spec.levels_required} levels were not searched"
             )
             if progress:
@@ -519,22 +519,26 @@ def _make_informative(
     r = ctx.responses
     n_ext = min(r.durations.size, r.max_segments(limits.duration_max_min))
     space = plan_space(plan)
-    # at least 80 % of the margins the shortest plan keeps (its rates meet them in full)
-    res = informative_rates(
-        ctx, structure, chosen.u, space, n_ext, progress=progress,
-        margins=(0.8 * chosen.margin_g, 0.8 * chosen.margin_t),
-    )  # fmt: skip
-    if res is None:
-        return keep("no change of the rates raised the information; the shortest plan stands")
-    programme = operator_programme(res.u, spec, limits)
-    cov, cov01, problems, t_lo, t_hi = check_programme(
-        programme, spec, limits, [plan.params], model
-    )
-    if programme.n_segments > spec.max_steps:
+    problems: list[str] = []
+    res = None
+    for l1_weight in L1_WEIGHT_LADDER:  # heavier rate-change prices give fewer steps
+        # at least 80 % of the margins the shortest plan keeps (its rates meet them in full)
+        res = informative_rates(
+            ctx, structure, chosen.u, space, n_ext, progress=progress,
+            margins=(0.8 * chosen.margin_g, 0.8 * chosen.margin_t), l1_weight=l1_weight,
+        )  # fmt: skip
+        if res is None:
+            return keep("no change of the rates raised the information; the shortest stands")
+        programme = operator_programme(res.u, spec, limits)
+        cov, cov01, problems, t_lo, t_hi = check_programme(
+            programme, spec, limits, [plan.params], model
+        )
+        if np.any(programme.durations_min < spec.min_step_min - 1e-9):
+            problems.append(f"a step shorter than min_step_min = {spec.min_step_min:g} min")
+        if programme.n_segments <= spec.max_steps:
+            break
         problems.append(f"{programme.n_segments} steps > max_steps = {spec.max_steps}")
-    if np.any(programme.durations_min < spec.min_step_min - 1e-9):
-        problems.append(f"a step shorter than min_step_min = {spec.min_step_min:g} min")
-    if not cov.complete or problems:
+    if res is None or not cov.complete or problems:
         why = "; ".join(problems) or f"coverage {cov.coverage:.1%} after rounding"
         return keep(f"the informative programme failed its check ({why}); the shortest stands")
     before = plan_design(plan)

@@ -48,8 +48,10 @@ from .search import Structure
 SLP_ITERATIONS = 20
 TRUST_START_C_PER_MIN = 0.4
 TRUST_MIN_C_PER_MIN = 0.01
-#: Weight of the total rate change against the normalised information gain (fewer steps).
+#: Weight of the total rate change against the normalised information gain (fewer steps),
+#: and the heavier weights tried when the table has more steps than ``max_steps``.
 L1_WEIGHT = 0.01
+L1_WEIGHT_LADDER = (0.01, 0.04, 0.16)
 #: Step-size of the central differences of the coded terms (exact for polynomials
 #: up to rounding).
 CODED_H = 1e-4
@@ -126,12 +128,14 @@ def informative_rates(
     terms: str | tuple = "full",
     progress: Callable[[str], None] | None = None,
     margins: tuple[float, float] = (0.0, 0.0),
+    l1_weight: float = L1_WEIGHT,
 ) -> InformativeResult | None:
     """Rates of ``n_segments`` segments keeping ``structure``'s sweep windows and
     maximising the samples' information (module docstring); None when no LP solved.
 
     ``u_start`` are the shortest plan's rates (its segments; the rest start as holds);
-    ``margins`` (band margin degC/min, edge margin degC) are kept as that plan's are.
+    ``margins`` (band margin degC/min, edge margin degC) are kept as that plan's are;
+    ``l1_weight`` prices the total rate change (more weight, fewer steps).
     """
     terms_t = parse_terms(terms)
     n_seg_short = structure.n_seg
@@ -160,7 +164,7 @@ def informative_rates(
         cn = c / scale * n  # a gain of order one per unit mean rate change
 
         def objective(x: cp.Variable, cn: np.ndarray = cn) -> cp.Expression:
-            return -(cn @ x[:n]) + L1_WEIGHT * cp.norm1(cp.diff(x[:n]))
+            return -(cn @ x[:n]) + l1_weight * cp.norm1(cp.diff(x[:n]))
 
         # gradients near the approximation region stay within the design space's envelope
         # (the reachable gradients the fit is coded over; no worse than the start's): a
