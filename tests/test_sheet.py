@@ -332,7 +332,9 @@ def test_campaign_writes_exports_sheets_and_an_index(small_campaign):
     assert "coverage of [-10, 0] °C re-simulated" in text
     sheet = (out / "S" / "sheet.html").read_text(encoding="utf-8")
     assert "every 20 min" in sheet and "08:00" in sheet
+    assert "staging" not in sheet  # the sheet names its table as it lies beside it
     index = (out / "index.html").read_text(encoding="utf-8")
+    assert "staging" not in index
     for href in re.findall(r'href="([^"]+)"', index):
         assert (out / href).is_file(), href
 

@@ -247,11 +247,20 @@ def write_plan_deliverables(plan, out: Path, exports=(), sheet=None, inputs=()):
         robust=robust,
         export=done[0] if done else None,
         limits=plan.limits,
-        source=str(steps_path),
-        provenance=provenance({"step table": steps_path}),
+        # the sheet lies beside its table: name it as such (``out`` may be a staging
+        # folder that is renamed once everything is written)
+        source=steps_path.name,
+        provenance=_beside(provenance({"step table": steps_path})),
     )
     write_page(out / "sheet.html", text, inputs)
     return lines, links, lost
+
+
+def _beside(prov: dict) -> dict:
+    """Provenance whose input paths are file names (files in the sheet's own folder)."""
+    for entry in prov.get("inputs", []):
+        entry["path"] = Path(entry["path"]).name
+    return prov
 
 
 def _safe_name(name: str) -> str:
@@ -269,6 +278,6 @@ def write_campaign_index(out: Path, summary, links, inputs=(), notes=()) -> Path
         summary,
         {k: [(lbl, f"{k}/{h}") for lbl, h in v] for k, v in links.items()},
         notes=notes,
-        provenance=provenance({"summary": Path(out) / "summary.csv"}),
+        provenance=_beside(provenance({"summary": Path(out) / "summary.csv"})),
     )
     return write_page(Path(out) / "index.html", text, inputs)
