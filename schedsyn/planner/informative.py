@@ -1,4 +1,4 @@
-"""Stage 7 (``objective = "informative"``): spend the rest of the budget on the drift fit.
+"""After the check (``objective = "informative"``): spend the rest of the budget on the drift fit.
 
 The shortest complete plan stacks its gradient bands close under the fastest gradients the
 chamber allows and crosses the region at nearly constant speed: it meets the coverage
