@@ -540,3 +540,17 @@ def test_require_complete_never_returns_a_graded_plan():
     assert not graded.complete and graded.levels_planned == 2
     with pytest.raises(InfeasiblePlanError, match="target cannot be met|no programme"):
         plan_experiment(spec, limits=limits, require_complete=True)
+
+
+def test_quiet_stdout_fd_silences_c_level_output(capfd):
+    """HiGHS prints its banner from C++ (file descriptor 1) whatever its options: the
+    planner wraps its calls so that nothing reaches the user's terminal."""
+    import os
+
+    from schedsyn.planner.lp import quiet_stdout_fd
+
+    os.write(1, b"before\n")
+    with quiet_stdout_fd():
+        os.write(1, b"banner from C\n")
+    os.write(1, b"after\n")
+    assert capfd.readouterr().out == "before\nafter\n"

@@ -20,9 +20,12 @@ solver failure is never mistaken for infeasibility.
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
 import time
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -49,6 +52,34 @@ _CLARABEL_OK = {"Solved": "optimal", "AlmostSolved": "inaccurate"}
 _CLARABEL_INFEASIBLE = ("PrimalInfeasible", "AlmostPrimalInfeasible")
 #: How many solver-failure messages a plan keeps (the count is kept in full).
 MAX_FAILURE_MESSAGES = 5
+
+
+@contextlib.contextmanager
+def quiet_stdout_fd() -> Iterator[None]:
+    """Send file descriptor 1 to the null device for the duration (Python's and C's output).
+
+    HiGHS (through highspy) prints its banner from C++ the first time a process uses it,
+    whatever its output options; the planner's output must stay the progress lines the
+    user asked for (``--quiet`` means quiet).
+    """
+    try:
+        sys.stdout.flush()
+    except (AttributeError, OSError, ValueError):
+        pass
+    try:
+        saved = os.dup(1)
+    except OSError:  # no stdout at all
+        yield
+        return
+    try:
+        with open(os.devnull, "w", encoding="utf-8") as null:
+            os.dup2(null.fileno(), 1)
+            try:
+                yield
+            finally:
+                os.dup2(saved, 1)
+    finally:
+        os.close(saved)
 
 
 @dataclass(slots=True)
@@ -233,7 +264,8 @@ class Context:
         status, message = None, None
         for solver in (cp.CLARABEL, cp.HIGHS):
             try:
-                with warnings.catch_warnings():
+                quiet = quiet_stdout_fd() if solver == cp.HIGHS else contextlib.nullcontext()
+                with warnings.catch_warnings(), quiet:
                     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
                     problem.solve(solver=solver)
                 status = problem.status
