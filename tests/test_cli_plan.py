@@ -59,6 +59,7 @@ def test_plan_with_a_model_file_writes_outputs_and_its_coverage_survives_re_simu
     assert rc == 0 and plan["complete"] and plan["coverage"] == 1.0, plan["notes"]
     assert plan["experiment"] == "small" and plan["tau_s"] == 2400.0  # --tau-s overrides
     assert "NOT COMPLETE" not in text
+    assert "drift-fit design" in text and "D-efficiency" in text  # informativeness, issue 15
     # the model the plan was made with, as monitor/replan read it back
     assert plan["model"] == {**spec.to_json_dict(), "tau_s": 2400.0}
     # independent check with separate code: scipy integrates the table through the

@@ -489,6 +489,16 @@ def report_plan(plan: Plan) -> list[str]:
     return lines
 
 
+def design_lines(plan: Plan) -> list[str]:
+    """How informative the plan is for the drift fit (:mod:`schedsyn.design`)."""
+    from ..design import plan_design
+
+    try:
+        return ["  " + plan_design(plan).summary()]
+    except ParameterError as exc:
+        return [f"  drift-fit design: not computed ({exc})"]
+
+
 # ---------------------------------------------------------------------------------------
 def _default_approx(lo: float, hi: float, limits: Limits) -> tuple[float, float]:
     # the paper's rule: 10 degC wider on each side, but not beyond the device limits
@@ -688,6 +698,7 @@ def run(args: argparse.Namespace) -> int:
         plan, out.folder("."), model=model, model_json=model_json, extra_json=advice_json
     )
     lines += report_plan(plan)
+    lines += design_lines(plan)
     lines += end_soak_lines(plan, model)
     lines += advice_lines
     _common.say(*lines)  # the plan's report now; the price may take as long again
