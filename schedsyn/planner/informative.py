@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
-from ..design import DesignSpace, log_det_information
+from ..design import DesignSpace
 from ..terms import monomials, parse_terms
 from .lp import Context
 from .polish import whole_lp
@@ -195,19 +195,3 @@ def informative_rates(
     if d0 <= start + GAIN_TOL:
         return None
     return InformativeResult(x0, start, d0, iterations, n)
-
-
-def information_gain(
-    t_before: np.ndarray,
-    g_before: np.ndarray,
-    t_after: np.ndarray,
-    g_after: np.ndarray,
-    space: DesignSpace,
-    terms: str | tuple = "full",
-) -> float:
-    """``exp((D_after - D_before)/p)``: the information gained, as a factor on the number of
-    equally informative samples (1.5 = as if the run had 50 % more of its samples)."""
-    p = len(parse_terms(terms))
-    d0 = log_det_information(t_before, g_before, space, terms)
-    d1 = log_det_information(t_after, g_after, space, terms)
-    return math.exp((d1 - d0) / p)
