@@ -50,6 +50,7 @@ from schedsyn.driftfit import fit_drift, fit_samples
 from schedsyn.errors import ParameterError
 from schedsyn.gyro import gyro_log, random_gyro
 from schedsyn.io import write_frame_atomic, write_text_atomic
+from schedsyn.sweep import run_map
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE_S = 10.0
@@ -272,7 +273,7 @@ def main() -> None:
                     walk=not args.no_walk,
                 )
                 cases.append(case)
-    rows = schedsyn.run_map(run_case, cases, "local", workers=args.workers, desc="gyros")
+    rows = run_map(run_case, cases, "local", workers=args.workers, desc="gyros")
     frame = pd.DataFrame(rows)
     out = Path(args.out)
     write_frame_atomic(out / "cases.csv", frame)
