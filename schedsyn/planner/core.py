@@ -67,6 +67,23 @@ def operator_programme(u: np.ndarray, spec: ExperimentSpec, limits: Limits) -> P
     return raw.merged(rate_tol_c_per_min=MERGE_TOL_C_PER_MIN).rounded(limits)
 
 
+def step_limit_problems(programme: Programme, spec: ExperimentSpec) -> list[str]:
+    """What of ``max_steps`` and ``min_step_min`` the exported table breaks."""
+    problems = []
+    if programme.n_segments > spec.max_steps:
+        problems.append(
+            f"the step table has {programme.n_segments} steps, more than "
+            f"max_steps = {spec.max_steps}"
+        )
+    short_steps = int(np.sum(programme.durations_min < spec.min_step_min - 1e-9))
+    if short_steps:
+        problems.append(
+            f"{short_steps} step(s) of the table are shorter than min_step_min = "
+            f"{spec.min_step_min:g} min"
+        )
+    return problems
+
+
 def _device_excess(limits: Limits, t_lo: float, t_hi: float) -> float:
     return max(limits.device_min_c - t_lo, t_hi - limits.device_max_c)
 
@@ -341,17 +358,7 @@ def plan_experiment(
         checked = _shape_steps(spec, limits, params_list, model, ctx, best[0], chosen, cov)
         if checked is not None:
             programme, (cov, cov01, problems, t_lo, t_hi) = checked
-    if programme.n_segments > spec.max_steps:
-        problems.append(
-            f"the step table has {programme.n_segments} steps, more than "
-            f"max_steps = {spec.max_steps}"
-        )
-    short_steps = int(np.sum(programme.durations_min < spec.min_step_min - 1e-9))
-    if short_steps:
-        problems.append(
-            f"{short_steps} step(s) of the table are shorter than min_step_min = "
-            f"{spec.min_step_min:g} min"
-        )
+    problems += step_limit_problems(programme, spec)
     complete = cov.complete and not problems
     if not cov.complete:
         short = cov.short_bins()
@@ -534,11 +541,9 @@ def _make_informative(
         cov, cov01, problems, t_lo, t_hi = check_programme(
             programme, spec, limits, [plan.params], model
         )
-        if np.any(programme.durations_min < spec.min_step_min - 1e-9):
-            problems.append(f"a step shorter than min_step_min = {spec.min_step_min:g} min")
+        problems += step_limit_problems(programme, spec)
         if programme.n_segments <= spec.max_steps:
             break
-        problems.append(f"{programme.n_segments} steps > max_steps = {spec.max_steps}")
     if res is None or not cov.complete or problems:
         why = "; ".join(problems) or f"coverage {cov.coverage:.1%} after rounding"
         return keep(f"the informative programme failed its check ({why}); the shortest stands")
