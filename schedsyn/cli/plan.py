@@ -98,6 +98,14 @@ def register(sub) -> None:
         help="most steps the exported table may have (default: the --chamber preset's, else 80)",
     )
     p.add_argument(
+        "--effort-s",
+        type=float,
+        default=None,
+        help="seconds after which the search for other plans stops when the requested one "
+        "cannot be met (fewer levels, sub-regions, coarser segments; default 45; 0 = no "
+        "limit); the search for the requested plan always runs to its end",
+    )
+    p.add_argument(
         "--duration-max-min",
         type=float,
         default=None,
@@ -551,6 +559,17 @@ def build_spec(args, limits: Limits) -> ExperimentSpec:
     )
 
 
+def _effort_s(args) -> float | None:
+    """``--effort-s``: None (no limit) for 0, the planner's default when not given."""
+    from ..planner.core import EFFORT_S
+
+    if args.effort_s is None:
+        return EFFORT_S
+    if not args.effort_s >= 0:
+        raise ParameterError(f"--effort-s must be >= 0 s (0 = no limit), got {args.effort_s:g}")
+    return None if args.effort_s == 0 else args.effort_s
+
+
 def _max_steps(args) -> int:
     """``--max-steps``, else the ``--chamber`` preset's step limit, else 80."""
     if args.max_steps is not None:
@@ -638,6 +657,7 @@ def run(args: argparse.Namespace) -> int:
                 robust_tau_s=robust_tau,
                 robust_dt0_c=robust_dt0,
                 progress=progress,
+                effort_s=_effort_s(args),
             )
         except InfeasiblePlanError:
             if args.advise:  # nothing planned: still say what would make it plannable

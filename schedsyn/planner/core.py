@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..coverage import CoverageReport
-from ..errors import InfeasiblePlanError, ParameterError
+from ..errors import InfeasiblePlanError, ParameterError, SolverFailedError
 from ..model import FirstOrderLag, LinearThermalModel
 from ..params import Limits, ThermalParams
 from ..programme import Programme
@@ -42,11 +42,43 @@ MAX_SEGMENT_MIN = 30
 #: Segment lengths (multiples of the requested one) tried when merging steps cannot meet
 #: max_steps.
 COARSER_FACTORS = (2, 3)
+#: Wall-clock seconds after which a plan's optional searches stop (the partial-coverage
+#: fallbacks, the graded search for fewer levels, coarser segments); the search for the
+#: requested plan itself always runs to its end.
+EFFORT_S = 45.0
 #: Device excess (degC) below which rounding is not worth a re-polish.
 EXCESS_TOL_C = 1e-6
 #: A step that changes the setpoint by less than this is merged into a neighbour when the
 #: plan stays as good (an operator types fewer, more meaningful steps), degC.
 MIN_STEP_CHANGE_C = 0.5
+
+
+@dataclass(slots=True)
+class _Effort:
+    """The effort limit of one :func:`plan_experiment` call: ``spent()`` says whether an
+    optional search should stop (the caller's ``stop`` or ``effort_s`` since ``tic``) and
+    remembers that it said so, for the plan's notes."""
+
+    tic: float
+    effort_s: float | None
+    stop: Callable[[], bool] | None
+    hit: bool = False
+
+    def spent(self) -> bool:
+        over = self.stop is not None and self.stop()
+        if self.effort_s is not None and time.perf_counter() - self.tic > self.effort_s:
+            over = True
+        self.hit = self.hit or over
+        return over
+
+    def note(self) -> str:
+        return (
+            f"the search for other plans stopped at its effort limit (effort_s = "
+            f"{self.effort_s:g} s): some fewer-level counts, sub-regions or coarser segments "
+            "were not searched; allow more with effort_s (CLI --effort-s, 0 = no limit)"
+            if self.effort_s is not None
+            else "the search for other plans was stopped by the caller"
+        )
 
 
 @dataclass(slots=True)
@@ -97,6 +129,7 @@ def _fallback(
     search: Search,
     progress: Callable[[str], None] | None,
     stats: LpStats,
+    effort: _Effort,
 ) -> _Candidate:
     """Nothing fits in time: the over-long structure cut at the limit, or the widest
     sub-regions that fit; whichever covers most of the region (by the dense check)."""
@@ -129,7 +162,13 @@ def _fallback(
         return any(verified(o) >= 1.0 for o in options[-1:])
 
     for sub_spec, sub_search in subregions(
-        spec, params_list, limits, models, progress, stats, stop=full_coverage_found
+        spec,
+        params_list,
+        limits,
+        models,
+        progress,
+        stats,
+        stop=lambda: full_coverage_found() or effort.spent(),
     ):
         assert sub_search.best is not None  # subregions yields only what fits
         u_sub, mg, mt = polish(sub_search.ctx, sub_search.best[0])
@@ -211,6 +250,8 @@ def plan_experiment(
     require_complete: bool = False,
     continuation: Continuation | None = None,
     graded: bool = True,
+    effort_s: float | None = EFFORT_S,
+    stop: Callable[[], bool] | None = None,
 ) -> Plan:
     """Synthesise a chamber programme for ``spec`` (see :mod:`schedsyn.planner`).
 
@@ -239,6 +280,15 @@ def plan_experiment(
         When the target cannot be met, also plan for fewer levels and return whichever
         plan gives the weakest bins the most levels, then the most complete bins (see
         :func:`_graded`).
+    effort_s : float or None, s
+        Wall-clock time after which the optional searches stop: the partial-coverage
+        fallbacks, the graded search for fewer levels and coarser segments (what was not
+        searched is named in ``notes``). The search for the requested plan itself always
+        runs to its end. None: no limit (the answer then does not depend on the
+        machine's speed).
+    stop : callable() -> bool, optional
+        Asked before each candidate structure of every search, the requested plan's too:
+        True stops the search with what it has (cancellation by the caller).
 
     Returns
     -------
@@ -256,8 +306,44 @@ def plan_experiment(
     SolverFailedError
         The LP solvers failed numerically and proved nothing infeasible.
     """
-    params = ThermalParams() if params is None else params
-    limits = Limits() if limits is None else limits
+    if effort_s is not None and not (math.isfinite(effort_s) and effort_s > 0):
+        raise ParameterError(
+            f"effort_s must be a positive number of seconds or None (no limit), got {effort_s!r}"
+        )
+    return _plan(
+        spec,
+        ThermalParams() if params is None else params,
+        Limits() if limits is None else limits,
+        model=model,
+        robust_tau_s=robust_tau_s,
+        robust_dt0_c=robust_dt0_c,
+        progress=progress,
+        require_complete=require_complete,
+        continuation=continuation,
+        graded=graded,
+        effort=_Effort(time.perf_counter(), effort_s, stop),
+        search_stop=stop,
+    )
+
+
+def _plan(
+    spec: ExperimentSpec,
+    params: ThermalParams,
+    limits: Limits,
+    *,
+    model: LinearThermalModel | None,
+    robust_tau_s: tuple[float, float] | None,
+    robust_dt0_c: tuple[float, float] | None,
+    progress: Callable[[str], None] | None,
+    require_complete: bool,
+    continuation: Continuation | None,
+    graded: bool,
+    effort: _Effort,
+    search_stop: Callable[[], bool] | None,
+) -> Plan:
+    """:func:`plan_experiment` within one effort limit, shared by the plans it makes on
+    the way (fewer levels, longer segments); ``search_stop`` ends the search for the
+    requested plan itself."""
     tic = time.perf_counter()
     check_request(spec, limits)
     robust = robust_tau_s is not None or robust_dt0_c is not None
@@ -269,7 +355,7 @@ def plan_experiment(
     if spec.min_step_min > spec.segment_min:  # plan with steps at least that long
         seg = min(MAX_SEGMENT_MIN, math.ceil(spec.min_step_min - 1e-9))
         if seg > spec.segment_min:
-            inner = plan_experiment(
+            inner = _plan(
                 dataclasses.replace(spec, segment_min=seg),
                 params,
                 limits,
@@ -277,15 +363,23 @@ def plan_experiment(
                 robust_tau_s=robust_tau_s,
                 robust_dt0_c=robust_dt0_c,
                 progress=progress,
+                require_complete=False,
                 continuation=continuation,
                 graded=graded,
+                effort=effort,
+                search_stop=search_stop,
             )
             note = (
                 f"planned with {seg:g}-min segments so that no step is shorter than "
                 f"min_step_min = {spec.min_step_min:g} min"
             )
             return _respec(inner, spec, note, require_complete)
-    if graded and not robust and model is None and continuation is None and not require_complete:
+    # graded plans: for the first-order model's nominal plans, unless a complete one is
+    # required (a graded plan is not what was asked for)
+    graded_ok = graded and model is None and not robust and not require_complete
+    found: _Fewer | None = None
+    searched_fewer = False
+    if graded_ok and continuation is None:
         # proven impossible: the search for these levels (and its fallbacks) cannot succeed,
         # and a graded plan for fewer levels beats any partial one (its weakest bin has more)
         proven = duration_lower_bound(spec, params, limits).lower_bound_min
@@ -297,9 +391,11 @@ def plan_experiment(
             )
             if progress:
                 progress(f"{spec.name}: {note}")
-            fewer = _graded(None, spec, params, limits, progress, (note,))
+            found = _fewer_levels(spec, params, limits, progress, effort)
+            searched_fewer = True
+            fewer = _graded(None, spec, params, limits, (note,), found)
             if fewer is not None:
-                return with_table_meta(fewer)
+                return with_table_meta(_finished(fewer, tic, effort))
     stats = LpStats()
     notes: list[str] = []
     fallback: str | None = None
@@ -315,7 +411,13 @@ def plan_experiment(
     else:
         params_list = [params]
         search = synthesise(
-            spec, params_list, limits, [model or FirstOrderLag(params)], progress, stats
+            spec,
+            params_list,
+            limits,
+            [model or FirstOrderLag(params)],
+            progress,
+            stats,
+            stop=search_stop,
         )
     models = [model if model is not None else FirstOrderLag(p) for p in params_list]
 
@@ -324,16 +426,19 @@ def plan_experiment(
         chosen = _Candidate(u, margin_g, margin_t, search, search.ctx)
     else:
         notes += explain_shortfall(spec, params, limits)
+        if graded_ok and not searched_fewer:  # first: the effort limit cuts sub-regions
+            found = _fewer_levels(spec, params, limits, progress, effort)
+            searched_fewer = True
         try:
-            chosen = _fallback(spec, limits, params_list, models, model, search, progress, stats)
+            chosen = _fallback(
+                spec, limits, params_list, models, model, search, progress, stats, effort
+            )
         except InfeasiblePlanError:
             # nothing at all with these levels: fewer levels, if some count fits
-            fewer = None  # (require_complete: a graded plan is not what was asked for)
-            if graded and model is None and not robust and not require_complete:
-                fewer = _graded(None, spec, params, limits, progress, tuple(notes))
+            fewer = _graded(None, spec, params, limits, tuple(notes), found)
             if fewer is None:
                 raise
-            return with_table_meta(fewer)
+            return with_table_meta(_finished(fewer, tic, effort))
         notes.append(chosen.note)
 
     programme = operator_programme(chosen.u, spec, limits)
@@ -424,13 +529,18 @@ def plan_experiment(
         and not robust
         and continuation is None
     ):  # merging steps was not enough: coarser control has fewer steps
-        coarser = _coarser(spec, params, limits, model, progress)
+        coarser = _coarser(spec, params, limits, model, progress, effort)
         if coarser is not None:
             plan = coarser
             complete = True
-    if not complete and graded and (model is None and not robust):
-        plan = _graded(plan, spec, params, limits, progress, plan.notes) or plan
-    plan = with_table_meta(plan)
+    if not complete and graded_ok:
+        if not searched_fewer:
+            found = _fewer_levels(spec, params, limits, progress, effort, plan.coverage.min_levels)
+        # the notes about the request (why it cannot be met), not about the replaced plan
+        about_request = explain_shortfall(spec, params, limits)
+        about_request += [n for n in plan.notes if n.startswith("no complete plan exists")]
+        plan = _graded(plan, spec, params, limits, tuple(about_request), found) or plan
+    plan = with_table_meta(_finished(plan, tic, effort))
     if require_complete and not complete:
         raise InfeasiblePlanError(
             f"{spec.name}: the target cannot be met: {'; '.join(notes + problems)}; best "
@@ -600,58 +710,161 @@ def with_table_meta(plan: Plan) -> Plan:
     return dataclasses.replace(plan, programme=plan.programme.with_meta(meta))
 
 
+@dataclass(frozen=True, slots=True)
+class _Fewer:
+    """What the graded search found: a complete plan for ``levels`` per bin (the most it
+    found), and the counts it searched."""
+
+    levels: int
+    plan: Plan
+    searched: tuple[int, ...]
+
+
+def _fewer_levels(
+    spec: ExperimentSpec,
+    params: ThermalParams,
+    limits: Limits,
+    progress: Callable[[str], None] | None,
+    effort: _Effort,
+    floor: int = 0,
+) -> _Fewer | None:
+    """The most levels per bin below ``levels_required`` (and above ``floor``) that a
+    complete plan reaches, with that plan; None when no count gives one.
+
+    The effort is bounded: each count is planned complete or not at all (no truncated
+    or partial plans; sub-regions only while ``effort`` lasts), counts whose proven bound exceeds the budget are never
+    planned, and the counts are searched from a first guess (:func:`_first_guess`) up
+    while plans are complete and down while they are not, so a request whose target is
+    far out of reach costs two or three searches, not one per count below ``L``.
+    Completeness is taken as monotone in the count (fewer levels, more time to spare):
+    the search stops at the first count where it changes. The first guess is always
+    searched; the others only while ``effort`` is not spent (a count whose search was
+    stopped counts as not found).
+    """
+    fits = [
+        k
+        for k in range(max(2, floor + 1), spec.levels_required)
+        if duration_lower_bound(
+            dataclasses.replace(spec, levels_required=k), params, limits
+        ).lower_bound_min
+        <= limits.duration_max_min
+    ]
+    if not fits:
+        return None
+    tried: dict[int, Plan | None] = {}
+
+    def attempt(levels: int, first: bool = False) -> Plan | None:
+        if levels in tried:
+            return tried[levels]
+        if not first and effort.spent():
+            return None  # (not searched; the effort note says so)
+        if progress:
+            progress(f"the target cannot be met: planning {levels} levels per bin instead")
+        try:
+            alt = _plan(  # complete or nothing: sub-regions may give it, not truncation
+                dataclasses.replace(spec, levels_required=levels),
+                params,
+                limits,
+                model=None,
+                robust_tau_s=None,
+                robust_dt0_c=None,
+                progress=progress,
+                require_complete=True,
+                continuation=None,
+                graded=False,
+                effort=effort,
+                search_stop=effort.stop if first else effort.spent,
+            )
+        except (InfeasiblePlanError, SolverFailedError):
+            alt = None  # (numerical failures prove nothing; that count is skipped)
+        tried[levels] = alt if alt is not None and alt.complete else None
+        return tried[levels]
+
+    k = _first_guess(spec, params, limits, fits)
+    if attempt(k, first=True) is not None:  # up while complete
+        while k + 1 in fits and attempt(k + 1) is not None:
+            k += 1
+    else:  # down until complete
+        while k - 1 in fits and attempt(k - 1) is None:
+            k -= 1
+        k -= 1
+    found = tried.get(k)
+    return None if found is None else _Fewer(k, found, tuple(sorted(tried)))
+
+
 def _graded(
     plan: Plan | None,
     spec: ExperimentSpec,
     params: ThermalParams,
     limits: Limits,
-    progress: Callable[[str], None] | None,
     notes: tuple[str, ...],
+    fewer: _Fewer | None,
 ) -> Plan | None:
-    """The best partial plan when ``levels_required`` cannot be met: also plan for fewer
-    levels (from ``L - 1`` down, skipping counts whose proven bound exceeds the budget;
-    the first complete one ends the search) and keep whichever table gives the weakest bin
-    the most levels, then covers the most bins, counted at the requested ``L`` by the
-    independent check. ``plan``: the best found with ``L`` (None: nothing at all).
+    """The better of ``plan`` (the best found with the requested ``L`` levels; None:
+    nothing at all) and the graded search's complete plan for fewer levels: the one
+    that gives the weakest bin more levels, then more bins at ``L`` (counted by the
+    independent check at ``L``); a plan that breaks a limit loses to one that does not.
     """
-    best = plan
-    key = (plan.coverage.min_levels, plan.coverage.coverage) if plan is not None else (-1, -1.0)
-    for levels in range(spec.levels_required - 1, 1, -1):
-        if levels <= key[0]:
-            break  # no fewer-level plan can give the weakest bin more than it has
-        fewer = dataclasses.replace(spec, levels_required=levels)
-        if duration_lower_bound(fewer, params, limits).lower_bound_min > limits.duration_max_min:
-            continue
-        if progress:
-            progress(f"the target cannot be met: planning {levels} levels per bin instead")
-        try:
-            alt = plan_experiment(fewer, params, limits, progress=progress, graded=False)
-        except InfeasiblePlanError:
-            continue
-        cov, cov01, _, _, _ = check_programme(alt.programme, spec, limits, [params])
-        alt_key = (cov.min_levels, cov.coverage)
-        if alt_key > key and not alt.violations:
-            best = dataclasses.replace(
-                alt,
-                spec=spec,
-                coverage=cov,
-                coverage_0p1=cov01,
-                complete=False,
-                status="incomplete",
-                levels_planned=levels,
-                notes=(
-                    *notes,
-                    f"GRADED: no complete plan with {spec.levels_required} levels per bin "
-                    f"was found; this one plans {levels} in every bin (the most the search "
-                    f"fits in {limits.duration_max_min:g} min): weakest bin {cov.min_levels} "
-                    f"levels, {cov.coverage:.0%} of the bins at {spec.levels_required}",
-                ),
-                duration_lower_bound_min=duration_lower_bound(spec, params, limits).lower_bound_min,
-            )
-            key = alt_key
-        if alt.complete:
-            break
-    return best
+    if fewer is None:
+        return plan
+    cov, cov01, _, _, _ = check_programme(fewer.plan.programme, spec, limits, [params])
+    if plan is not None and (
+        not plan.violations,
+        plan.coverage.min_levels,
+        plan.coverage.coverage,
+    ) >= (
+        True,
+        cov.min_levels,
+        cov.coverage,
+    ):
+        return plan
+    searched = ", ".join(str(n) for n in fewer.searched)
+    return dataclasses.replace(
+        fewer.plan,
+        spec=spec,
+        coverage=cov,
+        coverage_0p1=cov01,
+        complete=False,
+        status="incomplete",
+        levels_planned=fewer.levels,
+        notes=(
+            *notes,
+            f"GRADED: no complete plan with {spec.levels_required} levels per bin "
+            f"was found; this one plans {fewer.levels} in every bin (the most the search "
+            f"fits in {limits.duration_max_min:g} min; levels searched: {searched}): "
+            f"weakest bin {cov.min_levels} levels, {cov.coverage:.0%} of the bins at "
+            f"{spec.levels_required}",
+        ),
+        duration_lower_bound_min=duration_lower_bound(spec, params, limits).lower_bound_min,
+    )
+
+
+#: Complete plans take at least this multiple of their proven lower bound (the bound
+#: relaxes turning and level separation): 1.25-2.1 over the benchmark's complete plans,
+#: 1.4 typically. The graded search's first guess is the most levels whose bound times
+#: this fits the budget.
+GUESS_BOUND_RATIO = 1.3
+
+
+def _first_guess(
+    spec: ExperimentSpec, params: ThermalParams, limits: Limits, fits: list[int]
+) -> int:
+    """The level count the graded search plans first: the most of ``fits`` whose proven
+    bound, scaled by :data:`GUESS_BOUND_RATIO`, fits the budget (else the fewest)."""
+    for k in sorted(fits, reverse=True):
+        bound = duration_lower_bound(dataclasses.replace(spec, levels_required=k), params, limits)
+        if bound.lower_bound_min * GUESS_BOUND_RATIO <= limits.duration_max_min:
+            return k
+    return min(fits)
+
+
+def _finished(plan: Plan, tic: float, effort: _Effort) -> Plan:
+    """``plan`` with the whole call's solve time and, when the effort limit stopped a
+    search, the note that says so."""
+    notes = plan.notes
+    if effort.hit and effort.note() not in notes:
+        notes = (*notes, effort.note())
+    return dataclasses.replace(plan, solve_s=time.perf_counter() - tic, notes=notes)
 
 
 def _respec(plan: Plan, spec: ExperimentSpec, note: str, require_complete: bool) -> Plan:
@@ -671,22 +884,31 @@ def _coarser(
     limits: Limits,
     model: LinearThermalModel | None,
     progress: Callable[[str], None] | None,
+    effort: _Effort,
 ) -> Plan | None:
     """A complete plan within ``max_steps`` with longer segments, or None."""
     for factor in COARSER_FACTORS:
+        if effort.spent():
+            break
         seg = spec.segment_min * factor
         if seg > MAX_SEGMENT_MIN:
             break
         if progress:
             progress(f"more than max_steps = {spec.max_steps} steps: trying {seg:g}-min segments")
         try:
-            alt = plan_experiment(
+            alt = _plan(
                 dataclasses.replace(spec, segment_min=seg),
                 params,
                 limits,
                 model=model,
+                robust_tau_s=None,
+                robust_dt0_c=None,
                 progress=progress,
+                require_complete=False,
+                continuation=None,
                 graded=False,
+                effort=effort,
+                search_stop=effort.spent,
             )
         except InfeasiblePlanError:
             continue

@@ -140,6 +140,8 @@ def candidate_bands(
     return bands
 
 
+#: The reason a search gives when its ``stop()`` ended it early.
+STOPPED = "the search was stopped at its effort limit"
 #: The greedy may run past the duration limit by this factor; such a structure is only
 #: used (cut at the limit) when nothing fits, to give the best reachable coverage.
 OVERRUN_FACTOR = 1.3
@@ -380,13 +382,15 @@ def synthesise(
     max_candidates: int | None = None,
     continuation: Continuation | None = None,
     n_sweeps: int | None = None,
+    stop: Callable[[], bool] | None = None,
 ) -> Search:
     """Search structures (first direction, band separation, edge caps).
 
     For each candidate: bands -> greedy placement of the sweeps. ``shortest`` keeps the
     shortest structure that fits the duration limit; ``margin`` the one with the widest
     band separation that fits. ``n_sweeps`` (default ``levels_required``) sweeps are
-    placed; with a ``continuation``, after its executed steps.
+    placed; with a ``continuation``, after its executed steps. ``stop()`` is asked before
+    each candidate: True ends the search with what it has (an effort limit).
     """
     seg = spec.segment_min
     n_fixed = 0 if continuation is None else continuation.prefix.n_segments
@@ -415,6 +419,9 @@ def synthesise(
             for candidate in CANDIDATES[:max_candidates]:
                 if guided_found and isinstance(candidate, Classic):
                     break  # the classic designs were tuned as fallbacks: not worth the LPs
+                if stop is not None and stop():
+                    search.reasons.append(STOPPED)
+                    return search
                 # robust plans use the same bands: each scenario gets its own windows
                 # and a slack (see scenario_windows and SubLP.window)
                 bands = candidate_bands(candidate, spec, params_list, limits, n_by_dir, sep)
@@ -484,9 +491,10 @@ def subregions(
     """The widest sub-regions (whole bins cut from the low, the high or both edges) for
     which a structure fits the duration limit: at most one per side, yielded as found.
 
-    ``stop()`` is asked before each further side: the caller says when an option already
+    ``stop()`` is asked before each search: the caller says when an option already
     covers the full region (sweeps designed for a narrower region often still cover the
-    whole one: they pass the edges with margin), so the remaining searches are skipped.
+    whole one: they pass the edges with margin), or its effort limit is spent, so the
+    remaining searches are skipped.
     """
     n = spec.grid.n_bins
     for side in ("low", "high", "both"):
@@ -495,6 +503,8 @@ def subregions(
         for cut in sorted(set(cuts) | {c for c in wide if c > max(SUBREGION_CUTS)}):
             if cut >= n - 1:
                 break
+            if stop is not None and stop():
+                return
             a = {"low": cut, "high": 0, "both": cut // 2}[side]
             b = cut - a
             sub = replace(
@@ -505,6 +515,4 @@ def subregions(
                 if progress:
                     progress(f"sub-region [{sub.working_lo_c:g}, {sub.working_hi_c:g}] fits")
                 yield sub, search
-                if stop is not None and stop():
-                    return
                 break
