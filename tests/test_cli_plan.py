@@ -109,6 +109,7 @@ def test_a_nonlinear_model_file_is_refused(tmp_path, capsys):
         (["--working", "-10", "0", "--tau-s", "-5"], ["tau_s"]),
         (["--working", "-10", "0", "--chamber-min-c", "30"], ["chamber"]),
         (["--working", "-10", "0", "--model", "/nonexistent/model.json"], ["model file"]),
+        (["--working", "-10", "0", "--effort-s", "-1"], ["--effort-s", ">= 0"]),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, words):

@@ -1,0 +1,82 @@
+"""The graded search's effort stays bounded (issue 13 item 6; schedsyn.planner.core:
+_fewer_levels, _Effort): few level counts are searched, from a bound-guided first guess,
+and an effort limit stops the optional searches without losing the graded answer."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+from independent import table_check
+
+from schedsyn.errors import InfeasiblePlanError, ParameterError
+from schedsyn.params import Limits
+from schedsyn.planner import ExperimentSpec, plan_experiment
+from schedsyn.planner import core
+
+#: [-10, 0] degC asked for 10 levels in 240 min: the bound proves 10 (344 min) impossible;
+#: 4 levels fit, 5 do not (found by the search).
+SPEC = ExperimentSpec("E", -10.0, 0.0, -20.0, 10.0, levels_required=10)
+LIMITS = Limits(duration_max_min=240.0)
+
+
+@pytest.fixture()
+def searched(monkeypatch):
+    """The level counts the planner is asked to plan complete-or-nothing, in order."""
+    calls: list[int] = []
+    inner = core._plan
+
+    def spy(spec, *args, **kwargs):
+        if kwargs.get("require_complete") and not kwargs.get("graded"):
+            calls.append(spec.levels_required)
+        return inner(spec, *args, **kwargs)
+
+    monkeypatch.setattr(core, "_plan", spy)
+    return calls
+
+
+def test_the_graded_search_plans_few_counts_and_finds_the_most_levels(searched, tmp_path):
+    """Out of reach by far, the request costs two searches (the first guess and the count
+    above it), not one per count below 10; the answer has the most levels a complete plan
+    reaches: its count is complete by the independent check, the next one is not."""
+    plan = plan_experiment(SPEC, limits=LIMITS, effort_s=None)
+    assert len(searched) <= 2, searched
+    k = plan.levels_planned
+    assert k is not None and k >= 2 and not plan.complete
+    check = table_check(plan.programme.to_csv(tmp_path / "g.csv"), (-10.0, 0.0), k)
+    assert check["coverage"] == 1.0 and check["min_levels"] >= k
+    assert check["duration_min"] <= LIMITS.duration_max_min + 1e-9
+    with pytest.raises(InfeasiblePlanError):  # one more level: no complete plan found
+        plan_experiment(
+            dataclasses.replace(SPEC, levels_required=k + 1),
+            limits=LIMITS,
+            require_complete=True,
+            effort_s=None,
+        )
+    note = next(n for n in plan.notes if n.startswith("GRADED"))
+    assert f"plans {k} in every bin" in note and "levels searched: " in note
+
+
+def test_an_effort_limit_keeps_the_first_guess_and_says_what_it_skipped(searched):
+    """Spent at once, the effort limit still lets the graded search plan its first guess
+    (so a graded answer comes back) but nothing after it, and the plan says so."""
+    plan = plan_experiment(SPEC, limits=LIMITS, effort_s=1e-6)
+    assert len(searched) == 1
+    assert plan.levels_planned == searched[0]
+    assert any("effort limit" in n and "effort_s" in n for n in plan.notes)
+    unlimited = plan_experiment(SPEC, limits=LIMITS, effort_s=None)
+    assert not any("effort limit" in n for n in unlimited.notes)
+
+
+def test_a_caller_can_cancel_every_search():
+    """``stop`` returning True ends the search for the requested plan too: nothing is
+    planned and the planner says so instead of running on."""
+    spec = dataclasses.replace(SPEC, levels_required=3)
+    with pytest.raises(InfeasiblePlanError, match="stopped"):
+        plan_experiment(spec, limits=LIMITS, stop=lambda: True)
+
+
+@pytest.mark.parametrize("bad", [0.0, -5.0, float("nan"), float("inf")])
+def test_effort_s_must_be_a_positive_time(bad):
+    with pytest.raises(ParameterError, match="effort_s"):
+        plan_experiment(SPEC, limits=LIMITS, effort_s=bad)
