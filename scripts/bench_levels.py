@@ -64,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
                 "status": plan.status,
                 "levels_planned": plan.levels_planned or (levels if plan.complete else None),
                 "min_levels": plan.coverage.min_levels,
-                "duration_min": plan.programme.duration_min,
+                "duration_min": plan.programme.total_min,
                 "effort_limit_hit": any("effort limit" in n for n in plan.notes),
             }
             rows.append(row)

@@ -213,3 +213,17 @@ def test_two_level_bound_is_below_and_close_to_a_bang_bang_run(lo, hi):
     bound = duration_lower_bound(spec, params, limits).lower_bound_min
     assert bound <= achieved
     assert bound >= 0.85 * achieved, (bound, achieved)
+
+
+def test_sweeps_that_repeat_a_level_are_weighed_so_a_slow_direction_is_not_proof():
+    """W1 over a -55 °C floor: near -50 °C the chamber lets the device cool at most about
+    0.05-0.075 °C/min, too slow for three cooling levels 0.05 °C/min apart. That alone is
+    not proof of impossibility: a plan may cool more often than it has cooling levels
+    (repeating one) so that heating gives the other levels. The bound weighs such plans:
+    finite, reached with more sweeps than levels, and still above the 540-min budget."""
+    spec = ExperimentSpec("F", -50.0, -30.0, -55.0, -20.0)
+    limits = Limits(chamber_min_c=-55.0)
+    bound = duration_lower_bound(spec, limits=limits)
+    assert math.isfinite(bound.lower_bound_min)
+    assert bound.sweeps > spec.levels_required
+    assert bound.lower_bound_min > 540.0

@@ -6,8 +6,13 @@ cross the whole working region (what the planner builds; a plan that turned roun
 the working region is not covered by the proof). The argument, in one direction (heating
 or cooling; the other is the same with the roles of the chamber rates swapped):
 
-1. **Counts.** Consecutive traversals of one bin alternate in direction, so ``L`` levels per
-   bin need ``ceil(L/2)`` sweeps in the first direction and ``floor(L/2)`` in the other.
+1. **Counts.** Consecutive traversals of one bin alternate in direction, so a plan of
+   ``N`` sweeps has ``ceil(N/2)`` in the first direction and ``floor(N/2)`` in the other,
+   and every bin is passed ``N`` times. ``L`` levels need ``N >= L``; a plan may have more
+   sweeps than levels (sweeps that repeat a level, so that the other direction can give
+   more levels than ``N/2``, where one direction is slow), and the bound is the least over
+   ``N`` (those with ``N - L`` up to ``MAX_SURPLUS_SWEEPS`` weighed as below, the rest
+   bounded by their count times the least time of one sweep of each direction).
 2. **Time of a sweep.** A sweep whose mean gradient in bin ``j`` is ``m_j`` (a harmonic mean
    over the bin: mean g over a pass = bin width / time in the bin) spends ``w / m_j`` in it.
    Before the region it sped up from rest (a turning point), which took at least the
@@ -29,16 +34,19 @@ or cooling; the other is the same with the roles of the chamber rates swapped):
    and the entry speed is at least the start of the speed-up curve with mean ``m_0`` in
    the first bin, the exit speed at least the end of the braking curve with the last
    bin's mean.
-5. **Levels.** In every bin the ``n`` sweeps of a direction give ``n`` levels pairwise
-   ``delta`` apart. Sorting the sweeps' bin means bin by bin (rank ``k`` = the ``k``-th
-   fastest) keeps the total time, the edge costs (the same speeds at each edge) and the
-   continuity limits (order statistics of sequences with bounded steps have bounded
-   steps). Two relaxations of the ranks' joint problem are each a valid bound, and the
-   larger counts: (a) each rank alone, capped at ``V_j - (k - 1) delta``, with its own
-   turns; (b) the fastest rank with its turns and continuity, the others charged only
-   their crossing time at the fastest they may go, ``m_1 - (k - 1) delta``. Each is a
-   shortest path over (bin, speed), solved exactly on a speed grid rounded in the bound's
-   favour (speeds up for crossing times, down for turning times).
+5. **Levels.** In every bin the ``L`` levels come from the ``N`` passes, so at most
+   ``S = N - L`` passes of a direction are not among them, and of the ``k`` fastest
+   sweeps of a direction in a bin at least ``k - S`` are levels pairwise ``delta`` apart:
+   the ``k``-th fastest is at most ``V_j - max(0, k - 1 - S) delta``. Sorting the sweeps'
+   bin means bin by bin (rank ``k`` = the ``k``-th fastest) keeps the total time, the edge
+   costs (the same speeds at each edge) and the continuity limits (order statistics of
+   sequences with bounded steps have bounded steps). Two relaxations of the ranks' joint
+   problem are each a valid bound, and the larger counts: (a) each rank alone, capped at
+   ``V_j - max(0, k - 1 - S) delta``, with its own turns; (b) the fastest rank with its
+   turns and continuity, the others charged only their crossing time at the fastest they
+   may go, ``m_1 - max(0, k - 1 - S) delta``. Each is a shortest path over (bin, speed),
+   solved exactly on a speed grid rounded in the bound's favour (speeds up for crossing
+   times, down for turning times).
 
 The bound is the least, over the first sweep's direction, of the sum over ranks. It
 ignores the chamber limits while turning and the separation between heating and cooling
@@ -48,7 +56,7 @@ levels, so it is loose where those bind; it is valid regardless.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -71,6 +79,10 @@ CURVE_POINTS = 20001
 CAP_POINTS_PER_BIN = 21
 #: Longest approach searched from the start to the region, min.
 MAX_APPROACH_MIN = 1e4
+#: Sweeps beyond ``levels_required`` whose plans the bound weighs explicitly (some sweeps
+#: repeat a level so that the other direction can give more); plans with still more are
+#: bounded by their count times the least time of one sweep.
+MAX_SURPLUS_SWEEPS = 12
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,7 +92,8 @@ class DurationBound:
     ``lower_bound_min`` is ``inf`` when no sweep can cross some bin at all. ``ranks``: per
     direction (+1 heating, -1 cooling) the least time of each rank's sweeps, min, and
     ``profiles`` the rank's bin-mean speeds in travel order (the optimum of the bound's
-    relaxation; a guide, not a plan).
+    relaxation; a guide, not a plan); ``sweeps`` the number of sweeps of that optimum
+    (more than ``levels_required`` where repeating a level is cheaper).
     """
 
     lower_bound_min: float
@@ -89,6 +102,7 @@ class DurationBound:
     turning_min: float
     ranks: dict[int, tuple[float, ...]]
     profiles: dict[int, tuple[np.ndarray, ...]]
+    sweeps: int = 0
 
     def to_dict(self) -> dict:
         return {
@@ -96,6 +110,7 @@ class DurationBound:
             "first_direction": self.first_direction,
             "crossing_min": self.crossing_min,
             "turning_min": self.turning_min,
+            "sweeps": self.sweeps,
         }
 
 
@@ -306,15 +321,20 @@ def _solve_rank(
 
 
 def _dominated(
-    generic: _RankProblem, entry: np.ndarray, exit_: np.ndarray, n: int, delta: float
+    generic: _RankProblem,
+    entry: np.ndarray,
+    exit_: np.ndarray,
+    shifts: list[int],
+    delta: float,
 ) -> tuple[float, np.ndarray]:
-    """Lower bound on ``n`` ranks held by the fastest: rank 1 pays its crossings, turns and
-    continuity; rank ``k`` is at most ``m_1 - (k - 1) delta`` in every bin, so it spends at
-    least ``w / (m_1 - (k - 1) delta)`` there (its own turns and continuity dropped)."""
+    """Lower bound on the ranks held by the fastest: rank 1 pays its crossings, turns and
+    continuity; rank ``k`` is at most ``m_1 - shifts[k] delta`` in every bin, so it spends
+    at least ``w / (m_1 - shifts[k] delta)`` there (its own turns and continuity
+    dropped)."""
     v = generic.v
-    slow = v[:, None] - delta * np.arange(n)[None, :]
+    slow = v[:, None] - delta * np.asarray(shifts, float)[None, :]
     with np.errstate(divide="ignore"):
-        crossing = np.where(slow[:, -1] > 0, (generic.width_c / slow).sum(axis=1), np.inf)
+        crossing = np.where(slow.min(axis=1) > 0, (generic.width_c / slow).sum(axis=1), np.inf)
     prob = _RankProblem(
         v, generic.caps, generic.width_c, generic.src_lo, generic.src_hi, entry, exit_
     )
@@ -385,75 +405,107 @@ def duration_lower_bound(
             v, caps, w, src_lo, src_hi, entry_cost(side, first), exit_cost(side, last)
         )
 
+    solved: dict[tuple[int, bool, bool, int], tuple[float, np.ndarray]] = {}
+
+    def rank(side: _Side, first: bool, last: bool, shift: int) -> tuple[float, np.ndarray]:
+        """Least time of one sweep (in its role) whose caps are lowered by ``shift``
+        delta, and its speed profile."""
+        key = (side.d, first, last, shift)
+        if key not in solved:
+            q = problem(side, first, last)
+            caps = q.caps - shift * delta
+            solved[key] = _solve_rank(_RankProblem(v, caps, w, q.src_lo, q.src_hi, q.entry, q.exit))
+        return solved[key]
+
+    def rank_cost(side: _Side, first: bool, last: bool, shift: int) -> float:
+        return rank(side, first, last, shift)[0]
+
+    def direction(
+        side: _Side, n: int, surplus: int, is_first: bool, is_last: bool
+    ) -> tuple[float, tuple[float, ...], tuple[np.ndarray, ...]]:
+        """Least time of the ``n`` sweeps of one direction (see the module doc, 5)."""
+        shifts = [max(0, k - surplus) for k in range(n)]
+        # (a) the ranks on their own, each with its turns (levels kept apart only by
+        # the caps V - shift delta)
+        base = [rank_cost(side, False, False, sh) for sh in shifts]
+        wanted = [(True, False)] * is_first + [(False, True)] * is_last
+        wanted += [(True, True)] * (is_first and is_last)
+        alt = {key: [rank_cost(side, *key, sh) for sh in shifts] for key in wanted}
+        value_a = sum(base) + (_role_adjustment(base, alt, is_first, is_last) if wanted else 0)
+        # (b) the ranks held by the fastest; the first sweep pays at least the approach
+        # whichever rank it is, the last at least nothing more
+        generic = problem(side, False, False)
+        entry, exit_ = generic.entry, generic.exit
+        if is_first:
+            f_entry = problem(side, True, False).entry
+            approach = float(np.min(f_entry - np.minimum(f_entry, generic.entry)))
+            entry = np.minimum(generic.entry + approach, f_entry)
+        caps_prob = problem(side, False, is_last)
+        if is_last:
+            exit_ = np.minimum(generic.exit, caps_prob.exit)
+        value_b, prof_b = _dominated(caps_prob, entry, exit_, shifts, delta)
+        value = max(value_a, value_b)
+        if value_b >= value_a:
+            profs = tuple(prof_b - sh * delta for sh in shifts)
+        else:
+            profs = tuple(rank(side, False, False, sh)[1] for sh in shifts)
+        return value, tuple(base), profs
+
     best: DurationBound | None = None
+    # the least time one sweep of a direction takes, whatever its role: a plan of N sweeps
+    # (ceil(N/2) in the first direction) takes at least the sum over its sweeps
+    per_sweep = {
+        d: min(rank_cost(side, f, la, 0) for f in (False, True) for la in (False, True))
+        for d, side in sides.items()
+    }
+
+    def at_least(first: int, n_sweeps: int) -> float:
+        return (n_sweeps + 1) // 2 * per_sweep[first] + n_sweeps // 2 * per_sweep[-first]
+
     for first in (-1, +1):
         if (first < 0 and t0 < lo_c) or (first > 0 and t0 > hi_c):
             continue  # the first sweep heads into the region from where the start lies
-        counts = {first: (n_levels + 1) // 2, -first: n_levels // 2}
-        last_dir = first if n_levels % 2 else -first
-        total = 0.0
-        crossing = 0.0
-        ranks: dict[int, tuple[float, ...]] = {}
-        profiles: dict[int, tuple[np.ndarray, ...]] = {}
-        for d, side in sides.items():
-            n = counts[d]
-            is_first, is_last = d == first, d == last_dir
-            generic = problem(side, False, False)
-            # (a) the ranks on their own, each with its turns (levels kept apart only by
-            # the caps V - (k - 1) delta)
-            indep = []
-            for k in range(n):
-                p = generic
-                shifted = _RankProblem(
-                    v, p.caps - k * delta, w, p.src_lo, p.src_hi, p.entry, p.exit
+        for n_sweeps in range(n_levels, n_levels + MAX_SURPLUS_SWEEPS + 1):
+            if best is not None and at_least(first, n_sweeps) >= best.lower_bound_min:
+                break  # more sweeps cannot be faster
+            counts = {first: (n_sweeps + 1) // 2, -first: n_sweeps // 2}
+            last_dir = first if n_sweeps % 2 else -first
+            total = 0.0
+            crossing = 0.0
+            ranks: dict[int, tuple[float, ...]] = {}
+            profiles: dict[int, tuple[np.ndarray, ...]] = {}
+            for d, side in sides.items():
+                value, base, profs = direction(
+                    side, counts[d], n_sweeps - n_levels, d == first, d == last_dir
                 )
-                indep.append(_solve_rank(shifted))
-            base = [c for c, _ in indep]
-            wanted = [(True, False)] * is_first + [(False, True)] * is_last
-            wanted += [(True, True)] * (is_first and is_last)
-            alt = {}
-            for key in wanted:
-                q = problem(side, *key)
-                alt[key] = [
-                    _solve_rank(
-                        _RankProblem(v, q.caps - k * delta, w, q.src_lo, q.src_hi, q.entry, q.exit)
-                    )[0]
-                    for k in range(n)
-                ]
-            value_a = sum(base) + (_role_adjustment(base, alt, is_first, is_last) if wanted else 0)
-            # (b) the ranks held by the fastest; the first sweep pays at least the approach
-            # whichever rank it is, the last at least nothing more
-            g_entry, g_exit = generic.entry, generic.exit
-            entry, exit_ = g_entry, g_exit
-            if is_first:
-                f_entry = problem(side, True, False).entry
-                approach = float(np.min(f_entry - np.minimum(f_entry, g_entry)))
-                entry = np.minimum(g_entry + approach, f_entry)
-            caps_prob = problem(side, False, is_last)
-            if is_last:
-                exit_ = np.minimum(g_exit, caps_prob.exit)
-            value_b, prof_b = _dominated(caps_prob, entry, exit_, n, delta)
-            value = max(value_a, value_b)
-            if not math.isfinite(value):
-                total = math.inf
-                break
-            total += value
-            ranks[d] = tuple(base)
-            use_b = value_b >= value_a
-            profs = [prof_b - k * delta for k in range(n)] if use_b else [p for _, p in indep]
-            profiles[d] = tuple(profs)
-            crossing += sum(float(np.sum(w / p)) for p in profs if np.all(np.isfinite(p)))
-        bound = DurationBound(
-            lower_bound_min=total,
-            first_direction=first,
-            crossing_min=crossing,
-            turning_min=total - crossing if math.isfinite(total) else math.inf,
-            ranks=ranks,
-            profiles=profiles,
-        )
-        if best is None or bound.lower_bound_min < best.lower_bound_min:
-            best = bound
+                if not math.isfinite(value):
+                    total = math.inf
+                    break
+                total += value
+                ranks[d] = base
+                profiles[d] = profs
+                crossing += sum(float(np.sum(w / p)) for p in profs if np.all(np.isfinite(p)))
+            bound = DurationBound(
+                lower_bound_min=total,
+                first_direction=first,
+                crossing_min=crossing,
+                turning_min=total - crossing if math.isfinite(total) else math.inf,
+                ranks=ranks,
+                profiles=profiles,
+                sweeps=n_sweeps,
+            )
+            if best is None or bound.lower_bound_min < best.lower_bound_min:
+                best = bound
     assert best is not None  # at least one first direction is possible
+    # plans with more sweeps than were weighed: each sweep takes at least per_sweep
+    many = n_levels + MAX_SURPLUS_SWEEPS + 1
+    beyond = min(
+        at_least(first, many)
+        for first in (-1, +1)
+        if not ((first < 0 and t0 < lo_c) or (first > 0 and t0 > hi_c))
+    )
+    if beyond < best.lower_bound_min:
+        best = replace(best, lower_bound_min=beyond, sweeps=many)
     return best
 
 

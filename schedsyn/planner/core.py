@@ -429,6 +429,10 @@ def _plan(
         if graded_ok and not searched_fewer:  # first: the effort limit cuts sub-regions
             found = _fewer_levels(spec, params, limits, progress, effort)
             searched_fewer = True
+        if found is not None and effort.spent():  # no time left to try partial L-plans
+            fewer = _graded(None, spec, params, limits, tuple(notes), found)
+            assert fewer is not None  # (a graded plan of what was found)
+            return with_table_meta(_finished(fewer, tic, effort))
         try:
             chosen = _fallback(
                 spec, limits, params_list, models, model, search, progress, stats, effort
