@@ -11,8 +11,8 @@ from independent import table_check
 
 from schedsyn.errors import InfeasiblePlanError, ParameterError
 from schedsyn.params import Limits
-from schedsyn.planner import ExperimentSpec, plan_experiment
-from schedsyn.planner import core
+from schedsyn.planner import ExperimentSpec, core, plan_experiment
+from schedsyn.planner.search import STOPPED
 
 #: [-10, 0] degC asked for 10 levels in 240 min: the bound proves 10 (344 min) impossible;
 #: 4 levels fit, 5 do not (found by the search).
@@ -80,3 +80,31 @@ def test_a_caller_can_cancel_every_search():
 def test_effort_s_must_be_a_positive_time(bad):
     with pytest.raises(ParameterError, match="effort_s"):
         plan_experiment(SPEC, limits=LIMITS, effort_s=bad)
+
+
+def test_an_unlikely_request_gets_its_graded_plan_first(searched, monkeypatch):
+    """5 levels in 240 min: the bound (about 207 min) allows it, but no complete plan
+    known came within 1.3x of its bound. The graded plan (4 levels) is made first, and
+    the search for 5 runs only while the effort lasts: spent at once, the answer is the
+    graded plan, and the plan says the search was cut."""
+    spec = dataclasses.replace(SPEC, levels_required=5)
+    bound = core.duration_lower_bound(spec, limits=LIMITS).lower_bound_min
+    assert bound <= LIMITS.duration_max_min < bound * core.GUESS_BOUND_RATIO
+    stopped: list[bool] = []  # per search for 5 levels: was it cut?
+    inner = core.synthesise
+
+    def spy(spec_, *args, **kwargs):
+        result = inner(spec_, *args, **kwargs)
+        if spec_.levels_required == 5:
+            stopped.append(STOPPED in result.reasons)
+        return result
+
+    monkeypatch.setattr(core, "synthesise", spy)
+    cut = plan_experiment(spec, limits=LIMITS, effort_s=1e-6)
+    assert searched[0] < 5 and cut.levels_planned == searched[0]
+    assert any("effort limit" in n for n in cut.notes)
+    assert stopped == [True]
+    full = plan_experiment(spec, limits=LIMITS, effort_s=None)
+    assert not any("effort limit" in n for n in full.notes)
+    assert stopped[-1] is False
+    assert full.complete or full.levels_planned is not None

@@ -43,8 +43,8 @@ MAX_SEGMENT_MIN = 30
 #: max_steps.
 COARSER_FACTORS = (2, 3)
 #: Wall-clock seconds after which a plan's optional searches stop (the partial-coverage
-#: fallbacks, the graded search for fewer levels, coarser segments); the search for the
-#: requested plan itself always runs to its end.
+#: fallbacks, the graded search for fewer levels, coarser segments; see
+#: :func:`plan_experiment`).
 EFFORT_S = 45.0
 #: Device excess (degC) below which rounding is not worth a re-polish.
 EXCESS_TOL_C = 1e-6
@@ -282,10 +282,12 @@ def plan_experiment(
         :func:`_graded`).
     effort_s : float or None, s
         Wall-clock time after which the optional searches stop: the partial-coverage
-        fallbacks, the graded search for fewer levels and coarser segments (what was not
-        searched is named in ``notes``). The search for the requested plan itself always
-        runs to its end. None: no limit (the answer then does not depend on the
-        machine's speed).
+        fallbacks, the graded search for fewer levels and coarser segments (a note says
+        when it stopped one). The search for the requested plan itself runs to its end,
+        unless its proven bound times ``GUESS_BOUND_RATIO`` exceeds the budget (no
+        complete plan known was that close to its bound) and a graded plan for fewer
+        levels is already in hand. None: no limit (the answer then does not depend on
+        the machine's speed).
     stop : callable() -> bool, optional
         Asked before each candidate structure of every search, the requested plan's too:
         True stops the search with what it has (cancellation by the caller).
@@ -396,6 +398,13 @@ def _plan(
             fewer = _graded(None, spec, params, limits, (note,), found)
             if fewer is not None:
                 return with_table_meta(_finished(fewer, tic, effort))
+        elif proven * GUESS_BOUND_RATIO > limits.duration_max_min:
+            # possible but unlikely (no complete plan found so far was this close to its
+            # bound): the graded answer first, then the requested levels while effort lasts
+            found = _fewer_levels(spec, params, limits, progress, effort)
+            searched_fewer = True
+            if found is not None:
+                search_stop = effort.spent
     stats = LpStats()
     notes: list[str] = []
     fallback: str | None = None
@@ -736,10 +745,11 @@ def _fewer_levels(
     complete plan reaches, with that plan; None when no count gives one.
 
     The effort is bounded: each count is planned complete or not at all (no truncated
-    or partial plans; sub-regions only while ``effort`` lasts), counts whose proven bound exceeds the budget are never
-    planned, and the counts are searched from a first guess (:func:`_first_guess`) up
-    while plans are complete and down while they are not, so a request whose target is
-    far out of reach costs two or three searches, not one per count below ``L``.
+    or partial plans; sub-regions only while ``effort`` lasts), counts whose proven
+    bound exceeds the budget are never planned, and the counts are searched from a
+    first guess (:func:`_first_guess`) up while plans are complete and down while they
+    are not, so a request whose target is far out of reach costs two or three searches,
+    not one per count below ``L``.
     Completeness is taken as monotone in the count (fewer levels, more time to spare):
     the search stops at the first count where it changes. The first guess is always
     searched; the others only while ``effort`` is not spent (a count whose search was
