@@ -42,6 +42,9 @@ MINUTES_FLOOR_C_PER_MIN = 1e-3
 BAND_FRACTIONS = (1.0, 0.75, 0.5, 0.25)
 #: Shares of a guided band's design speed sweeps are timed at, fastest first.
 PROFILE_SHARES = (1.0, 0.95, 0.9, 0.8)
+#: Where in a band a sweep is timed when none of the usual timings fits (near the
+#: bottom): long segments cannot hold a sweep high in its band right after a turnaround.
+SLOW_BAND_FRACTIONS = (0.1, 0.0)
 #: Relative tolerance within which two band orders count as equally fast.
 ORDER_TIE_TOL = 1e-9
 
@@ -91,13 +94,16 @@ class Band:
             out.append(float(np.trapezoid(1.0 / v, t)))
         return np.array(out)
 
-    def timing_options(self) -> list[np.ndarray]:
+    def timing_options(self, slow: bool = False) -> list[np.ndarray]:
         """Minutes per piece (ascending T) to time a sweep by, in order of preference.
 
         A band designed around a speed profile is crossed at that profile and then a little
         slower (``PROFILE_SHARES``); otherwise at its top, three quarters, half and a
-        quarter of its width (``BAND_FRACTIONS``).
+        quarter of its width (``BAND_FRACTIONS``). ``slow``: the last resort, near the
+        bottom of the band (``SLOW_BAND_FRACTIONS``), either kind.
         """
+        if slow:
+            return [self.minutes(f) for f in SLOW_BAND_FRACTIONS]
         if self.speed_c_per_min is None:
             return [self.minutes(f) for f in BAND_FRACTIONS]
         out = []

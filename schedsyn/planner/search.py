@@ -164,12 +164,13 @@ class Structure:
 
 
 def place_sweep(
-    ctx: Context, u_fixed: np.ndarray, d: int, band: Band, max_seg: int
+    ctx: Context, u_fixed: np.ndarray, d: int, band: Band, max_seg: int, slow: bool = False
 ) -> tuple[np.ndarray, Window] | None:
     """Shortest transition + window for one sweep.
 
     The window may start at any planner sample after the fixed segments; its knot
-    crossings are planned fast first, then slower (:meth:`~.bands.Band.timing_options`).
+    crossings are planned fast first, then slower (:meth:`~.bands.Band.timing_options`;
+    ``slow``: only the last-resort timings near the bottom of the band).
     The transition is scanned in segment steps (feasibility is not monotone enough for
     bisection over the whole range), then refined to the minute.
     """
@@ -179,7 +180,7 @@ def place_sweep(
     s_max = r.sample_of(max_seg)
     # piece durations (samples) in travel order, from the band's top speed down
     options = []
-    for minutes in band.timing_options():
+    for minutes in band.timing_options(slow):
         if d < 0:
             minutes = minutes[::-1]
         # round the planned knot times, not each piece (rounded pieces drift)
@@ -331,14 +332,27 @@ def return_to_end(ctx: Context, u_fixed: np.ndarray, max_seg: int) -> np.ndarray
 
 
 def greedy(
-    ctx: Context, directions: list[int], sweep_bands: list[Band], max_seg: int, progress: Progress
+    ctx: Context,
+    directions: list[int],
+    sweep_bands: list[Band],
+    max_seg: int,
+    progress: Progress,
+    slow_retry: bool = False,
 ) -> tuple[Structure | None, str]:
-    """Place the sweeps one after another, each as early and as short as feasible."""
+    """Place the sweeps one after another, each as early and as short as feasible.
+
+    ``slow_retry``: a sweep that fits at none of its band's usual timings is tried once
+    more timed near the bottom of the band.
+    """
     limits = ctx.limits
     u_fixed = ctx.responses.fixed_rates.copy()
     windows: list[Window] = []
     for k, (d, band) in enumerate(zip(directions, sweep_bands, strict=True)):
         res = place_sweep(ctx, u_fixed, d, band, max_seg)
+        if res is None and slow_retry:
+            # long segments cannot hold a sweep high in its band just after a turnaround
+            # (the rate changes only every segment): time it near the bottom of the band
+            res = place_sweep(ctx, u_fixed, d, band, max_seg, slow=True)
         if res is None:
             where = "cooling" if d < 0 else "heating"
             return None, (
@@ -411,10 +425,52 @@ def synthesise(
         base_sep += 2 * ROBUST_SLACK_C_PER_MIN
     # "informative" starts from the shortest plan's sweeps (.informative runs them on)
     seps = [base_sep + x for x in MARGIN_SEPARATIONS] if spec.objective == "margin" else [base_sep]
+    firsts = first_directions(spec, limits, start_t)
+
+    def attempt(candidate: Guided | Classic, first: int, sep: float, slow_retry: bool) -> str:
+        """One candidate's greedy: ``"fits"``, ``"over"`` (too long), ``"stuck"`` (some
+        sweep did not fit) or ``"none"`` (no bands)."""
+        directions = sweep_directions(spec, first, n_sweeps)
+        n_by_dir = {d: directions.count(d) for d in (+1, -1)}
+        # robust plans use the same bands: each scenario gets its own windows
+        # and a slack (see scenario_windows and SubLP.window)
+        bands = candidate_bands(candidate, spec, params_list, limits, n_by_dir, sep)
+        if bands is None:
+            search.reasons.append(
+                f"the gradients the chamber allows cannot hold the levels "
+                f"{sep:.3f} °C/min apart with the {type(candidate).__name__.lower()} "
+                "band design"
+            )
+            return "none"
+        order = order_bands(directions, bands, params_list[0], limits)
+        # only a shorter structure can improve on what was found: prune
+        limit = ext_seg
+        if search.best is not None:
+            limit = search.best[0].n_seg - 1
+        elif search.overrun is not None:
+            limit = min(limit, search.overrun.n_seg - 1)
+        structure, why = greedy(ctx, directions, order, limit, progress, slow_retry)
+        if structure is None:
+            search.reasons.append(why)
+            return "stuck"
+        minutes = responses.edges_min[structure.n_seg]
+        if structure.n_seg > max_seg:
+            search.reasons.append(
+                f"the sweeps need {minutes:g} min, more than the limit "
+                f"{limits.duration_max_min:g} min"
+            )
+            if search.overrun is None or structure.n_seg < search.overrun.n_seg:
+                search.overrun = structure
+            return "over"
+        if search.best is None or structure.n_seg < search.best[0].n_seg:
+            search.best = (structure, sep)
+        if progress:
+            progress(f"structure found: {minutes:g} min")
+        return "fits"
+
     for sep in seps:
-        for first in first_directions(spec, limits, start_t):
-            directions = sweep_directions(spec, first, n_sweeps)
-            n_by_dir = {d: directions.count(d) for d in (+1, -1)}
+        stuck: list[tuple[Guided | Classic, int]] = []
+        for first in firsts:
             guided_found = False
             for candidate in CANDIDATES[:max_candidates]:
                 if guided_found and isinstance(candidate, Classic):
@@ -422,41 +478,18 @@ def synthesise(
                 if stop is not None and stop():
                     search.reasons.append(STOPPED)
                     return search
-                # robust plans use the same bands: each scenario gets its own windows
-                # and a slack (see scenario_windows and SubLP.window)
-                bands = candidate_bands(candidate, spec, params_list, limits, n_by_dir, sep)
-                if bands is None:
-                    search.reasons.append(
-                        f"the gradients the chamber allows cannot hold the levels "
-                        f"{sep:.3f} °C/min apart with the {type(candidate).__name__.lower()} "
-                        "band design"
-                    )
-                    continue
-                order = order_bands(directions, bands, params_list[0], limits)
-                # only a shorter structure can improve on what was found: prune
-                limit = ext_seg
-                if search.best is not None:
-                    limit = search.best[0].n_seg - 1
-                elif search.overrun is not None:
-                    limit = min(limit, search.overrun.n_seg - 1)
-                structure, why = greedy(ctx, directions, order, limit, progress)
-                if structure is None:
-                    search.reasons.append(why)
-                    continue
-                minutes = responses.edges_min[structure.n_seg]
-                if structure.n_seg > max_seg:
-                    search.reasons.append(
-                        f"the sweeps need {minutes:g} min, more than the limit "
-                        f"{limits.duration_max_min:g} min"
-                    )
-                    if search.overrun is None or structure.n_seg < search.overrun.n_seg:
-                        search.overrun = structure
-                    continue
-                if search.best is None or structure.n_seg < search.best[0].n_seg:
-                    search.best = (structure, sep)
-                guided_found = guided_found or isinstance(candidate, Guided)
-                if progress:
-                    progress(f"structure found: {minutes:g} min")
+                outcome = attempt(candidate, first, sep, slow_retry=False)
+                if outcome == "stuck":
+                    stuck.append((candidate, first))
+                guided_found = guided_found or (outcome == "fits" and isinstance(candidate, Guided))
+        if search.best is None:
+            # nothing fits: the candidates that got stuck on a sweep, once more with that
+            # sweep timed near the bottom of its band (long segments need it)
+            for candidate, first in stuck:
+                if stop is not None and stop():
+                    search.reasons.append(STOPPED)
+                    return search
+                attempt(candidate, first, sep, slow_retry=True)
         if search.best is not None:
             break  # margin: the widest separation that fits
     return search

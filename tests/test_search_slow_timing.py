@@ -1,0 +1,72 @@
+"""The search's last resort for sweeps that fit at none of their band's usual timings.
+
+Long decision segments change the chamber rate only every segment, so right after a
+turnaround near a device limit a sweep cannot be held high in its band: the search then
+times the sweep near the bottom of the band (``SLOW_BAND_FRACTIONS``), but only once no
+candidate fits with the usual timings (the paper's four never get there).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from independent import table_check
+
+from schedsyn.campaign import load_campaign
+from schedsyn.planner import plan_experiment
+from schedsyn.planner.bands import SLOW_BAND_FRACTIONS, Band
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_slow_timings_cross_each_piece_near_the_bottom_of_the_band():
+    # a band with constant bounds 0.2 .. 0.4 degC/min: crossing a piece of width w at
+    # lo + f (hi - lo) takes w / (0.2 + 0.2 f) minutes (plain arithmetic)
+    knots = (-0.25, 1.5, 8.5, 10.25)
+    band = Band(+1, 1, knots, (0.2,) * 4, (0.4,) * 4)
+    widths = np.diff(knots)
+    slow = band.timing_options(slow=True)
+    assert len(slow) == len(SLOW_BAND_FRACTIONS)
+    for minutes, f in zip(slow, SLOW_BAND_FRACTIONS, strict=True):
+        np.testing.assert_allclose(minutes, widths / (0.2 + 0.2 * f), rtol=1e-6)
+    # and they are slower than every usual timing
+    usual = band.timing_options()
+    assert min(s.sum() for s in slow) > max(u.sum() for u in usual)
+
+
+@pytest.mark.slow
+def test_ten_minute_segments_at_the_cold_edge_plan_complete(tmp_path):
+    """data/bench/w1-seg10 (W1, -50..-30 degC, 2 degC above the device floor, with 10-min
+    segments): every candidate got stuck on a heating sweep out of the cold edge and the
+    plan covered 0 % of the bins at 6 levels; timed slower that sweep fits."""
+    config = load_campaign(ROOT / "data" / "bench" / "w1-seg10.toml")
+    spec, params, limits = config.experiments[0], config.params, config.limits
+    assert spec.segment_min == 10
+    plan = plan_experiment(spec, params, limits)
+    steps = plan.programme.to_csv(tmp_path / "steps.csv")
+    # the independent re-check (scipy's ODE solver, plain counting)
+    res = table_check(
+        steps,
+        (spec.working_lo_c, spec.working_hi_c),
+        spec.levels_required,
+        tau_s=params.tau_s,
+        dt0_c=params.dt0_c,
+        delta=spec.delta_c_per_min,
+    )
+    assert res["coverage"] == 1.0, res["levels"]
+    assert res["min_levels"] >= spec.levels_required
+    assert res["duration_min"] <= limits.duration_max_min + 1e-9
+    assert res["device_min_c"] >= limits.device_min_c
+    assert res["device_max_c"] <= limits.device_max_c
+    assert abs(res["chamber_end_c"] - limits.end_c) <= limits.end_tol_c
+    rates = res["rates_c_per_min"]
+    assert rates.min() >= limits.rate_min_c_per_min - 1e-3
+    assert rates.max() <= limits.rate_max_c_per_min + 1e-3
+    # every step lasts whole 10-min segments (equal rates merged), within max_steps
+    durations = pd.read_csv(steps, comment="#")["duration_min"].to_numpy(float)
+    np.testing.assert_allclose(durations % spec.segment_min, 0.0, atol=1e-9)
+    assert durations.size <= spec.max_steps
+    assert plan.complete
