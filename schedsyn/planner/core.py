@@ -43,7 +43,7 @@ MAX_SEGMENT_MIN = 30
 #: max_steps.
 COARSER_FACTORS = (2, 3)
 #: Wall-clock seconds after which a plan's optional searches stop (the partial-coverage
-#: fallbacks, the graded search for fewer levels, coarser segments; see
+#: fallbacks, the graded search for fewer levels; see
 #: :func:`plan_experiment`).
 EFFORT_S = 45.0
 #: Device excess (degC) below which rounding is not worth a re-polish.
@@ -74,7 +74,7 @@ class _Effort:
     def note(self) -> str:
         return (
             f"the search for other plans stopped at its effort limit (effort_s = "
-            f"{self.effort_s:g} s): some fewer-level counts, sub-regions or coarser segments "
+            f"{self.effort_s:g} s): some fewer-level counts or sub-regions "
             "were not searched; allow more with effort_s (CLI --effort-s, 0 = no limit)"
             if self.effort_s is not None
             else "the search for other plans was stopped by the caller"
@@ -282,7 +282,7 @@ def plan_experiment(
         :func:`_graded`).
     effort_s : float or None, s
         Wall-clock time after which the optional searches stop: the partial-coverage
-        fallbacks, the graded search for fewer levels and coarser segments (a note says
+        fallbacks and the graded search for fewer levels (a note says
         when it stopped one). The search for the requested plan itself runs to its end,
         unless its proven bound times ``GUESS_BOUND_RATIO`` exceeds the budget (no
         complete plan known was that close to its bound) and a graded plan for fewer
@@ -900,10 +900,9 @@ def _coarser(
     progress: Callable[[str], None] | None,
     effort: _Effort,
 ) -> Plan | None:
-    """A complete plan within ``max_steps`` with longer segments, or None."""
+    """A complete plan within ``max_steps`` with longer segments, or None. (Not cut by
+    the effort limit: it is how a complete plan meets its step limit.)"""
     for factor in COARSER_FACTORS:
-        if effort.spent():
-            break
         seg = spec.segment_min * factor
         if seg > MAX_SEGMENT_MIN:
             break
@@ -922,7 +921,7 @@ def _coarser(
                 continuation=None,
                 graded=False,
                 effort=effort,
-                search_stop=effort.spent,
+                search_stop=effort.stop,
             )
         except InfeasiblePlanError:
             continue
