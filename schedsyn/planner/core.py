@@ -56,17 +56,24 @@ MIN_STEP_CHANGE_C = 0.5
 @dataclass(slots=True)
 class _Effort:
     """The effort limit of one :func:`plan_experiment` call: ``spent()`` says whether an
-    optional search should stop (the caller's ``stop`` or ``effort_s`` since ``tic``) and
-    remembers that it said so, for the plan's notes."""
+    optional search should stop -- the caller's ``stop``, or ``effort_s`` since ``tic``
+    once some answer is in hand (``answered``: a complete plan for fewer levels), so the
+    limit never leaves the user with nothing -- and remembers that it said so, for the
+    plan's notes."""
 
     tic: float
     effort_s: float | None
     stop: Callable[[], bool] | None
     hit: bool = False
+    answered: bool = False
 
     def spent(self) -> bool:
         over = self.stop is not None and self.stop()
-        if self.effort_s is not None and time.perf_counter() - self.tic > self.effort_s:
+        if (
+            self.answered
+            and self.effort_s is not None
+            and time.perf_counter() - self.tic > self.effort_s
+        ):
             over = True
         self.hit = self.hit or over
         return over
@@ -281,8 +288,9 @@ def plan_experiment(
         plan gives the weakest bins the most levels, then the most complete bins (see
         :func:`_graded`).
     effort_s : float or None, s
-        Wall-clock time after which the optional searches stop: the partial-coverage
-        fallbacks and the graded search for fewer levels (a note says
+        Wall-clock time after which the optional searches stop once a complete plan for
+        fewer levels is in hand: the sub-region fallbacks and the graded search for
+        further level counts (a note says
         when it stopped one). The search for the requested plan itself runs to its end,
         unless its proven bound times ``GUESS_BOUND_RATIO`` exceeds the budget (no
         complete plan known was that close to its bound) and a graded plan for fewer
@@ -438,10 +446,6 @@ def _plan(
         if graded_ok and not searched_fewer:  # first: the effort limit cuts sub-regions
             found = _fewer_levels(spec, params, limits, progress, effort)
             searched_fewer = True
-        if found is not None and effort.spent():  # no time left to try partial L-plans
-            fewer = _graded(None, spec, params, limits, tuple(notes), found)
-            assert fewer is not None  # (a graded plan of what was found)
-            return with_table_meta(_finished(fewer, tic, effort))
         try:
             chosen = _fallback(
                 spec, limits, params_list, models, model, search, progress, stats, effort
@@ -792,6 +796,7 @@ def _fewer_levels(
         except (InfeasiblePlanError, SolverFailedError):
             alt = None  # (numerical failures prove nothing; that count is skipped)
         tried[levels] = alt if alt is not None and alt.complete else None
+        effort.answered = effort.answered or tried[levels] is not None
         return tried[levels]
 
     k = _first_guess(spec, params, limits, fits)
