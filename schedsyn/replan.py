@@ -37,17 +37,22 @@ What :func:`replan_run` then decides:
   limits. The plan's own rest and the planner's continuation are judged the same way.
 * **The plan is kept** when its own rest is predicted to complete every bin: nothing new
   to type in.
-* **Otherwise new steps begin where the sweep in progress ends** (:func:`sweep_end_min`):
-  the first whole minute from ``M`` at which the device, going on with the plan, is
-  beyond the working region by the plan's edge margin (``M`` itself if it already is).
-  The planner's sweeps start and end beyond the region's edges, so new steps begun in the
-  middle of a sweep would abandon it and pass its bins once more for nothing; finishing
-  it as planned saves one whole sweep. The passes between ``M`` and there count as
-  measured (predicted by the identified model).
-* The better of the plan unchanged and the planner's continuation is chosen
+* **Otherwise the planner is asked for new steps, first from where the sweep in
+  progress ends** (:func:`sweep_end_min`): the first whole minute from ``M`` at which the
+  device, going on with the plan, is beyond the working region by the plan's edge margin
+  (``M`` itself if it already is). The planner's sweeps start and end beyond the
+  region's edges, so new steps begun in the middle of a sweep may abandon it and pass its
+  bins once more; finishing it as planned can save a sweep. The passes between ``M`` and
+  there count as measured (predicted by the identified model).
+* **If that continuation is not predicted complete, from ``M`` itself**
+  (:func:`continuation_starts`): a device slower or hotter than the plan's model turns
+  back short of the edge margin, so the sweep end comes a whole sweep later (or only on
+  the way home) and the rest no longer fits; new steps from ``M`` take the sweep in
+  progress over.
+* The best of the plan unchanged and the continuations tried is chosen
   (:meth:`RunPrediction.preference`: within limits, complete, coverage, lowest level
   count, fewest levels missing), the plan unchanged on a tie or when no continuation
-  fits.
+  fits; every attempt is kept (``planner_attempts`` in ``replan.json``).
 """
 
 from __future__ import annotations
@@ -811,10 +816,11 @@ def replan_run(
     the plan's own rest is predicted with the identified model (:func:`predict_run`). If
     it completes every bin within the limits and ``keep_if_complete``, it is kept (no new
     steps to type in). Otherwise :func:`schedsyn.planner.plan_experiment` plans new steps
-    as a continuation from where the sweep in progress ends (:func:`sweep_end_min`,
-    :func:`planner_request`), and the whole run it returns is predicted the same way; the
-    better of the two (:meth:`RunPrediction.preference`) is chosen, the unchanged plan on
-    a tie or when no continuation fits (the planner's reason is kept in the result).
+    as a continuation from where the sweep in progress ends and, unless that one is
+    predicted complete, from ``M`` itself (:func:`continuation_starts`,
+    :func:`planner_request`); each whole run it returns is predicted the same way; the
+    best (:meth:`RunPrediction.preference`) is chosen, the unchanged plan on a tie or when
+    no continuation fits (the planner's reasons are kept in the result).
 
     Parameters
     ----------
