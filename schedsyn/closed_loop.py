@@ -198,6 +198,12 @@ class CliReplanner:
         Where the logs and the re-planned folders go (``replan_<M>/``).
     find_effect, keep_if_complete : bool
         As for :func:`schedsyn.replan.replan_run`.
+    complete_only_before_min : float
+        Re-plans before this minute (the early ones) take new steps only when the whole
+        run is predicted complete (``new_only_if_complete``): their model has seen at
+        most half a transit, and an incomplete new rest chosen on it can spend the time
+        the re-plan after the first hour would use better (W2 with a cooling limit:
+        77 % against 97 %). Default 60 min.
     """
 
     def __init__(
@@ -207,11 +213,13 @@ class CliReplanner:
         *,
         find_effect: bool = True,
         keep_if_complete: bool = True,
+        complete_only_before_min: float = 60.0,
     ) -> None:
         self.plan_dir = Path(plan_dir)
         self.work_dir = Path(work_dir)
         self.find_effect = find_effect
         self.keep_if_complete = keep_if_complete
+        self.complete_only_before_min = complete_only_before_min
         self.records: list[ReplanRecord] = []
 
     def __call__(self, log: pd.DataFrame, programme: Programme, at_min: float) -> Programme:
@@ -234,6 +242,7 @@ class CliReplanner:
             at_min,
             find_effect=self.find_effect,
             keep_if_complete=self.keep_if_complete,
+            new_only_if_complete=at_min < self.complete_only_before_min,
         )
         out = self.work_dir / f"replan_{at_min:g}"
         write_replan_dir(out, result, [path])

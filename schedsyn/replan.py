@@ -808,6 +808,7 @@ def replan_run(
     find_effect: bool = True,
     material_c: float = MATERIAL_C,
     keep_if_complete: bool = True,
+    new_only_if_complete: bool = False,
     progress: Callable[[str], None] | None = None,
 ) -> ReplanResult:
     """Re-plan the rest of a run at minute ``at_min`` (what ``schedsyn replan`` does).
@@ -829,6 +830,11 @@ def replan_run(
     keep_if_complete : bool
         Keep the plan's own rest when it is predicted to complete (default); ``False``
         always asks the planner.
+    new_only_if_complete : bool
+        Take new steps only when the whole run they make is predicted complete (for an
+        early re-plan, whose model has seen little of the run: an incomplete new rest
+        chosen on it can spend time a later, better-informed re-plan would have used
+        better). Default ``False``: the better run is taken.
     progress : callable(str), optional
         Receives short progress messages (the planner's too).
 
@@ -876,7 +882,11 @@ def replan_run(
         if best is not None:
             planned = best[1]
         new = None if best is None else best[0]
-        if new is not None and new.preference() > unchanged.preference():
+        if (
+            new is not None
+            and new.preference() > unchanged.preference()
+            and (new.complete or not new_only_if_complete)
+        ):
             choice, chosen, new_from = "new", new, best[2]  # type: ignore[index]
             reason = (
                 f"the planner's continuation is predicted to reach {new.coverage.coverage:.0%}"
@@ -890,6 +900,7 @@ def replan_run(
                 if new is None
                 else f"the planner's continuation would reach only {new.coverage.coverage:.0%}"
                 f" (min {new.coverage.min_levels} levels)"
+                + (", and new steps are taken only when complete" if new_only_if_complete else "")
             )
             reason = f"{why}; the plan unchanged {before}"
     return ReplanResult(

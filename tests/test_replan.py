@@ -405,6 +405,29 @@ def test_a_device_turning_short_of_the_edge_is_re_planned_from_m_not_a_sweep_lat
     assert min(distinct_levels(g, DELTA) for g in old) < LEVELS
 
 
+def test_an_incomplete_new_rest_is_taken_only_when_allowed(tmp_path):
+    """The plan of the test above with a 170 min limit: at 60 min no rest completes; the
+    best one raises the lowest level count, so it is taken by default, and refused (the
+    plan goes on) when new steps are taken only if complete."""
+    from schedsyn.replan import replan_run
+
+    prog = Programme(np.array([29.0, 60.0, 29.0, 40.0]), np.array([-1.0, 0.0, 1.0, 0.0]))
+    plan_dir = write_plan_dir(tmp_path / "plan", programme=prog)
+    meta = json.loads((plan_dir / "plan.json").read_text())
+    meta["limits"]["duration_max_min"] = 170.0
+    (plan_dir / "plan.json").write_text(json.dumps(meta))
+    plan = read_plan_dir(plan_dir)
+    frame = synth_effect_log(prog, ModelSpec(2400.0, 5.5), sample_s=10.0, noise_c=0.01, seed=1)
+    log = log_from_frame(frame.drop(columns=["t_true_c", "g_true_c_per_min"]), "r")
+    taken = replan_run(log, plan, 60.0)
+    assert taken.choice == "new" and not taken.complete
+    assert taken.prediction.coverage.min_levels > taken.unchanged.coverage.min_levels
+    refused = replan_run(log, plan, 60.0, new_only_if_complete=True)
+    assert refused.choice == "keep" and "only when complete" in refused.reason
+    t = np.linspace(0.0, prog.total_min, 801)
+    np.testing.assert_allclose(refused.programme.chamber_at(t), prog.chamber_at(t), atol=1e-9)
+
+
 def test_replan_cli_says_how_far_an_incomplete_rest_falls_short_and_exits_1(tmp_path, capsys):
     """Late in the run nothing new fits in the time left: the plan goes on, replan.json
     lists the short bins with their missing levels, which the true run confirms."""
