@@ -37,17 +37,22 @@ What :func:`replan_run` then decides:
   limits. The plan's own rest and the planner's continuation are judged the same way.
 * **The plan is kept** when its own rest is predicted to complete every bin: nothing new
   to type in.
-* **Otherwise new steps begin where the sweep in progress ends** (:func:`sweep_end_min`):
-  the first whole minute from ``M`` at which the device, going on with the plan, is
-  beyond the working region by the plan's edge margin (``M`` itself if it already is).
-  The planner's sweeps start and end beyond the region's edges, so new steps begun in the
-  middle of a sweep would abandon it and pass its bins once more for nothing; finishing
-  it as planned saves one whole sweep. The passes between ``M`` and there count as
-  measured (predicted by the identified model).
-* The better of the plan unchanged and the planner's continuation is chosen
+* **Otherwise the planner is asked for new steps, first from where the sweep in
+  progress ends** (:func:`sweep_end_min`): the first whole minute from ``M`` at which the
+  device, going on with the plan, is beyond the working region by the plan's edge margin
+  (``M`` itself if it already is). The planner's sweeps start and end beyond the
+  region's edges, so new steps begun in the middle of a sweep may abandon it and pass its
+  bins once more; finishing it as planned can save a sweep. The passes between ``M`` and
+  there count as measured (predicted by the identified model).
+* **If that continuation is not predicted complete, from ``M`` itself**
+  (:func:`continuation_starts`): a device slower or hotter than the plan's model turns
+  back short of the edge margin, so the sweep end comes a whole sweep later (or only on
+  the way home) and the rest no longer fits; new steps from ``M`` take the sweep in
+  progress over.
+* The best of the plan unchanged and the continuations tried is chosen
   (:meth:`RunPrediction.preference`: within limits, complete, coverage, lowest level
   count, fewest levels missing), the plan unchanged on a tie or when no continuation
-  fits.
+  fits; every attempt is kept (``planner_attempts`` in ``replan.json``).
 """
 
 from __future__ import annotations
@@ -575,6 +580,78 @@ def planner_request(request: ReplanRequest, from_min: float | None = None) -> tu
     return spec, model.planner_params(), model.planner_limits(plan.limits), linear, continuation
 
 
+def continuation_starts(request: ReplanRequest, edge_margin_c: float) -> list[float]:
+    """Whole minutes from which the planner is asked for new steps, in the order tried.
+
+    First where the sweep in progress ends (:func:`sweep_end_min`): finishing it as
+    planned saves a sweep when the device still leaves the region by the edge margin.
+    Then ``M`` itself: where the device turns back short of that (a device slower or
+    hotter than the plan's model, say), the sweep end comes a whole sweep later or never,
+    and the time left no longer holds the sweeps still needed; new steps from ``M`` take
+    the sweep in progress over. Starts at or beyond the time limit are left out.
+    """
+    plan = request.plan
+    out = []
+    end = sweep_end_min(request, edge_margin_c)
+    for start in (end, request.at_min):
+        if start is not None and start < plan.limits.duration_max_min and start not in out:
+            out.append(float(start))
+    return out
+
+
+@dataclass(frozen=True, slots=True)
+class PlannerAttempt:
+    """One call of the planner for the rest of a run: new steps from ``start_min``; the
+    whole run it returned predicted to its end (``None`` and ``error`` when nothing
+    fitted), and the seconds it took."""
+
+    start_min: float
+    plan: Any  # schedsyn.planner.Plan or None
+    prediction: RunPrediction | None
+    error: str | None
+    planner_s: float
+
+    def to_dict(self) -> dict[str, Any]:
+        pr = self.prediction
+        return {
+            "new_steps_from_min": self.start_min,
+            "predicted_complete": None if pr is None else pr.complete,
+            "predicted_coverage": None if pr is None else pr.coverage.coverage,
+            "predicted_min_levels": None if pr is None else pr.coverage.min_levels,
+            "duration_min": None if pr is None else pr.programme.total_min,
+            "error": self.error,
+            "planner_s": self.planner_s,
+        }
+
+
+def _plan_from(
+    request: ReplanRequest,
+    start: float,
+    progress: Callable[[str], None] | None,
+    say: Callable[[str], None],
+) -> PlannerAttempt:
+    """Ask the planner for new steps from ``start`` and predict the whole run it returns."""
+    from .errors import InfeasiblePlanError
+    from .planner import plan_experiment
+
+    plan = request.plan
+    spec, params, limits, linear, continuation = planner_request(request, start)
+    say(
+        f"{plan.name}: planning new steps from minute {start:g} "
+        f"({int(request.missing_levels.sum())} levels missing at minute {request.at_min:g}, "
+        f"{plan.limits.duration_max_min - start:g} min left)"
+    )
+    tic = time.perf_counter()
+    try:
+        planned = plan_experiment(
+            spec, params, limits, model=linear, continuation=continuation, progress=progress
+        )
+    except InfeasiblePlanError as exc:
+        return PlannerAttempt(start, None, None, str(exc), time.perf_counter() - tic)
+    seconds = time.perf_counter() - tic
+    return PlannerAttempt(start, planned, predict_run(request, planned.programme), None, seconds)
+
+
 @dataclass(frozen=True, slots=True)
 class ReplanResult:
     """A re-plan at ``M``: the whole run chosen, its predicted end, and the alternatives.
@@ -599,6 +676,7 @@ class ReplanResult:
     new_steps_from_min: float | None = None
     replan_s: float = 0.0
     planner_s: float = 0.0
+    attempts: tuple[PlannerAttempt, ...] = ()
 
     @property
     def programme(self) -> Programme:
@@ -661,6 +739,7 @@ class ReplanResult:
                 "predicted": self.prediction.to_dict(),
                 "unchanged_plan": self.unchanged.to_dict(),
                 "planner": self._planner_dict(),
+                "planner_attempts": [a.to_dict() for a in self.attempts],
                 "new_steps_from_min": self.new_steps_from_min,
                 "replan_s": self.replan_s,
                 "planner_s": self.planner_s,
@@ -729,6 +808,7 @@ def replan_run(
     find_effect: bool = True,
     material_c: float = MATERIAL_C,
     keep_if_complete: bool = True,
+    new_only_if_complete: bool = False,
     progress: Callable[[str], None] | None = None,
 ) -> ReplanResult:
     """Re-plan the rest of a run at minute ``at_min`` (what ``schedsyn replan`` does).
@@ -737,10 +817,11 @@ def replan_run(
     the plan's own rest is predicted with the identified model (:func:`predict_run`). If
     it completes every bin within the limits and ``keep_if_complete``, it is kept (no new
     steps to type in). Otherwise :func:`schedsyn.planner.plan_experiment` plans new steps
-    as a continuation from where the sweep in progress ends (:func:`sweep_end_min`,
-    :func:`planner_request`), and the whole run it returns is predicted the same way; the
-    better of the two (:meth:`RunPrediction.preference`) is chosen, the unchanged plan on
-    a tie or when no continuation fits (the planner's reason is kept in the result).
+    as a continuation from where the sweep in progress ends and, unless that one is
+    predicted complete, from ``M`` itself (:func:`continuation_starts`,
+    :func:`planner_request`); each whole run it returns is predicted the same way; the
+    best (:meth:`RunPrediction.preference`) is chosen, the unchanged plan on a tie or when
+    no continuation fits (the planner's reasons are kept in the result).
 
     Parameters
     ----------
@@ -749,6 +830,11 @@ def replan_run(
     keep_if_complete : bool
         Keep the plan's own rest when it is predicted to complete (default); ``False``
         always asks the planner.
+    new_only_if_complete : bool
+        Take new steps only when the whole run they make is predicted complete (for an
+        early re-plan, whose model has seen little of the run: an incomplete new rest
+        chosen on it can spend time a later, better-informed re-plan would have used
+        better). Default ``False``: the better run is taken.
     progress : callable(str), optional
         Receives short progress messages (the planner's too).
 
@@ -765,6 +851,7 @@ def replan_run(
     )
     unchanged = predict_run(request, plan.programme)
     planned, error, planner_s, new_from = None, None, 0.0, None
+    attempts: list[PlannerAttempt] = []
     if keep_if_complete and unchanged.complete:
         choice = "keep"
         reason = (
@@ -773,34 +860,34 @@ def replan_run(
         )
         chosen = unchanged
     else:
-        from .errors import InfeasiblePlanError
-        from .planner import plan_experiment
-
         before = "completes" if unchanged.complete else f"reaches {unchanged.coverage.coverage:.0%}"
-        start = sweep_end_min(request, plan_spec(plan).edge_margin_c)
-        if start is None or start >= plan.limits.duration_max_min:
+        best: tuple[RunPrediction, Any, float] | None = None
+        for start in continuation_starts(request, plan_spec(plan).edge_margin_c):
+            attempt = _plan_from(request, start, progress, say)
+            attempts.append(attempt)
+            planner_s += attempt.planner_s
+            if attempt.prediction is not None and (
+                best is None or attempt.prediction.preference() > best[0].preference()
+            ):
+                best = (attempt.prediction, attempt.plan, start)
+            if best is not None and best[0].complete:
+                break  # a later start cannot do better than complete
+        if not attempts:
             error = (
-                "the device stays inside the working region until the end of the plan: no "
-                "new sweep can begin"
+                "the device stays inside the working region until the end of the plan and "
+                "no time is left: no new sweep can begin"
             )
-        else:
-            spec, params, limits, linear, continuation = planner_request(request, start)
-            say(
-                f"{plan.name}: planning new steps from minute {start:g} "
-                f"({int(request.missing_levels.sum())} levels missing at minute {at_min:g}, "
-                f"{plan.limits.duration_max_min - start:g} min left)"
-            )
-            t1 = time.perf_counter()
-            try:
-                planned = plan_experiment(
-                    spec, params, limits, model=linear, continuation=continuation, progress=progress
-                )
-            except InfeasiblePlanError as exc:
-                error = str(exc)
-            planner_s = time.perf_counter() - t1
-        new = None if planned is None else predict_run(request, planned.programme)
-        if new is not None and new.preference() > unchanged.preference():
-            choice, chosen, new_from = "new", new, start
+        elif best is None:
+            error = "; ".join(f"from minute {a.start_min:g}: {a.error}" for a in attempts)
+        if best is not None:
+            planned = best[1]
+        new = None if best is None else best[0]
+        if (
+            new is not None
+            and new.preference() > unchanged.preference()
+            and (new.complete or not new_only_if_complete)
+        ):
+            choice, chosen, new_from = "new", new, best[2]  # type: ignore[index]
             reason = (
                 f"the planner's continuation is predicted to reach {new.coverage.coverage:.0%}"
                 f" (min {new.coverage.min_levels} levels) in {new.programme.total_min:g} min; "
@@ -813,6 +900,7 @@ def replan_run(
                 if new is None
                 else f"the planner's continuation would reach only {new.coverage.coverage:.0%}"
                 f" (min {new.coverage.min_levels} levels)"
+                + (", and new steps are taken only when complete" if new_only_if_complete else "")
             )
             reason = f"{why}; the plan unchanged {before}"
     return ReplanResult(
@@ -826,6 +914,7 @@ def replan_run(
         new_steps_from_min=new_from,
         replan_s=time.perf_counter() - tic,
         planner_s=planner_s,
+        attempts=tuple(attempts),
     )
 
 

@@ -2,7 +2,7 @@
 
     python scripts/closed_loop.py [--full] [--regions W2 W3] [--tau-s ...] [--dt0-c ...]
         [--effects none chamber_lag ...] [--plan-dir W2=DIR ...] [--true-plans]
-        [--jobs N] [--out out/closed_loop]
+        [--early-min 30] [--jobs N] [--out out/closed_loop]
 
 For each region (the paper's W2 = [-30, 0] and W3 = [0, 30] with their approximation
 regions) the nominal plan (tau 2400 s, dT0 3 °C, Δ 0.05 °C/min; planned here or read from
@@ -10,9 +10,10 @@ regions) the nominal plan (tau 2400 s, dT0 3 °C, Δ 0.05 °C/min; planned here 
 grid strength (schedsyn.closed_loop.EFFECT_STRENGTHS) at the grid's middle point.
 
 * open loop: the nominal plan unchanged;
-* closed loop: `schedsyn replan` after 60 min, then every 90 min, each time on the log so
-  far and the plan folder the previous re-plan wrote (schedsyn.closed_loop.CliReplanner,
-  the command's own code path);
+* closed loop: `schedsyn replan` after 30 min (--early-min; none with --early-min and no
+  value), after 60 min, then every 90 min, each time on the log so far and the plan
+  folder the previous re-plan wrote (schedsyn.closed_loop.CliReplanner, the command's own
+  code path);
 * --true-plans: a plan made for the true device itself ("would a plan for that device be
   complete"; one planner run per device).
 
@@ -37,6 +38,7 @@ import numpy as np
 import pandas as pd
 
 from schedsyn.closed_loop import (
+    EARLY_MIN,
     EFFECT_STRENGTHS,
     CliReplanner,
     device_label,
@@ -69,12 +71,14 @@ def nominal_plan_dir(name: str, plan_dirs: dict[str, str], out: Path) -> Path:
     return folder
 
 
-def one_device(job: tuple[str, str, tuple[float, float, str], bool, int]) -> tuple[dict, list]:
+def one_device(
+    job: tuple[str, str, tuple[float, float, str], bool, int, tuple[float, ...]],
+) -> tuple[dict, list]:
     """Open loop, closed loop and (optionally) the true plan of one device.
 
     The device comes as ``(tau_s, dt0_c, effect)`` (a ModelSpec does not pickle).
     """
-    name, plan_dir, (tau_s, dt0_c, effect), with_true_plan, seed = job
+    name, plan_dir, (tau_s, dt0_c, effect), with_true_plan, seed, early = job
     dev = true_device(tau_s, dt0_c, effect)
     rec = read_plan_dir(plan_dir)
     grid, req, delta = rec.grid, rec.levels_required, rec.delta_c_per_min
@@ -83,7 +87,16 @@ def one_device(job: tuple[str, str, tuple[float, float, str], bool, int]) -> tup
         replanner = CliReplanner(plan_dir, work)
         tic = time.perf_counter()
         try:
-            closed = run_loop(dev, rec.programme, grid, req, delta, replanner=replanner, seed=seed)
+            closed = run_loop(
+                dev,
+                rec.programme,
+                grid,
+                req,
+                delta,
+                replanner=replanner,
+                seed=seed,
+                early_min=early,
+            )
             error = ""
         except SchedsynError as exc:  # reported in the table, the open loop stands
             closed = open_
@@ -108,6 +121,7 @@ def one_device(job: tuple[str, str, tuple[float, float, str], bool, int]) -> tup
         "closed_device_max_c": closed.device_max_c,
         "replans": len(records),
         "new_programmes": sum(r.choice == "new" for r in records),
+        "new_at_min": " ".join(f"{r.at_min:g}" for r in records if r.choice == "new"),
         "planner_calls": len(planner_s),
         "median_replan_s": float(np.median(replan_s)) if replan_s else float("nan"),
         "median_planner_s": float(np.median(planner_s)) if planner_s else float("nan"),
@@ -161,7 +175,7 @@ def markdown(table: pd.DataFrame, with_true: bool) -> str:
         ("open_coverage", "open loop"),
         ("closed_coverage", "closed loop"),
         ("min_levels", "min levels open / closed"),
-        ("replans", "re-plans (new programmes)"),
+        ("replans", "re-plans (new programmes: at)"),
         ("median_replan_s", "median re-plan, s"),
     ]
     if with_true:
@@ -178,7 +192,10 @@ def markdown(table: pd.DataFrame, with_true: bool) -> str:
             elif key == "min_levels":
                 cells.append(f"{r['open_min_levels']} / {r['closed_min_levels']}")
             elif key == "replans":
-                cells.append(f"{r['replans']} ({r['new_programmes']})")
+                at = str(r["new_at_min"]) if r["new_programmes"] else ""
+                cells.append(
+                    f"{r['replans']} ({r['new_programmes']}" + (f": {at} min)" if at else ")")
+                )
             elif key == "effect_shift_c":
                 cells.append("–" if r["effect"] == "none" else f"{r[key]:.2f}")
             elif key == "median_replan_s":
@@ -205,6 +222,13 @@ def main() -> None:
     ap.add_argument("--true-plans", action="store_true", help="also plan for each true device")
     ap.add_argument("--jobs", type=int, default=1, help="devices run in parallel (processes)")
     ap.add_argument("--seed", type=int, default=0, help="sensor noise seed")
+    ap.add_argument(
+        "--early-min",
+        nargs="*",
+        type=float,
+        default=list(EARLY_MIN),
+        help="early re-planning times before the first hour, min (default 30; none: no value)",
+    )
     ap.add_argument("--out", default="out/closed_loop")
     ns = ap.parse_args()
     grid = FULL if ns.full else SMALL
@@ -212,12 +236,13 @@ def main() -> None:
     dt0s = ns.dt0_c or grid["dt0_c"]
     effects = ns.effects or (["none", *EFFECT_STRENGTHS] if ns.full else ["none"])
     out = Path(ns.out)
+    early = tuple(ns.early_min)
     plan_dirs = dict(p.split("=", 1) for p in ns.plan_dir)
     jobs = []
     for name in ns.regions:
         folder = str(nominal_plan_dir(name, plan_dirs, out))
         jobs += [
-            (name, folder, (d.tau_s, d.dt0_c, d.effect), ns.true_plans, ns.seed)
+            (name, folder, (d.tau_s, d.dt0_c, d.effect), ns.true_plans, ns.seed, early)
             for d in grid_devices(taus, dt0s, effects)
         ]
     rows, details = [], []

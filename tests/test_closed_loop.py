@@ -56,11 +56,15 @@ def test_open_loop_coverage_is_that_of_the_true_device_by_an_ode_and_own_count()
     assert res.replans_at_min == ()
 
 
-def test_replan_times_first_hour_then_every_90_min():
-    assert replan_times(535.0) == [60.0, 150.0, 240.0, 330.0, 420.0, 510.0]
-    assert replan_times(150.0) == [60.0]
+def test_replan_times_half_hour_first_hour_then_every_90_min():
+    assert replan_times(535.0) == [30.0, 60.0, 150.0, 240.0, 330.0, 420.0, 510.0]
+    assert replan_times(150.0, early_min=()) == [60.0]
+    assert replan_times(50.0) == [30.0]
+    assert replan_times(300.0, early_min=(45.0, 20.0)) == [20.0, 45.0, 60.0, 150.0, 240.0]
     with pytest.raises(ParameterError):
         replan_times(500.0, every_min=0.0)
+    with pytest.raises(ParameterError, match="early"):
+        replan_times(500.0, early_min=(60.0,))
 
 
 def test_a_replanner_gets_the_log_cut_at_each_time_and_keeping_the_plan_is_open_loop():
@@ -143,10 +147,10 @@ def test_the_closed_loop_re_plans_through_the_command_and_completes_what_open_lo
     replanner = CliReplanner(plan_dir, tmp_path / "work")
     closed = run_loop(dev, prog, GRID, LEVELS, DELTA, replanner=replanner)
     assert not open_.complete and closed.complete
-    first = replanner.records[0]
-    assert first.at_min == 60.0 and first.choice == "new" and first.planner_called
+    first = next(r for r in replanner.records if r.choice == "new")
+    assert first.at_min in (30.0, 60.0) and first.planner_called
     assert (first.out_dir / "replan.json").is_file() and (
-        tmp_path / "work" / "log_60.csv"
+        tmp_path / "work" / f"log_{first.at_min:g}.csv"
     ).is_file()
     assert [r.at_min for r in replanner.records] == list(closed.replans_at_min)
     prog = closed.programme
@@ -166,3 +170,61 @@ def test_the_closed_loop_re_plans_through_the_command_and_completes_what_open_lo
     for b in range(GRID.n_bins):
         mine = np.array([gg for k, gg, _ in found if k == b])
         assert distinct_levels(mine, DELTA) >= LEVELS, b
+
+
+def _scipy_levels(prog, dev):
+    """Per bin, the distinct levels of ``prog`` run on ``dev`` (first-order lag): scipy's
+    solve_ivp and a pass count of ours."""
+    tau = dev.tau_s / 60.0
+    t = np.arange(0.0, prog.total_min + 1e-9, 0.1)
+    sol = solve_ivp(
+        lambda s, y: [(prog.chamber_at([s])[0] + dev.dt0_c - y[0]) / tau],
+        (0.0, prog.total_min),
+        [20.0],
+        t_eval=t,
+        rtol=1e-10,
+        atol=1e-10,
+        max_step=0.5,
+    )
+    g = (prog.chamber_at(t) + dev.dt0_c - sol.y[0]) / tau
+    found = own_passes(sol.y[0], g, *REGION)
+    return np.array(
+        [distinct_levels(np.array([x for k, x, _ in found if k == b]), DELTA) for b in range(10)]
+    )
+
+
+@pytest.mark.slow
+def test_the_early_re_plan_completes_a_run_that_from_the_first_hour_no_longer_fits(tmp_path):
+    """One sweep to a chamber hold at -9 degC and back, a 190 min limit, a device 2.5 degC
+    hotter than the plan's model (it turns back inside the region). Re-planned from
+    minute 60 on, the sweeps still needed no longer fit; with the re-plan at 30 min (the
+    default) they do: every bin complete on the true device (scipy, own pass count)."""
+    import json
+
+    from test_monitor import write_plan_dir
+
+    from schedsyn.closed_loop import CliReplanner
+
+    prog = Programme(np.array([29.0, 60.0, 29.0, 40.0]), np.array([-1.0, 0.0, 1.0, 0.0]))
+    plan_dir = write_plan_dir(tmp_path / "plan", programme=prog)
+    meta = json.loads((plan_dir / "plan.json").read_text())
+    meta["limits"]["duration_max_min"] = 190.0
+    (plan_dir / "plan.json").write_text(json.dumps(meta))
+    dev = true_device(2400.0, 5.5)
+    late = run_loop(
+        dev,
+        prog,
+        GRID,
+        LEVELS,
+        DELTA,
+        early_min=(),
+        replanner=CliReplanner(plan_dir, tmp_path / "a"),
+    )
+    early = run_loop(
+        dev, prog, GRID, LEVELS, DELTA, replanner=CliReplanner(plan_dir, tmp_path / "b")
+    )
+    assert _scipy_levels(prog, dev).min() < LEVELS  # the plan alone
+    assert _scipy_levels(late.programme, dev).min() < LEVELS
+    assert _scipy_levels(early.programme, dev).min() >= LEVELS
+    assert early.programme.total_min <= 190.0
+    assert late.replans_at_min[0] == 60.0 and early.replans_at_min[:2] == (30.0, 60.0)

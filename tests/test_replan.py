@@ -370,6 +370,64 @@ def test_replan_cli_keeps_the_executed_steps_and_the_true_run_reaches_its_claim(
     np.testing.assert_allclose(read_plan_dir(out2).programme.chamber_at(t), whole.chamber_at(t))
 
 
+def test_a_device_turning_short_of_the_edge_is_re_planned_from_m_not_a_sweep_later(
+    tmp_path, capsys
+):
+    """One cooling sweep to a chamber hold at -9 degC and back; the device is 2.5 degC
+    hotter than the plan's model, so it turns back at +0.3 degC, inside the region: the
+    sweep in progress at 60 min ends only on the way back up (115 min), and from there
+    the rest no longer fits in the 240 min limit. New steps from M itself do: the whole
+    run, on the true device (scipy, counted by a plain loop), completes every bin within
+    240 min, which the plan alone does not."""
+    from schedsyn.cli import main
+
+    prog = Programme(np.array([29.0, 60.0, 29.0, 40.0]), np.array([-1.0, 0.0, 1.0, 0.0]))
+    plan_dir = write_plan_dir(tmp_path / "plan", programme=prog)
+    meta = json.loads((plan_dir / "plan.json").read_text())
+    meta["limits"]["duration_max_min"] = 240.0
+    (plan_dir / "plan.json").write_text(json.dumps(meta))
+    truth = ModelSpec(2400.0, 5.5)
+    frame = synth_effect_log(prog, truth, sample_s=10.0, noise_c=0.01, seed=1)
+    frame = frame.drop(columns=["t_true_c", "g_true_c_per_min"])
+    log = _write_log(frame, tmp_path / "log.csv", 60.0)
+    out = tmp_path / "re"
+    rc = main(["replan", str(log), str(plan_dir), "--at-min", "60", "--out", str(out), "--quiet"])
+    capsys.readouterr()
+    meta = json.loads((out / "replan.json").read_text())
+    tried = meta["planner_attempts"]
+    # the sweep end was tried first and left bins short; then M
+    assert [a["new_steps_from_min"] for a in tried] == [115.0, 60.0]
+    assert tried[0]["predicted_complete"] is not True
+    assert rc == 0 and meta["choice"] == "new" and meta["new_steps_from_min"] == 60.0
+    grads, total = _true_levels(out / "steps.csv", truth)
+    assert min(distinct_levels(g, DELTA) for g in grads) >= LEVELS and total <= 240.0
+    old, _ = _true_levels(plan_dir / "steps.csv", truth)
+    assert min(distinct_levels(g, DELTA) for g in old) < LEVELS
+
+
+def test_an_incomplete_new_rest_is_taken_only_when_allowed(tmp_path):
+    """The plan of the test above with a 170 min limit: at 60 min no rest completes; the
+    best one raises the lowest level count, so it is taken by default, and refused (the
+    plan goes on) when new steps are taken only if complete."""
+    from schedsyn.replan import replan_run
+
+    prog = Programme(np.array([29.0, 60.0, 29.0, 40.0]), np.array([-1.0, 0.0, 1.0, 0.0]))
+    plan_dir = write_plan_dir(tmp_path / "plan", programme=prog)
+    meta = json.loads((plan_dir / "plan.json").read_text())
+    meta["limits"]["duration_max_min"] = 170.0
+    (plan_dir / "plan.json").write_text(json.dumps(meta))
+    plan = read_plan_dir(plan_dir)
+    frame = synth_effect_log(prog, ModelSpec(2400.0, 5.5), sample_s=10.0, noise_c=0.01, seed=1)
+    log = log_from_frame(frame.drop(columns=["t_true_c", "g_true_c_per_min"]), "r")
+    taken = replan_run(log, plan, 60.0)
+    assert taken.choice == "new" and not taken.complete
+    assert taken.prediction.coverage.min_levels > taken.unchanged.coverage.min_levels
+    refused = replan_run(log, plan, 60.0, new_only_if_complete=True)
+    assert refused.choice == "keep" and "only when complete" in refused.reason
+    t = np.linspace(0.0, prog.total_min, 801)
+    np.testing.assert_allclose(refused.programme.chamber_at(t), prog.chamber_at(t), atol=1e-9)
+
+
 def test_replan_cli_says_how_far_an_incomplete_rest_falls_short_and_exits_1(tmp_path, capsys):
     """Late in the run nothing new fits in the time left: the plan goes on, replan.json
     lists the short bins with their missing levels, which the true run confirms."""
