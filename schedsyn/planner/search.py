@@ -26,6 +26,7 @@ from .bands import (
     band_feasibility,
     make_bands,
     order_bands,
+    transit_band,
 )
 from .guide import guided_bands
 from .lp import (
@@ -138,6 +139,53 @@ def candidate_bands(
     if any(bands[d] and band_feasibility(bands[d]) <= 0 for d in (+1, -1)):
         return None
     return bands
+
+
+#: Sweeps beyond ``levels_required`` the level-split family tries (issue 12), fewest first.
+SPLIT_SURPLUS_SWEEPS = (1, 2)
+#: Level splits the family tries per sweep count and first direction, best first.
+SPLIT_TRIES = 2
+
+
+def band_room(
+    spec: ExperimentSpec,
+    params_list: list[ThermalParams],
+    limits: Limits,
+    direction: int,
+    sep: float,
+) -> float:
+    """Room for the levels of one direction, degC/min: the least, over the band knots, of
+    the fastest gradient the chamber and device allow (one band, :func:`make_bands`) above
+    the slowest any band may go (``delta/2 + safety``). Negative: not even one band fits.
+    """
+    (band,) = make_bands(spec, 1, direction, sep, params_list, limits)
+    floor = spec.delta_c_per_min / 2 + BAND_SAFETY_C_PER_MIN
+    return float(min(band.hi_c_per_min)) - floor
+
+
+def level_splits(
+    levels: int, n_by_dir: dict[int, int], room_by_dir: dict[int, float], sep: float
+) -> list[dict[int, int]]:
+    """Ways to share ``levels`` between the directions of ``n_by_dir`` sweeps, best first.
+
+    Each direction gets at least one level and at most one per sweep; the squeezed
+    direction (the smaller room) gets fewer levels than the other. Ranked by the width
+    the narrower direction's bands would get, ``(room - (l - 1) sep) / l`` (stacked
+    ``sep`` apart in ``room``): the split whose tightest direction has most room first.
+    """
+    squeezed = min((+1, -1), key=lambda d: room_by_dir[d])
+    other = -squeezed
+    out = []
+    for l_sq in range(1, levels):
+        split = {squeezed: l_sq, other: levels - l_sq}
+        if split[squeezed] >= split[other]:
+            continue
+        if any(split[d] > n_by_dir[d] for d in (+1, -1)):
+            continue
+        width = min((room_by_dir[d] - (split[d] - 1) * sep) / split[d] for d in (+1, -1))
+        out.append((width, split))
+    out.sort(key=lambda ws: -ws[0])
+    return [split for _, split in out]
 
 
 #: The reason a search gives when its ``stop()`` ended it early.
@@ -384,6 +432,9 @@ class Search:
     overrun: Structure | None  # shortest structure that does not fit
     ctx: Context
     reasons: list[str]
+    #: the best structure repeats levels (the level-split family): levels per direction
+    #: (+1 heating, -1 cooling) and the number of sweeps; None for the usual structures
+    split: tuple[dict[int, int], int] | None = None
 
 
 def synthesise(
@@ -427,21 +478,39 @@ def synthesise(
     seps = [base_sep + x for x in MARGIN_SEPARATIONS] if spec.objective == "margin" else [base_sep]
     firsts = first_directions(spec, limits, start_t)
 
-    def attempt(candidate: Guided | Classic, first: int, sep: float, slow_retry: bool) -> str:
+    def attempt(
+        candidate: Guided | Classic,
+        first: int,
+        sep: float,
+        slow_retry: bool,
+        split: tuple[dict[int, int], int] | None = None,
+    ) -> str:
         """One candidate's greedy: ``"fits"``, ``"over"`` (too long), ``"stuck"`` (some
-        sweep did not fit) or ``"none"`` (no bands)."""
-        directions = sweep_directions(spec, first, n_sweeps)
+        sweep did not fit) or ``"none"`` (no bands). ``split``: levels per direction and
+        the number of sweeps (the level-split family); the sweeps beyond a direction's
+        levels get its transit band."""
+        directions = sweep_directions(spec, first, n_sweeps if split is None else split[1])
         n_by_dir = {d: directions.count(d) for d in (+1, -1)}
+        levels_by_dir = n_by_dir if split is None else split[0]
         # robust plans use the same bands: each scenario gets its own windows
         # and a slack (see scenario_windows and SubLP.window)
-        bands = candidate_bands(candidate, spec, params_list, limits, n_by_dir, sep)
+        bands = candidate_bands(candidate, spec, params_list, limits, levels_by_dir, sep)
         if bands is None:
             search.reasons.append(
                 f"the gradients the chamber allows cannot hold the levels "
                 f"{sep:.3f} °C/min apart with the {type(candidate).__name__.lower()} "
                 "band design"
+                + (
+                    ""
+                    if split is None
+                    else f" ({split[0][+1]} heating + {split[0][-1]} cooling levels)"
+                )
             )
             return "none"
+        if split is not None:  # sweeps that repeat a level: the fastest band, widened
+            for d in (+1, -1):
+                extra = n_by_dir[d] - levels_by_dir[d]
+                bands[d] = list(bands[d]) + [transit_band(bands[d][-1], spec)] * extra
         order = order_bands(directions, bands, params_list[0], limits)
         # only a shorter structure can improve on what was found: prune
         limit = ext_seg
@@ -464,9 +533,24 @@ def synthesise(
             return "over"
         if search.best is None or structure.n_seg < search.best[0].n_seg:
             search.best = (structure, sep)
+            search.split = split
         if progress:
             progress(f"structure found: {minutes:g} min")
         return "fits"
+
+    def split_structures(sep: float) -> list[tuple[tuple[dict[int, int], int], int]]:
+        """The level-split family's ``((levels by direction, sweeps), first)``, in order:
+        fewest sweeps, then each first direction's best splits."""
+        rooms = {d: band_room(spec, params_list, limits, d, sep) for d in (+1, -1)}
+        out = []
+        for surplus in SPLIT_SURPLUS_SWEEPS:
+            n_total = spec.levels_required + surplus
+            for first in firsts:
+                directions = sweep_directions(spec, first, n_total)
+                n_by_dir = {d: directions.count(d) for d in (+1, -1)}
+                for split in level_splits(spec.levels_required, n_by_dir, rooms, sep)[:SPLIT_TRIES]:
+                    out.append(((split, n_total), first))
+        return out
 
     for sep in seps:
         stuck: list[tuple[Guided | Classic, int]] = []
@@ -490,6 +574,17 @@ def synthesise(
                     search.reasons.append(STOPPED)
                     return search
                 attempt(candidate, first, sep, slow_retry=True)
+        if search.best is None and n_sweeps is None and max_candidates is None:
+            # still nothing: more sweeps than levels, the squeezed direction's levels
+            # shared with the other (issue 12)
+            for split, first in split_structures(sep):
+                for candidate in CANDIDATES:
+                    if stop is not None and stop():
+                        search.reasons.append(STOPPED)
+                        return search
+                    attempt(candidate, first, sep, slow_retry=True, split=split)
+                    if search.best is not None:
+                        return search
         if search.best is not None:
             break  # margin: the widest separation that fits
     return search
