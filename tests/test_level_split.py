@@ -51,7 +51,8 @@ def test_order_bands_with_repeated_bands_is_the_least_turnaround_assignment():
     cool = [flat(-1, 1, 0.05, 0.09), flat(-1, 2, 0.15, 0.2, top=True)]
     spec = load_campaign(ROOT / "data" / "bench" / "m45-m35-floor-m52.toml").experiments[0]
     transit = transit_band(cool[-1], spec)
-    pool = {+1: heat, -1: [*cool, transit, transit]}
+    # given fastest first, so that the order given is not the best one (checked below)
+    pool = {+1: heat[::-1], -1: [transit, transit, *cool[::-1]]}
     params = ThermalParams(tau_s=2400.0, dt0_c=3.0)
     limits = Limits(rate_min_c_per_min=-0.5, rate_max_c_per_min=1.5)
     order = order_bands(directions, pool, params, limits)
@@ -66,6 +67,8 @@ def test_order_bands_with_repeated_bands_is_the_least_turnaround_assignment():
         for c in set(itertools.permutations(pool[-1])):
             seq = [c[k // 2] if d < 0 else h[k // 2] for k, d in enumerate(directions)]
             best = min(best, brute_turnaround_total(directions, seq, params.tau_min, 1.5, 0.5))
+    given = [pool[d][k // 2] for k, d in enumerate(directions)]
+    assert brute_turnaround_total(directions, given, params.tau_min, 1.5, 0.5) > best + 1.0
     got_total = brute_turnaround_total(directions, order, params.tau_min, 1.5, 0.5)
     assert got_total == pytest.approx(best, rel=1e-9, abs=1e-9)
 

@@ -307,6 +307,8 @@ def order_bands(
         return best
 
     optimum = rest(0, (0, 0), None, (None,) * n)
+    if not math.isfinite(optimum):
+        raise ValueError("no assignment of the bands to the sweeps was found")
     tol = ORDER_TIE_TOL * max(1.0, abs(optimum))
     pinned: list[int | None] = [None] * n
     for d in (+1, -1):  # pin sweep by sweep the lowest band index that keeps the optimum
