@@ -4,7 +4,8 @@ The combinatorial part of the synthesis: for a sequence of sweep directions and 
 place the sweeps one after another (:func:`greedy`), each as early and as short as the
 small LP over its segments allows (:func:`place_sweep`); try a few band designs
 (``CANDIDATES``) and keep the shortest structure that fits the duration limit
-(:func:`synthesise`). When none fits, :func:`subregions` finds the widest parts of the
+(:func:`synthesise`), and when none does, structures with more sweeps than levels whose
+surplus sweeps repeat a level (:func:`level_splits`). When none fits, :func:`subregions` finds the widest parts of the
 region that do, and :func:`truncate` cuts an over-long structure at the limit.
 """
 
@@ -456,6 +457,14 @@ def synthesise(
     band separation that fits. ``n_sweeps`` (default ``levels_required``) sweeps are
     placed; with a ``continuation``, after its executed steps. ``stop()`` is asked before
     each candidate: True ends the search with what it has (an effort limit).
+
+    When no candidate fits (after the slow retry, at every separation), one plan with
+    ``levels_required`` sweeps and not robust: the level-split family -- ``L + 1`` or
+    ``L + 2`` sweeps, the levels shared unevenly between the directions
+    (:func:`level_splits`, the squeezed direction getting fewer), each direction's
+    surplus sweeps repeating a level in its transit band (:func:`~.bands.transit_band`);
+    the first that fits is kept (``Search.split`` says which). Requests the usual
+    structures plan are not affected.
     """
     seg = spec.segment_min
     n_fixed = 0 if continuation is None else continuation.prefix.n_segments
@@ -472,7 +481,8 @@ def synthesise(
         ref, at = responses.resp[0], responses.sample_of(n_fixed)
         start_t = float(ref.a_t[at, :n_fixed] @ responses.fixed_rates + ref.b_t[at])
     base_sep = spec.delta_c_per_min + BAND_SAFETY_C_PER_MIN
-    if len(params_list) > 1:
+    robust = len(params_list) > 1
+    if robust:
         base_sep += 2 * ROBUST_SLACK_C_PER_MIN
     # "informative" starts from the shortest plan's sweeps (.informative runs them on)
     seps = [base_sep + x for x in MARGIN_SEPARATIONS] if spec.objective == "margin" else [base_sep]
@@ -574,19 +584,21 @@ def synthesise(
                     search.reasons.append(STOPPED)
                     return search
                 attempt(candidate, first, sep, slow_retry=True)
-        if search.best is None and n_sweeps is None and max_candidates is None:
-            # still nothing: more sweeps than levels, the squeezed direction's levels
-            # shared with the other (issue 12)
-            for split, first in split_structures(sep):
-                for candidate in CANDIDATES:
-                    if stop is not None and stop():
-                        search.reasons.append(STOPPED)
-                        return search
-                    attempt(candidate, first, sep, slow_retry=True, split=split)
-                    if search.best is not None:
-                        return search
         if search.best is not None:
             break  # margin: the widest separation that fits
+    if search.best is None and n_sweeps is None and max_candidates is None and not robust:
+        # still nothing, at any separation: more sweeps than levels, the squeezed
+        # direction's levels shared with the other (issue 12); at the narrowest separation
+        # only, and not for robust boxes (their fallbacks would wait for it)
+        sep = seps[-1]
+        for split, first in split_structures(sep):
+            for candidate in CANDIDATES:
+                if stop is not None and stop():
+                    search.reasons.append(STOPPED)
+                    return search
+                attempt(candidate, first, sep, slow_retry=True, split=split)
+                if search.best is not None:
+                    return search
     return search
 
 
