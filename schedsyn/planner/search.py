@@ -5,8 +5,9 @@ place the sweeps one after another (:func:`greedy`), each as early and as short 
 small LP over its segments allows (:func:`place_sweep`); try a few band designs
 (``CANDIDATES``) and keep the shortest structure that fits the duration limit
 (:func:`synthesise`), and when none does, structures with more sweeps than levels whose
-surplus sweeps repeat a level (:func:`level_splits`). When none fits, :func:`subregions` finds the widest parts of the
-region that do, and :func:`truncate` cuts an over-long structure at the limit.
+surplus sweeps repeat a level (:func:`level_splits`). When none fits, :func:`subregions`
+finds the widest parts of the region that do, and :func:`truncate` cuts an over-long
+structure at the limit.
 """
 
 from __future__ import annotations
