@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cache
 
 import numpy as np
@@ -238,6 +238,19 @@ def band_feasibility(bands: Sequence[Band]) -> float:
     return float(min(np.min(np.subtract(b.hi_c_per_min, b.lo_c_per_min)) for b in bands))
 
 
+def transit_band(fastest: Band, spec: ExperimentSpec) -> Band:
+    """A band for a sweep that repeats a level of its direction (a transit).
+
+    Levels are counted on all passes of a bin (the largest subset ``delta`` apart), so a
+    sweep beyond its direction's levels may go at any speed: it keeps the fastest band's
+    top (and speed profile, which times it) but may drop to ``delta/2 + safety`` (still
+    ``delta`` from every pass of the other direction). ``rank`` 0 marks it.
+    """
+    floor = spec.delta_c_per_min / 2 + BAND_SAFETY_C_PER_MIN
+    lo = tuple(min(floor, x) for x in fastest.lo_c_per_min)
+    return replace(fastest, rank=0, lo_c_per_min=lo, top=True)
+
+
 def order_bands(
     directions: Sequence[int],
     bands_by_dir: dict[int, list[Band]],
@@ -245,6 +258,10 @@ def order_bands(
     limits: Limits,
 ) -> list[Band]:
     """Assign bands to sweeps so that the estimated turnaround time is smallest.
+
+    ``bands_by_dir[d]`` holds one band per sweep of direction ``d``; a band may appear
+    more than once (sweeps that repeat a level: :func:`transit_band`), and copies of one
+    band are interchangeable, so only the first unused copy is tried.
 
     Between consecutive sweeps the gradient must go from the previous sweep's exit speed
     to the next one's entry speed at the full chamber rate
@@ -260,6 +277,11 @@ def order_bands(
     if any(len(pool[d]) != len(idx_of[d]) for d in (+1, -1)):
         raise ValueError("one band per sweep of each direction is needed")
     n = len(directions)
+    # equal bands are interchangeable: of their unused copies only the first is tried
+    earlier_copies = {
+        d: [[j for j in range(i) if pool[d][j] == pool[d][i]] for i in range(len(pool[d]))]
+        for d in (+1, -1)
+    }
 
     def turn(prev: Band | None, nxt: Band) -> float:
         v_out = 0.0 if prev is None else prev.edge_speeds()[1]
@@ -278,11 +300,15 @@ def order_bands(
         for i in choices:
             if used[k] >> i & 1:
                 continue
+            if pins[pos] is None and any(not used[k] >> j & 1 for j in earlier_copies[d][i]):
+                continue
             nu = (used[0] | 1 << i, used[1]) if d > 0 else (used[0], used[1] | 1 << i)
             best = min(best, turn(prev, pool[d][i]) + rest(pos + 1, nu, (d, i), pins))
         return best
 
     optimum = rest(0, (0, 0), None, (None,) * n)
+    if not math.isfinite(optimum):
+        raise ValueError("no assignment of the bands to the sweeps was found")
     tol = ORDER_TIE_TOL * max(1.0, abs(optimum))
     pinned: list[int | None] = [None] * n
     for d in (+1, -1):  # pin sweep by sweep the lowest band index that keeps the optimum

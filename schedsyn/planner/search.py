@@ -4,8 +4,10 @@ The combinatorial part of the synthesis: for a sequence of sweep directions and 
 place the sweeps one after another (:func:`greedy`), each as early and as short as the
 small LP over its segments allows (:func:`place_sweep`); try a few band designs
 (``CANDIDATES``) and keep the shortest structure that fits the duration limit
-(:func:`synthesise`). When none fits, :func:`subregions` finds the widest parts of the
-region that do, and :func:`truncate` cuts an over-long structure at the limit.
+(:func:`synthesise`), and when none does, structures with more sweeps than levels whose
+surplus sweeps repeat a level (:func:`level_splits`). When none fits, :func:`subregions`
+finds the widest parts of the region that do, and :func:`truncate` cuts an over-long
+structure at the limit.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from .bands import (
     band_feasibility,
     make_bands,
     order_bands,
+    transit_band,
 )
 from .guide import guided_bands
 from .lp import (
@@ -138,6 +141,53 @@ def candidate_bands(
     if any(bands[d] and band_feasibility(bands[d]) <= 0 for d in (+1, -1)):
         return None
     return bands
+
+
+#: Sweeps beyond ``levels_required`` the level-split family tries (issue 12), fewest first.
+SPLIT_SURPLUS_SWEEPS = (1, 2)
+#: Level splits the family tries per sweep count and first direction, best first.
+SPLIT_TRIES = 2
+
+
+def band_room(
+    spec: ExperimentSpec,
+    params_list: list[ThermalParams],
+    limits: Limits,
+    direction: int,
+    sep: float,
+) -> float:
+    """Room for the levels of one direction, degC/min: the least, over the band knots, of
+    the fastest gradient the chamber and device allow (one band, :func:`make_bands`) above
+    the slowest any band may go (``delta/2 + safety``). Negative: not even one band fits.
+    """
+    (band,) = make_bands(spec, 1, direction, sep, params_list, limits)
+    floor = spec.delta_c_per_min / 2 + BAND_SAFETY_C_PER_MIN
+    return float(min(band.hi_c_per_min)) - floor
+
+
+def level_splits(
+    levels: int, n_by_dir: dict[int, int], room_by_dir: dict[int, float], sep: float
+) -> list[dict[int, int]]:
+    """Ways to share ``levels`` between the directions of ``n_by_dir`` sweeps, best first.
+
+    Each direction gets at least one level and at most one per sweep; the squeezed
+    direction (the smaller room) gets fewer levels than the other. Ranked by the width
+    the narrower direction's bands would get, ``(room - (l - 1) sep) / l`` (stacked
+    ``sep`` apart in ``room``): the split whose tightest direction has most room first.
+    """
+    squeezed = min((+1, -1), key=lambda d: room_by_dir[d])
+    other = -squeezed
+    out = []
+    for l_sq in range(1, levels):
+        split = {squeezed: l_sq, other: levels - l_sq}
+        if split[squeezed] >= split[other]:
+            continue
+        if any(split[d] > n_by_dir[d] for d in (+1, -1)):
+            continue
+        width = min((room_by_dir[d] - (split[d] - 1) * sep) / split[d] for d in (+1, -1))
+        out.append((width, split))
+    out.sort(key=lambda ws: -ws[0])
+    return [split for _, split in out]
 
 
 #: The reason a search gives when its ``stop()`` ended it early.
@@ -384,6 +434,9 @@ class Search:
     overrun: Structure | None  # shortest structure that does not fit
     ctx: Context
     reasons: list[str]
+    #: the best structure repeats levels (the level-split family): levels per direction
+    #: (+1 heating, -1 cooling) and the number of sweeps; None for the usual structures
+    split: tuple[dict[int, int], int] | None = None
 
 
 def synthesise(
@@ -405,6 +458,14 @@ def synthesise(
     band separation that fits. ``n_sweeps`` (default ``levels_required``) sweeps are
     placed; with a ``continuation``, after its executed steps. ``stop()`` is asked before
     each candidate: True ends the search with what it has (an effort limit).
+
+    When no candidate fits (after the slow retry, at every separation), one plan with
+    ``levels_required`` sweeps and not robust: the level-split family -- ``L + 1`` or
+    ``L + 2`` sweeps, the levels shared unevenly between the directions
+    (:func:`level_splits`, the squeezed direction getting fewer), each direction's
+    surplus sweeps repeating a level in its transit band (:func:`~.bands.transit_band`);
+    the first that fits is kept (``Search.split`` says which). Requests the usual
+    structures plan are not affected.
     """
     seg = spec.segment_min
     n_fixed = 0 if continuation is None else continuation.prefix.n_segments
@@ -421,27 +482,46 @@ def synthesise(
         ref, at = responses.resp[0], responses.sample_of(n_fixed)
         start_t = float(ref.a_t[at, :n_fixed] @ responses.fixed_rates + ref.b_t[at])
     base_sep = spec.delta_c_per_min + BAND_SAFETY_C_PER_MIN
-    if len(params_list) > 1:
+    robust = len(params_list) > 1
+    if robust:
         base_sep += 2 * ROBUST_SLACK_C_PER_MIN
     # "informative" starts from the shortest plan's sweeps (.informative runs them on)
     seps = [base_sep + x for x in MARGIN_SEPARATIONS] if spec.objective == "margin" else [base_sep]
     firsts = first_directions(spec, limits, start_t)
 
-    def attempt(candidate: Guided | Classic, first: int, sep: float, slow_retry: bool) -> str:
+    def attempt(
+        candidate: Guided | Classic,
+        first: int,
+        sep: float,
+        slow_retry: bool,
+        split: tuple[dict[int, int], int] | None = None,
+    ) -> str:
         """One candidate's greedy: ``"fits"``, ``"over"`` (too long), ``"stuck"`` (some
-        sweep did not fit) or ``"none"`` (no bands)."""
-        directions = sweep_directions(spec, first, n_sweeps)
+        sweep did not fit) or ``"none"`` (no bands). ``split``: levels per direction and
+        the number of sweeps (the level-split family); the sweeps beyond a direction's
+        levels get its transit band."""
+        directions = sweep_directions(spec, first, n_sweeps if split is None else split[1])
         n_by_dir = {d: directions.count(d) for d in (+1, -1)}
+        levels_by_dir = n_by_dir if split is None else split[0]
         # robust plans use the same bands: each scenario gets its own windows
         # and a slack (see scenario_windows and SubLP.window)
-        bands = candidate_bands(candidate, spec, params_list, limits, n_by_dir, sep)
+        bands = candidate_bands(candidate, spec, params_list, limits, levels_by_dir, sep)
         if bands is None:
             search.reasons.append(
                 f"the gradients the chamber allows cannot hold the levels "
                 f"{sep:.3f} °C/min apart with the {type(candidate).__name__.lower()} "
                 "band design"
+                + (
+                    ""
+                    if split is None
+                    else f" ({split[0][+1]} heating + {split[0][-1]} cooling levels)"
+                )
             )
             return "none"
+        if split is not None:  # sweeps that repeat a level: the fastest band, widened
+            for d in (+1, -1):
+                extra = n_by_dir[d] - levels_by_dir[d]
+                bands[d] = list(bands[d]) + [transit_band(bands[d][-1], spec)] * extra
         order = order_bands(directions, bands, params_list[0], limits)
         # only a shorter structure can improve on what was found: prune
         limit = ext_seg
@@ -464,9 +544,24 @@ def synthesise(
             return "over"
         if search.best is None or structure.n_seg < search.best[0].n_seg:
             search.best = (structure, sep)
+            search.split = split
         if progress:
             progress(f"structure found: {minutes:g} min")
         return "fits"
+
+    def split_structures(sep: float) -> list[tuple[tuple[dict[int, int], int], int]]:
+        """The level-split family's ``((levels by direction, sweeps), first)``, in order:
+        fewest sweeps, then each first direction's best splits."""
+        rooms = {d: band_room(spec, params_list, limits, d, sep) for d in (+1, -1)}
+        out = []
+        for surplus in SPLIT_SURPLUS_SWEEPS:
+            n_total = spec.levels_required + surplus
+            for first in firsts:
+                directions = sweep_directions(spec, first, n_total)
+                n_by_dir = {d: directions.count(d) for d in (+1, -1)}
+                for split in level_splits(spec.levels_required, n_by_dir, rooms, sep)[:SPLIT_TRIES]:
+                    out.append(((split, n_total), first))
+        return out
 
     for sep in seps:
         stuck: list[tuple[Guided | Classic, int]] = []
@@ -492,6 +587,19 @@ def synthesise(
                 attempt(candidate, first, sep, slow_retry=True)
         if search.best is not None:
             break  # margin: the widest separation that fits
+    if search.best is None and n_sweeps is None and max_candidates is None and not robust:
+        # still nothing, at any separation: more sweeps than levels, the squeezed
+        # direction's levels shared with the other (issue 12); at the narrowest separation
+        # only, and not for robust boxes (their fallbacks would wait for it)
+        sep = seps[-1]
+        for split, first in split_structures(sep):
+            for candidate in CANDIDATES:
+                if stop is not None and stop():
+                    search.reasons.append(STOPPED)
+                    return search
+                attempt(candidate, first, sep, slow_retry=True, split=split)
+                if search.best is not None:
+                    return search
     return search
 
 
