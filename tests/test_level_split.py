@@ -140,3 +140,6 @@ def test_a_ceiling_close_to_the_region_plans_complete_with_levels_shared(tmp_pat
     assert rates.max() <= limits.rate_max_c_per_min + 1e-3
     assert plan.complete
     assert plan.levels_planned is None  # the requested levels, not a graded plan
+    # the plan says how it shares the levels (six sweeps, two heating levels)
+    (note,) = [n for n in plan.notes if n.startswith("structure:")]
+    assert "6 sweeps for 5 levels" in note and "2 heating and 3 cooling" in note

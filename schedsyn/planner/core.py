@@ -29,7 +29,7 @@ from .lp import Context, LpStats, require_solvable
 from .polish import honour_step_limits, merge_small_changes, polish, step_runs
 from .request import Continuation, ExperimentSpec, check_request
 from .robust import box_note, box_scenarios, search_robust, verify_robust
-from .search import Search, Structure, subregions, synthesise, truncate
+from .search import Search, Structure, split_note, subregions, synthesise, truncate
 
 #: Rates closer than this are one step of the exported table, degC/min.
 MERGE_TOL_C_PER_MIN = 1e-6
@@ -441,6 +441,8 @@ def _plan(
     if search.best is not None:
         u, margin_g, margin_t = polish(search.ctx, search.best[0])
         chosen = _Candidate(u, margin_g, margin_t, search, search.ctx)
+        if search.split is not None:
+            notes.append(split_note(*search.split))
     else:
         notes += explain_shortfall(spec, params, limits)
         if graded_ok and not searched_fewer:  # first: the effort limit cuts sub-regions
