@@ -133,3 +133,30 @@ def table_check(
         "duration_min": float(knots_t[-1]),
         "rates_c_per_min": np.diff(knots_tk) / np.diff(knots_t),
     }
+
+
+def assert_plan_complete(plan, tmp_path: Path) -> dict:
+    """Export ``plan``'s step table, re-check it (:func:`table_check`) and assert it is
+    complete and within every limit of its request: coverage, levels, duration, device
+    range, end temperature, rates. Returns the re-check."""
+    spec, params, limits = plan.spec, plan.params, plan.limits
+    steps = plan.programme.to_csv(tmp_path / "steps.csv")
+    res = table_check(
+        steps,
+        (spec.working_lo_c, spec.working_hi_c),
+        spec.levels_required,
+        tau_s=params.tau_s,
+        dt0_c=params.dt0_c,
+        delta=spec.delta_c_per_min,
+    )
+    assert res["coverage"] == 1.0, res["levels"]
+    assert res["min_levels"] >= spec.levels_required
+    assert res["duration_min"] <= limits.duration_max_min + 1e-9
+    assert res["device_min_c"] >= limits.device_min_c
+    assert res["device_max_c"] <= limits.device_max_c
+    assert abs(res["chamber_end_c"] - limits.end_c) <= limits.end_tol_c
+    rates = res["rates_c_per_min"]
+    assert rates.min() >= limits.rate_min_c_per_min - 1e-3
+    assert rates.max() <= limits.rate_max_c_per_min + 1e-3
+    res["steps_csv"] = steps
+    return res
