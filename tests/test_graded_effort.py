@@ -5,6 +5,7 @@ and an effort limit stops the optional searches without losing the graded answer
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import pytest
 from independent import table_check
@@ -108,3 +109,16 @@ def test_an_unlikely_request_gets_its_graded_plan_first(searched, monkeypatch):
     assert not any("effort limit" in n for n in full.notes)
     assert stopped[-1] is False
     assert full.complete or full.levels_planned is not None
+
+
+def test_the_effort_limit_counts_cpu_time_not_time_spent_waiting():
+    """On a busy machine the planner waits for a core; that must not cut its search (the
+    answer would depend on other work sharing the machine): only the process's own CPU
+    time counts."""
+    effort = core._Effort(time.process_time(), 0.2, None, answered=True)
+    time.sleep(0.4)  # wall time passes, almost no CPU time
+    assert not effort.spent()
+    t0 = time.process_time()
+    while time.process_time() - t0 < 0.3:  # CPU time passes
+        pass
+    assert effort.spent() and effort.hit

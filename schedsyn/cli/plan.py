@@ -101,7 +101,8 @@ def register(sub) -> None:
         "--effort-s",
         type=float,
         default=None,
-        help="seconds after which the search for other plans stops when the requested one "
+        help="seconds of CPU time after which the search for other plans stops when the "
+        "requested one "
         "cannot be met (fewer levels, sub-regions; default 45; 0 = no "
         "limit); the search for the requested plan runs to its end unless its proven bound "
         "says it is unlikely to fit and a plan with fewer levels is in hand",

@@ -56,12 +56,12 @@ MIN_STEP_CHANGE_C = 0.5
 @dataclass(slots=True)
 class _Effort:
     """The effort limit of one :func:`plan_experiment` call: ``spent()`` says whether an
-    optional search should stop -- the caller's ``stop``, or ``effort_s`` since ``tic``
-    once some answer is in hand (``answered``: a complete plan for fewer levels), so the
-    limit never leaves the user with nothing -- and remembers that it said so, for the
-    plan's notes."""
+    optional search should stop -- the caller's ``stop``, or ``effort_s`` of this
+    process's CPU time since ``cpu_tic`` once some answer is in hand (``answered``: a
+    complete plan for fewer levels), so the limit never leaves the user with nothing --
+    and remembers that it said so, for the plan's notes."""
 
-    tic: float
+    cpu_tic: float
     effort_s: float | None
     stop: Callable[[], bool] | None
     hit: bool = False
@@ -72,7 +72,7 @@ class _Effort:
         if (
             self.answered
             and self.effort_s is not None
-            and time.perf_counter() - self.tic > self.effort_s
+            and time.process_time() - self.cpu_tic > self.effort_s
         ):
             over = True
         self.hit = self.hit or over
@@ -288,10 +288,11 @@ def plan_experiment(
         plan gives the weakest bins the most levels, then the most complete bins (see
         :func:`_graded`).
     effort_s : float or None, s
-        Wall-clock time after which the optional searches stop once a complete plan for
-        fewer levels is in hand: the sub-region fallbacks and the graded search for
-        further level counts (a note says
-        when it stopped one). The search for the requested plan itself runs to its end,
+        CPU time of this process after which the optional searches stop once a
+        complete plan for fewer levels is in hand: the sub-region fallbacks and the
+        graded search for further level counts (a note says when it stopped one). CPU
+        time, not wall-clock: on a busy machine the same request gives the same answer,
+        only later. The search for the requested plan itself runs to its end,
         unless its proven bound times ``GUESS_BOUND_RATIO`` exceeds the budget (no
         complete plan known was that close to its bound) and a graded plan for fewer
         levels is already in hand. None: no limit (the answer then does not depend on
@@ -331,7 +332,7 @@ def plan_experiment(
         require_complete=require_complete,
         continuation=continuation,
         graded=graded,
-        effort=_Effort(time.perf_counter(), effort_s, stop),
+        effort=_Effort(time.process_time(), effort_s, stop),
         search_stop=stop,
     )
 
