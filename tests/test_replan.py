@@ -428,6 +428,34 @@ def test_an_incomplete_new_rest_is_taken_only_when_allowed(tmp_path):
     np.testing.assert_allclose(refused.programme.chamber_at(t), prog.chamber_at(t), atol=1e-9)
 
 
+def test_replan_cli_only_if_complete_keeps_the_plan_when_no_rest_completes(tmp_path, capsys):
+    """The case above through the CLI: by default the better, incomplete rest is written;
+    with ``--only-if-complete`` the plan goes on unchanged and replan.json says why."""
+    from schedsyn.cli import main
+
+    prog = Programme(np.array([29.0, 60.0, 29.0, 40.0]), np.array([-1.0, 0.0, 1.0, 0.0]))
+    plan_dir = write_plan_dir(tmp_path / "plan", programme=prog)
+    meta = json.loads((plan_dir / "plan.json").read_text())
+    meta["limits"]["duration_max_min"] = 170.0
+    (plan_dir / "plan.json").write_text(json.dumps(meta))
+    frame = synth_effect_log(prog, ModelSpec(2400.0, 5.5), sample_s=10.0, noise_c=0.01, seed=1)
+    log = tmp_path / "log.csv"
+    frame.drop(columns=["t_true_c", "g_true_c_per_min"]).to_csv(log, index=False)
+    choices = {}
+    for flags in ([], ["--only-if-complete"]):
+        out = tmp_path / ("re" + "".join(flags))
+        rc = main(["replan", str(log), str(plan_dir), "--at-min", "60", "--out", str(out), *flags])
+        capsys.readouterr()
+        assert rc == 1
+        choices[tuple(flags)] = json.loads((out / "replan.json").read_text())
+    assert choices[()]["choice"] == "new"
+    kept = choices[("--only-if-complete",)]
+    assert kept["choice"] == "keep" and "only when complete" in kept["reason"]
+    executed = pd.read_csv(tmp_path / "re--only-if-complete" / "steps.csv")
+    original = pd.read_csv(plan_dir / "steps.csv")
+    pd.testing.assert_frame_equal(executed[original.columns], original, check_dtype=False)
+
+
 def test_replan_cli_says_how_far_an_incomplete_rest_falls_short_and_exits_1(tmp_path, capsys):
     """Late in the run nothing new fits in the time left: the plan goes on, replan.json
     lists the short bins with their missing levels, which the true run confirms."""

@@ -7,7 +7,10 @@ identified model, requiring only the levels still missing (new ones ``delta`` aw
 the measured ones) and ending at 20 °C within the plan's time limit. The new steps begin
 where the sweep in progress has left the region (the plan runs on until then). If the
 plan's own rest is predicted to complete the region, or nothing better fits, it is kept
-unchanged (``--always-replan`` asks the planner anyway).
+unchanged (``--always-replan`` asks the planner anyway). An incomplete new rest that
+does better than the plan unchanged is taken, unless ``--only-if-complete`` (for an early
+re-plan, whose model has seen little of the run: an incomplete rest chosen on it can spend
+time a later, better-informed re-plan would use better).
 
 Writes ``--out DIR`` (default ``out/replan``), itself a plan folder, so the run can be
 re-planned again later: ``steps.csv`` (the whole run: the executed steps, then the new
@@ -54,6 +57,12 @@ def register(sub) -> None:
         help="plan new steps even when the plan's own rest is predicted to complete",
     )
     p.add_argument(
+        "--only-if-complete",
+        action="store_true",
+        help="take new steps only when the whole run they make is predicted complete "
+        "(otherwise the plan goes on unchanged)",
+    )
+    p.add_argument(
         "--no-effect",
         action="store_true",
         help="identify tau and dT0 only (skip the search for other effects)",
@@ -86,6 +95,7 @@ def run(args: argparse.Namespace) -> int:
         args.at_min,
         find_effect=not args.no_effect,
         keep_if_complete=not args.always_replan,
+        new_only_if_complete=args.only_if_complete,
         progress=progress,
     )
     inputs = [args.log, plan.path / "steps.csv", plan.path / "plan.json"]
