@@ -29,9 +29,10 @@ re-plan: time, choice, predicted coverage, seconds) and DIR/closed_loop.md (the 
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
@@ -211,6 +212,35 @@ def markdown(table: pd.DataFrame, with_true: bool) -> str:
     return "\n".join(lines) + "\n"
 
 
+def write_tables(
+    out: Path, rows: list[dict], details: list[dict], true_plans: bool, n_jobs: int
+) -> str:
+    """Write closed_loop.csv, replans.csv and closed_loop.md for the devices done so far."""
+    table = pd.DataFrame(rows).sort_values("_order").drop(columns="_order")
+    det = pd.DataFrame(details)
+    write_frame_atomic(out / "closed_loop.csv", table)
+    write_frame_atomic(out / "replans.csv", det)
+    md = markdown(table, true_plans)
+    if len(table) < n_jobs:
+        md += f"\nPARTIAL: {len(table)} of {n_jobs} devices done so far.\n"
+    called = det[det["planner_called"]] if len(det) else det
+    md += (
+        f"\n{len(det)} re-plans: median {det['replan_s'].median():.1f} s, max "
+        f"{det['replan_s'].max():.1f} s; {len(called)} called the planner: median "
+        f"{called['replan_s'].median():.1f} s, max {called['replan_s'].max():.1f} s "
+        "(wall clock, shared machine).\n"
+        if len(det)
+        else ""
+    )
+    if true_plans:
+        md += (
+            f"Target (closed loop complete wherever the true device's own plan is): met on "
+            f"{int(table['target_met'].sum())} of {len(table)} devices.\n"
+        )
+    write_text_atomic(out / "closed_loop.md", md)
+    return md
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--full", action="store_true", help="the issue's whole grid (about an hour)")
@@ -245,14 +275,25 @@ def main() -> None:
             (name, folder, (d.tau_s, d.dt0_c, d.effect), ns.true_plans, ns.seed, early)
             for d in grid_devices(taus, dt0s, effects)
         ]
-    rows, details = [], []
-    pool = ProcessPoolExecutor(max_workers=ns.jobs) if ns.jobs > 1 else None
-    results = pool.map(one_device, jobs) if pool is not None else map(one_device, jobs)
+    rows, details, md = [], [], ""
+    # spawned workers: a forked one inherits the solvers' and BLAS's thread locks in
+    # whatever state the parent's planning left them, and can wait on them for ever
+    pool = (
+        ProcessPoolExecutor(max_workers=ns.jobs, mp_context=multiprocessing.get_context("spawn"))
+        if ns.jobs > 1
+        else None
+    )
+    if pool is not None:
+        futures = {pool.submit(one_device, job): i for i, job in enumerate(jobs)}
+        results = ((futures[f], f.result()) for f in as_completed(futures))
+    else:
+        results = ((i, one_device(job)) for i, job in enumerate(jobs))
     try:
-        for row, det in results:
-            rows.append(row)
+        for i, (row, det) in results:
+            rows.append({**row, "_order": i})
             details += det
             print(
+                f"[{len(rows)}/{len(jobs)}] "
                 f"{row['region']} {row['device']}: open {row['open_coverage']:.0%} "
                 f"(min {row['open_min_levels']}), closed {row['closed_coverage']:.0%} "
                 f"(min {row['closed_min_levels']}), {row['replans']} re-plans "
@@ -260,29 +301,10 @@ def main() -> None:
                 + (f"; true plan complete: {row['true_plan_complete']}" if ns.true_plans else ""),
                 flush=True,
             )
+            md = write_tables(out, rows, details, ns.true_plans, len(jobs))  # partial so far
     finally:
         if pool is not None:
-            pool.shutdown()
-    table = pd.DataFrame(rows)
-    det = pd.DataFrame(details)
-    write_frame_atomic(out / "closed_loop.csv", table)
-    write_frame_atomic(out / "replans.csv", det)
-    md = markdown(table, ns.true_plans)
-    called = det[det["planner_called"]] if len(det) else det
-    md += (
-        f"\n{len(det)} re-plans: median {det['replan_s'].median():.1f} s, max "
-        f"{det['replan_s'].max():.1f} s; {len(called)} called the planner: median "
-        f"{called['replan_s'].median():.1f} s, max {called['replan_s'].max():.1f} s "
-        "(wall clock, shared machine).\n"
-        if len(det)
-        else ""
-    )
-    if ns.true_plans:
-        md += (
-            f"Target (closed loop complete wherever the true device's own plan is): met on "
-            f"{int(table['target_met'].sum())} of {len(table)} devices.\n"
-        )
-    write_text_atomic(out / "closed_loop.md", md)
+            pool.shutdown(cancel_futures=True)
     print(md)
     print(f"wrote {out}/closed_loop.csv, replans.csv, closed_loop.md")
 
