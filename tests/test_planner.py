@@ -554,3 +554,26 @@ def test_quiet_stdout_fd_silences_c_level_output(capfd):
         os.write(1, b"banner from C\n")
     os.write(1, b"after\n")
     assert capfd.readouterr().out == "before\nafter\n"
+
+
+def test_a_level_pair_right_at_delta_is_counted_as_a_finer_sampling_counts_it():
+    """A table whose two levels in bin [-49, -48) are 0.0504 apart sampled every 0.1 min
+    but 0.0500 (short of delta) sampled every 0.05 or 0.01 min: the planner's check keeps
+    the worse count, so its claim agrees with an independent count at fine sampling."""
+    from pathlib import Path
+
+    from schedsyn.programme import read_steps
+
+    steps = Path(__file__).parent / "data" / "plans" / "w1_slow_chamber_720_steps.csv"
+    prog = read_steps(steps)
+    spec = ExperimentSpec("W1", -50.0, -30.0, -52.0, -20.0)
+    limits = Limits(rate_min_c_per_min=-0.5, rate_max_c_per_min=1.5, duration_max_min=720.0)
+    rep, *_ = check_programme(prog, spec, limits, [ThermalParams()])
+    knots_t, knots_tk = chamber_knots(steps)
+    counts = {}
+    for dt_min in (0.1, 0.05, 0.01):
+        _, temp, grad = ode_trajectories(knots_t, knots_tk, 2400.0, 3.0, dt_min=dt_min)
+        counts[dt_min] = levels_per_bin(temp[0], grad[0], -50.0, -30.0, 0.05)
+    assert counts[0.1][1] == 6 and counts[0.05][1] == counts[0.01][1] == 5  # the case holds
+    np.testing.assert_array_equal(rep.levels, counts[0.01])
+    assert not rep.complete and rep.coverage == pytest.approx(0.9)
