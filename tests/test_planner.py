@@ -577,3 +577,35 @@ def test_a_level_pair_right_at_delta_is_counted_as_a_finer_sampling_counts_it():
     assert counts[0.1][1] == 6 and counts[0.05][1] == counts[0.01][1] == 5  # the case holds
     np.testing.assert_array_equal(rep.levels, counts[0.01])
     assert not rep.complete and rep.coverage == pytest.approx(0.9)
+
+
+def test_the_finer_sampling_runs_only_where_the_count_is_close_to_changing(monkeypatch):
+    """The 0.02-min simulation (8x the cost) runs for the table with levels right at delta
+    apart and not for W2's table, whose levels are clear of it."""
+    from pathlib import Path
+
+    import schedsyn.planner.check as check_mod
+    from schedsyn.programme import read_steps
+
+    seen = []
+    real = check_mod.simulate
+
+    def counting(*args, **kwargs):
+        seen.append(kwargs["dt_min"])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(check_mod, "simulate", counting)
+    data = Path(__file__).parent / "data" / "plans"
+    slow = Limits(rate_min_c_per_min=-0.5, rate_max_c_per_min=1.5, duration_max_min=720.0)
+    for name, spec, limits, fine in (
+        ("w2_steps.csv", ExperimentSpec("W2", -30.0, 0.0, -40.0, 10.0), Limits(), False),
+        (
+            "w1_slow_chamber_720_steps.csv",
+            ExperimentSpec("W1", -50.0, -30.0, -52.0, -20.0),
+            slow,
+            True,
+        ),
+    ):
+        seen.clear()
+        check_programme(read_steps(data / name), spec, limits, [ThermalParams()])
+        assert seen == ([0.1, 0.02] if fine else [0.1]), name
