@@ -2,10 +2,11 @@
 
 A :class:`Plan` is judged only on its exported step table (whole minutes, 0.1 degC, what
 the operator types), re-simulated densely every 0.1 min by :func:`check_programme` and
-scored by :mod:`schedsyn.coverage` -- never on the optimiser's variables. Where that count is
-close to changing, the check also samples every 0.02 min and keeps the worse of the two, so that a plan whose levels
-sit right at ``delta`` apart is not claimed complete on the strength of one sampling
-(another checker, sampling otherwise, would count a level fewer).
+scored by :mod:`schedsyn.coverage` -- never on the optimiser's variables. Where that count
+is close to changing, the check also samples every 0.02 min and keeps the worse of the
+two, so that a plan whose levels sit right at ``delta`` apart is not claimed complete on
+the strength of one sampling (another checker, sampling otherwise, would count a level
+fewer).
 """
 
 from __future__ import annotations
