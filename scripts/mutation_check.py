@@ -51,6 +51,17 @@ PLANNER_CORE = "schedsyn/planner/core.py"
 
 MUTATIONS: tuple[Mutation, ...] = (
     Mutation(
+        "fine-check-off",
+        "schedsyn/planner/check.py",
+        "    if np.any(wider.levels < rep.levels):",
+        "    if np.any(wider.levels < rep.levels - 1):",
+        (
+            "tests/test_planner.py::"
+            "test_a_level_pair_right_at_delta_is_counted_as_a_finer_sampling_counts_it",
+        ),
+        "the planner check's finer sampling never runs for levels right at delta apart",
+    ),
+    Mutation(
         "step-table-bias",
         "schedsyn/programme.py",
         "            want = round(float(tk_target[i + 1]), 1)",
