@@ -542,6 +542,25 @@ def test_require_complete_never_returns_a_graded_plan():
         plan_experiment(spec, limits=limits, require_complete=True)
 
 
+def test_an_over_long_plan_that_cannot_be_cut_leaves_the_other_fallbacks(monkeypatch):
+    """110 min: the 3-level sweeps overrun and the planner falls back. When the over-long
+    programme cannot be cut to end in time (forced here), that one option is dropped and
+    the graded plan still comes back; it used to abort the whole plan with a solver error.
+    """
+    from schedsyn.planner import core
+
+    calls = []
+
+    def no_cut(*args, **kwargs):
+        calls.append(args)
+        return None
+
+    monkeypatch.setattr(core, "truncate", no_cut)
+    plan = plan_experiment(ExperimentSpec(**SMALL), limits=Limits(duration_max_min=110.0))
+    assert calls, "the over-long option was never tried: the test exercises nothing"
+    assert not plan.complete and plan.levels_planned == 2
+
+
 def test_quiet_stdout_fd_silences_c_level_output(capfd):
     """HiGHS prints its banner from C++ (file descriptor 1) whatever its options: the
     planner wraps its calls so that nothing reaches the user's terminal."""

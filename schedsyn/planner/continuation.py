@@ -31,6 +31,7 @@ from .search import (
     SUBREGION_CUTS_BOTH,
     SUBREGION_WIDE_SHARES,
     Search,
+    Structure,
     synthesise,
     truncate,
 )
@@ -111,6 +112,14 @@ def check_continuation(
     return reports[0], reports[1], problems, t_lo, t_hi
 
 
+def _cut(search: Search, limits: Limits) -> Structure | None:
+    """The search's over-long structure cut to end in time, if it had one and a cut does."""
+    if search.overrun is None:
+        return None
+    max_seg = search.ctx.responses.max_segments(limits.duration_max_min)
+    return truncate(search.ctx, search.overrun, max_seg)
+
+
 def sweeps_needed(spec: ExperimentSpec, continuation: Continuation) -> int:
     """The most levels any bin still lacks: the fewest new sweeps that can complete it."""
     have = [distinct_levels(g, spec.delta_c_per_min) for g in continuation.existing_gradients]
@@ -142,10 +151,8 @@ def plan_continuation(
         if search.best is not None:
             u, mg, mt = polish(search.ctx, search.best[0])
             durations = search.ctx.responses.durations[: u.size]
-        elif search.overrun is not None:
-            max_seg = search.ctx.responses.max_segments(limits.duration_max_min)
-            structure = truncate(search.ctx, search.overrun, max_seg)
-            u, mg, mt = structure.u, 0.0, 0.0
+        elif (cut := _cut(search, limits)) is not None:
+            u, mg, mt = cut.u, 0.0, 0.0
             durations = search.ctx.responses.durations[: u.size]
         else:
             notes.append(f"{k} new sweep(s) do not fit: {'; '.join(search.reasons[:2])}")

@@ -142,8 +142,12 @@ def _fallback(
     sub-regions that fit; whichever covers most of the region (by the dense check)."""
     max_seg = int(limits.duration_max_min // spec.segment_min)
     options: list[_Candidate] = []
-    if search.overrun is not None:
-        structure = truncate(search.ctx, search.overrun, max_seg)
+    structure = None if search.overrun is None else truncate(search.ctx, search.overrun, max_seg)
+    if search.overrun is not None and structure is None:
+        search.reasons.append(
+            "the over-long programme cannot be cut to return to the end temperature in time"
+        )
+    if search.overrun is not None and structure is not None:
         options.append(
             _Candidate(
                 structure.u,
