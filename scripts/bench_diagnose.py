@@ -18,6 +18,7 @@ where the chamber-air channel showed an effect (reported with its device impact)
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -102,7 +103,9 @@ def main() -> None:
     jobs = [(e, s, ns.fit_step_s) for e in EFFECTS for s in range(ns.seeds)]
     jobs += [("none", s, ns.fit_step_s) for s in range(ns.clean)]
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(ns.workers) as pool:
+    # spawned workers: a forked child can inherit a held solver/BLAS lock and hang
+    # (scripts/closed_loop.py sat for an hour on a futex that way)
+    with ProcessPoolExecutor(ns.workers, mp_context=multiprocessing.get_context("spawn")) as pool:
         rows = list(pool.map(run_case, jobs))
     wall = time.perf_counter() - t0
     cases = pd.DataFrame(rows)
