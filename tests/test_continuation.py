@@ -106,6 +106,24 @@ def test_check_continuation_joins_measured_and_new_passes_and_corrects_the_state
         assert cov.gradients[8].size == 1 and cov.gradients[8][0] > 0
 
 
+def test_a_continuation_is_held_to_the_step_limits_on_its_new_steps():
+    """The controller is loaded with the re-planned rest: max_steps and min_step_min apply
+    to the new steps (3 here: 40, 60 and 50 min after M = 30), not to the executed one."""
+    import dataclasses
+
+    prog = Programme(np.array([30.0, 40.0, 60.0, 50.0]), np.array([-1.0, -0.5, 0.4, 0.3]))
+    cont = Continuation(cut(prog, 30.0), tuple(np.zeros(0) for _ in range(10)))
+    limits = Limits(duration_max_min=300.0)
+
+    def problems(**changes):
+        spec = dataclasses.replace(SPEC, **changes)
+        return check_continuation(prog, spec, limits, PARAMS, _lag(PARAMS), cont)[2]
+
+    assert not [p for p in problems(max_steps=3, min_step_min=40.0) if "step" in p]
+    assert any("3 steps, more than max_steps = 2" in p for p in problems(max_steps=2))
+    assert any("1 step(s)" in p and "min_step_min = 45" in p for p in problems(min_step_min=45.0))
+
+
 def _lag(params):
     from schedsyn.model import FirstOrderLag
 

@@ -269,3 +269,21 @@ def check_programme(
         )
     assert worst is not None and worst01 is not None  # scenarios is not empty
     return worst, worst01, problems, float(t_lo), float(t_hi)
+
+
+def step_limit_problems(
+    programme: Programme, spec: ExperimentSpec, what: str = "the step table"
+) -> list[str]:
+    """What of ``max_steps`` and ``min_step_min`` the exported table (``what``) breaks."""
+    problems = []
+    if programme.n_segments > spec.max_steps:
+        problems.append(
+            f"{what} has {programme.n_segments} steps, more than max_steps = {spec.max_steps}"
+        )
+    short_steps = int(np.sum(programme.durations_min < spec.min_step_min - 1e-9))
+    if short_steps:
+        problems.append(
+            f"{short_steps} step(s) of {what} are shorter than min_step_min = "
+            f"{spec.min_step_min:g} min"
+        )
+    return problems

@@ -22,7 +22,7 @@ from ..model import LinearThermalModel, affine_response
 from ..params import Limits, ThermalParams
 from ..programme import Programme
 from ..simulate import dense_times
-from .check import CHECK_DT_MIN, DEVICE_TOL_C, REPORT_DELTA_C_PER_MIN
+from .check import CHECK_DT_MIN, DEVICE_TOL_C, REPORT_DELTA_C_PER_MIN, step_limit_problems
 from .lp import LpStats
 from .polish import polish
 from .request import Continuation, ExperimentSpec
@@ -67,7 +67,8 @@ def check_continuation(
     measured offset at ``M`` (decaying with the model's time constant); only samples from
     ``M`` on make new passes, and the first of them is dropped when ``T(M)`` lies inside a
     bin (that pass began before ``M``; its measured part was left out too). Limits are
-    checked on the new steps only (the executed ones are history).
+    checked on the new steps only (the executed ones are history), ``max_steps`` and
+    ``min_step_min`` among them (the controller is loaded with the new steps).
     """
     at = continuation.at_min
     times = dense_times(programme.total_min, CHECK_DT_MIN)
@@ -97,6 +98,8 @@ def check_continuation(
         continuation.prefix.end_c,
     )
     problems = [p for p in new_steps.violations(limits) if "starts at" not in p]
+    # the controller is loaded with the new steps only: they are what its limits apply to
+    problems += step_limit_problems(new_steps, spec, "the re-planned rest")
     if programme.total_min > limits.duration_max_min + 1e-9:
         problems = [p for p in problems if "lasts" not in p]
         problems.append(

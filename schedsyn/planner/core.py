@@ -21,7 +21,7 @@ from ..model import FirstOrderLag, LinearThermalModel
 from ..params import Limits, ThermalParams
 from ..programme import Programme
 from .bound import duration_lower_bound
-from .check import Plan, check_programme
+from .check import Plan, check_programme, step_limit_problems
 from .continuation import plan_continuation
 from .explain import explain_shortfall
 from .informative import L1_WEIGHT_LADDER, informative_rates
@@ -104,23 +104,6 @@ def operator_programme(u: np.ndarray, spec: ExperimentSpec, limits: Limits) -> P
     """What the operator types: equal rates merged, whole minutes, 0.1 degC."""
     raw = Programme(np.full(u.size, float(spec.segment_min)), u, limits.start_c)
     return raw.merged(rate_tol_c_per_min=MERGE_TOL_C_PER_MIN).rounded(limits)
-
-
-def step_limit_problems(programme: Programme, spec: ExperimentSpec) -> list[str]:
-    """What of ``max_steps`` and ``min_step_min`` the exported table breaks."""
-    problems = []
-    if programme.n_segments > spec.max_steps:
-        problems.append(
-            f"the step table has {programme.n_segments} steps, more than "
-            f"max_steps = {spec.max_steps}"
-        )
-    short_steps = int(np.sum(programme.durations_min < spec.min_step_min - 1e-9))
-    if short_steps:
-        problems.append(
-            f"{short_steps} step(s) of the table are shorter than min_step_min = "
-            f"{spec.min_step_min:g} min"
-        )
-    return problems
 
 
 def _device_excess(limits: Limits, t_lo: float, t_hi: float) -> float:
@@ -595,12 +578,7 @@ def _plan_continued(
     programme, mg, mt, search, notes, check = plan_continuation(
         spec, params, limits, model, continuation, progress, stats
     )
-    cov, cov01, problems, t_lo, t_hi = check
-    if programme.n_segments > spec.max_steps:
-        problems.append(
-            f"the step table has {programme.n_segments} steps, more than "
-            f"max_steps = {spec.max_steps}"
-        )
+    cov, cov01, problems, t_lo, t_hi = check  # step limits: on the new steps (the check)
     complete = cov.complete and not problems
     if not cov.complete:
         short = cov.short_bins()
