@@ -293,7 +293,10 @@ def _plan_job(job: tuple[_Request, float, float], progress) -> tuple[float, Plan
     req, a, b = job
     spec = req.spec(a, b, name=f"[{a:g}, {b:g}]")
     try:
-        plan = plan_experiment(spec, req.params, req.limits)
+        # no effort limit: the limit counts CPU time, which grows when the other core is
+        # busy (shared cores), so a region complete alone could be cut short beside other
+        # work and the split would depend on the load
+        plan = plan_experiment(spec, req.params, req.limits, effort_s=None)
     except InfeasiblePlanError:
         plan = None
     if progress is not None:
