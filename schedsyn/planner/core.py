@@ -126,10 +126,6 @@ def _fallback(
     max_seg = int(limits.duration_max_min // spec.segment_min)
     options: list[_Candidate] = []
     structure = None if search.overrun is None else truncate(search.ctx, search.overrun, max_seg)
-    if search.overrun is not None and structure is None:
-        search.reasons.append(
-            "the over-long programme cannot be cut to return to the end temperature in time"
-        )
     if search.overrun is not None and structure is not None:
         options.append(
             _Candidate(
@@ -142,6 +138,10 @@ def _fallback(
                 f"{search.overrun.n_seg * spec.segment_min:g} min, more than the limit "
                 f"{limits.duration_max_min:g} min; the programme is cut at the limit",
             )
+        )
+    elif search.overrun is not None:
+        search.reasons.append(
+            "the over-long programme cannot be cut to return to the end temperature in time"
         )
     checked: dict[int, float] = {}
 
