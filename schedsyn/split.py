@@ -293,9 +293,8 @@ def _plan_job(job: tuple[_Request, float, float], progress) -> tuple[float, Plan
     req, a, b = job
     spec = req.spec(a, b, name=f"[{a:g}, {b:g}]")
     try:
-        # no effort limit: the limit counts CPU time, which grows when the other core is
-        # busy (shared cores), so a region complete alone could be cut short beside other
-        # work and the split would depend on the load
+        # no effort limit: the split asks whether a complete plan exists, so the search
+        # for the requested levels runs to its end even where the bound says it is unlikely
         plan = plan_experiment(spec, req.params, req.limits, effort_s=None)
     except InfeasiblePlanError:
         plan = None

@@ -2,10 +2,11 @@
 
 ``schedsyn plan --levels N`` is documented for N = 2..12. Counts the budget cannot hold
 are answered by a graded plan (the most levels a complete plan reaches), whose search is
-bounded (:func:`schedsyn.planner.plan_experiment`'s ``effort_s``, default 45 s, stops the
-optional searches; the search for the requested plan always runs to its end). For every
-experiment of the default campaign named with ``--experiments`` and every count, one
-plan with the default effort limit, timed (wall clock, one process):
+bounded (:func:`schedsyn.planner.plan_experiment`'s ``effort_s``, default 45 reference
+seconds of LP work, stops the optional searches; the search for the requested plan always
+runs to its end). For every experiment of the default campaign named with
+``--experiments`` and every count, one plan with the default effort limit, timed (wall
+clock, one process):
 
     level count, wall s, status, levels planned (graded), weakest bin, duration,
     whether the effort limit stopped a search

@@ -51,6 +51,18 @@ PLANNER_CORE = "schedsyn/planner/core.py"
 
 MUTATIONS: tuple[Mutation, ...] = (
     Mutation(
+        "effort-counts-cpu-time",
+        "schedsyn/planner/core.py",
+        "and lp_nonzeros_solved() - self.work_tic > self.effort_s * LP_NONZEROS_PER_EFFORT_S",
+        "and time.process_time() - self.work_tic / 1e9 > self.effort_s",
+        (
+            "tests/test_graded_effort.py::test_the_effort_limit_counts_lp_work_not_time",
+            "tests/test_graded_effort.py::"
+            "test_the_same_request_gets_the_same_answer_on_a_slower_machine",
+        ),
+        "the effort limit counts CPU time (load-dependent) instead of LP work",
+    ),
+    Mutation(
         "fine-check-off",
         "schedsyn/planner/check.py",
         "    if np.any(wider.levels < rep.levels):",

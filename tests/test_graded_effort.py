@@ -13,6 +13,7 @@ from independent import table_check
 from schedsyn.errors import InfeasiblePlanError, ParameterError
 from schedsyn.params import Limits
 from schedsyn.planner import ExperimentSpec, core, plan_experiment
+from schedsyn.planner.lp import lp_nonzeros_solved
 from schedsyn.planner.search import STOPPED
 
 #: [-10, 0] degC asked for 10 levels in 240 min: the bound proves 10 (344 min) impossible;
@@ -111,14 +112,29 @@ def test_an_unlikely_request_gets_its_graded_plan_first(searched, monkeypatch):
     assert full.complete or full.levels_planned is not None
 
 
-def test_the_effort_limit_counts_cpu_time_not_time_spent_waiting():
-    """On a busy machine the planner waits for a core; that must not cut its search (the
-    answer would depend on other work sharing the machine): only the process's own CPU
-    time counts."""
-    effort = core._Effort(time.process_time(), 0.2, None, answered=True)
-    time.sleep(0.4)  # wall time passes, almost no CPU time
-    assert not effort.spent()
+def test_the_effort_limit_counts_lp_work_not_time():
+    """Neither waiting nor other CPU work spends the effort: only the LPs solved do, so
+    where a search is cut does not depend on the machine or its load."""
+    effort = core._Effort(lp_nonzeros_solved(), 1e-3, None, answered=True)  # 400 nonzeros
+    time.sleep(0.3)  # wall time passes
     t0 = time.process_time()
-    while time.process_time() - t0 < 0.3:  # CPU time passes
+    while time.process_time() - t0 < 0.3:  # CPU time passes (another job's work)
         pass
+    assert not effort.spent()
+    plan_experiment(dataclasses.replace(SPEC, levels_required=2), limits=LIMITS)
     assert effort.spent() and effort.hit
+
+
+def test_the_same_request_gets_the_same_answer_on_a_slower_machine(monkeypatch):
+    """The effort limit cuts the graded search at the same place whatever the clocks say:
+    a machine (or a load) that makes every CPU second count ten times gives the same
+    plan, with the same levels and the same steps."""
+    spec = dataclasses.replace(SPEC, levels_required=5)
+    first = plan_experiment(spec, limits=LIMITS, effort_s=5.0)
+    clocks = {"process_time": time.process_time, "perf_counter": time.perf_counter}
+    monkeypatch.setattr(core.time, "process_time", lambda: 10.0 * clocks["process_time"]())
+    monkeypatch.setattr(core.time, "perf_counter", lambda: 10.0 * clocks["perf_counter"]())
+    slow = plan_experiment(spec, limits=LIMITS, effort_s=5.0)
+    assert slow.levels_planned == first.levels_planned
+    assert slow.programme.to_frame().equals(first.programme.to_frame())
+    assert [n for n in slow.notes if "effort" in n] == [n for n in first.notes if "effort" in n]

@@ -101,11 +101,12 @@ def register(sub) -> None:
         "--effort-s",
         type=float,
         default=None,
-        help="seconds of CPU time after which the search for other plans stops when the "
-        "requested one "
-        "cannot be met (fewer levels, sub-regions; default 45; 0 = no "
-        "limit); the search for the requested plan runs to its end unless its proven bound "
-        "says it is unlikely to fit and a plan with fewer levels is in hand",
+        help="effort after which the search for other plans stops when the requested one "
+        "cannot be met (fewer levels, sub-regions; default 45; 0 = no limit), in reference "
+        "seconds of LP work (about CPU seconds of one core; counted in work, so the same "
+        "request gives the same plan on any machine and under any load); the search for the "
+        "requested plan runs to its end unless its proven bound says it is unlikely to fit "
+        "and a plan with fewer levels is in hand",
     )
     p.add_argument(
         "--duration-max-min",

@@ -25,7 +25,7 @@ from .check import Plan, check_programme, step_limit_problems
 from .continuation import plan_continuation
 from .explain import explain_shortfall
 from .informative import L1_WEIGHT_LADDER, informative_rates
-from .lp import Context, LpStats, require_solvable
+from .lp import Context, LpStats, lp_nonzeros_solved, require_solvable
 from .polish import honour_step_limits, merge_small_changes, polish, step_runs
 from .request import Continuation, ExperimentSpec, check_request
 from .robust import box_note, box_scenarios, search_robust, verify_robust
@@ -42,10 +42,15 @@ MAX_SEGMENT_MIN = 30
 #: Segment lengths (multiples of the requested one) tried when merging steps cannot meet
 #: max_steps.
 COARSER_FACTORS = (2, 3)
-#: Wall-clock seconds after which a plan's optional searches stop (the partial-coverage
-#: fallbacks, the graded search for fewer levels; see
-#: :func:`plan_experiment`).
+#: Effort after which a plan's optional searches stop (the partial-coverage fallbacks,
+#: the graded search for fewer levels; see :func:`plan_experiment`), in reference seconds
+#: (:data:`LP_NONZEROS_PER_EFFORT_S`).
 EFFORT_S = 45.0
+#: Effort is counted in LP work, not time: one reference second is this many
+#: constraint-matrix nonzeros solved (:func:`.lp.lp_nonzeros_solved`). Measured on the
+#: 2-core machine of 2026-11-25, one core: 345 000 per CPU second planning W1 for 8
+#: levels (540-min LPs), 450 000 for [-10, 0] degC at 10 levels in 240 min.
+LP_NONZEROS_PER_EFFORT_S = 400_000
 #: Device excess (degC) below which rounding is not worth a re-polish.
 EXCESS_TOL_C = 1e-6
 #: A step that changes the setpoint by less than this is merged into a neighbour when the
@@ -56,12 +61,17 @@ MIN_STEP_CHANGE_C = 0.5
 @dataclass(slots=True)
 class _Effort:
     """The effort limit of one :func:`plan_experiment` call: ``spent()`` says whether an
-    optional search should stop -- the caller's ``stop``, or ``effort_s`` of this
-    process's CPU time since ``cpu_tic`` once some answer is in hand (``answered``: a
-    complete plan for fewer levels), so the limit never leaves the user with nothing --
-    and remembers that it said so, for the plan's notes."""
+    optional search should stop -- the caller's ``stop``, or ``effort_s`` reference
+    seconds of LP work (:data:`LP_NONZEROS_PER_EFFORT_S`) since ``work_tic`` once some
+    answer is in hand (``answered``: a complete plan for fewer levels), so the limit never
+    leaves the user with nothing -- and remembers that it said so, for the plan's notes.
 
-    cpu_tic: float
+    Work, not a clock: CPU time grows when another process shares the core (W4 plans in
+    42 s alone and 70 s beside another plan on a 2-core machine), so a CPU-time limit cut
+    the same search at different places under different loads, and the same request got
+    different answers."""
+
+    work_tic: int
     effort_s: float | None
     stop: Callable[[], bool] | None
     hit: bool = False
@@ -72,7 +82,7 @@ class _Effort:
         if (
             self.answered
             and self.effort_s is not None
-            and time.process_time() - self.cpu_tic > self.effort_s
+            and lp_nonzeros_solved() - self.work_tic > self.effort_s * LP_NONZEROS_PER_EFFORT_S
         ):
             over = True
         self.hit = self.hit or over
@@ -274,16 +284,17 @@ def plan_experiment(
         When the target cannot be met, also plan for fewer levels and return whichever
         plan gives the weakest bins the most levels, then the most complete bins (see
         :func:`_graded`).
-    effort_s : float or None, s
-        CPU time of this process after which the optional searches stop once a
-        complete plan for fewer levels is in hand: the sub-region fallbacks and the
-        graded search for further level counts (a note says when it stopped one). CPU
-        time, not wall-clock: on a busy machine the same request gives the same answer,
-        only later. The search for the requested plan itself runs to its end,
+    effort_s : float or None, reference s
+        Effort after which the optional searches stop once a complete plan for fewer
+        levels is in hand: the sub-region fallbacks and the graded search for further
+        level counts (a note says when it stopped one). Counted in LP work, not time
+        (one reference second is :data:`LP_NONZEROS_PER_EFFORT_S` constraint-matrix
+        nonzeros solved, about a CPU second of one core of a 2026 CI machine), so the
+        same request gives the same answer on any machine and under any load, only
+        sooner or later. The search for the requested plan itself runs to its end,
         unless its proven bound times ``GUESS_BOUND_RATIO`` exceeds the budget (no
         complete plan known was that close to its bound) and a graded plan for fewer
-        levels is already in hand. None: no limit (the answer then does not depend on
-        the machine's speed).
+        levels is already in hand. None: no limit.
     stop : callable() -> bool, optional
         Asked before each candidate structure of every search, the requested plan's too:
         True stops the search with what it has (cancellation by the caller).
@@ -319,7 +330,7 @@ def plan_experiment(
         require_complete=require_complete,
         continuation=continuation,
         graded=graded,
-        effort=_Effort(time.process_time(), effort_s, stop),
+        effort=_Effort(lp_nonzeros_solved(), effort_s, stop),
         search_stop=stop,
     )
 

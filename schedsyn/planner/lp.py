@@ -23,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import threading
 import time
 import warnings
 from collections.abc import Callable, Iterator, Sequence
@@ -52,6 +53,24 @@ _CLARABEL_OK = {"Solved": "optimal", "AlmostSolved": "inaccurate"}
 _CLARABEL_INFEASIBLE = ("PrimalInfeasible", "AlmostPrimalInfeasible")
 #: How many solver-failure messages a plan keeps (the count is kept in full).
 MAX_FAILURE_MESSAGES = 5
+
+#: Constraint-matrix nonzeros of the LPs solved so far, per thread (a plan runs in one).
+_work = threading.local()
+
+
+def lp_nonzeros_solved() -> int:
+    """Constraint-matrix nonzeros of every LP this thread has solved so far.
+
+    The planner's measure of search effort (:class:`schedsyn.planner.core._Effort`): it
+    counts work rather than time, so where an effort limit cuts a search does not depend
+    on the machine's speed or on what else shares its cores. It tracks CPU time closely
+    (each LP's solve costs in proportion to its nonzeros, and the LPs dominate a search).
+    """
+    return int(getattr(_work, "nonzeros", 0))
+
+
+def _count_work(nonzeros: int) -> None:
+    _work.nonzeros = lp_nonzeros_solved() + int(nonzeros)
 
 
 @contextlib.contextmanager
@@ -481,6 +500,7 @@ class SubLP:
         q = np.concatenate((np.asarray(cost, dtype=float), np.full(n_t, float(l1_weight))))
         self.last_size = {"variables": int(m + n_t), "constraints": int(a.shape[0])}
         a_sparse = sparse.csc_matrix(a)
+        _count_work(a_sparse.nnz)
         cones = ([clarabel.ZeroConeT(n_eq)] if n_eq else []) + [
             clarabel.NonnegativeConeT(a.shape[0] - n_eq)
         ]
@@ -544,6 +564,7 @@ class SubLP:
         if extra_constraints is not None:
             cons += extra_constraints(x)
         prob = cp.Problem(cp.Minimize(objective(x)), cons)
+        _count_work(int(np.count_nonzero(g)) + sum(int(np.count_nonzero(e)) for e in self.e_rows))
         ok = self.ctx.solve_cvxpy(prob)
         self.last_size = {"variables": int(x.size), "constraints": int(h.size + 2 * self.n)}
         if not ok or x.value is None:
