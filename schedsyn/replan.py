@@ -809,6 +809,7 @@ def replan_run(
     material_c: float = MATERIAL_C,
     keep_if_complete: bool = True,
     new_only_if_complete: bool = False,
+    new_min_coverage: float = 0.0,
     progress: Callable[[str], None] | None = None,
 ) -> ReplanResult:
     """Re-plan the rest of a run at minute ``at_min`` (what ``schedsyn replan`` does).
@@ -835,6 +836,11 @@ def replan_run(
         early re-plan, whose model has seen little of the run: an incomplete new rest
         chosen on it can spend time a later, better-informed re-plan would have used
         better). Default ``False``: the better run is taken.
+    new_min_coverage : float, share 0..1
+        Take new steps that do not complete the run only when it is predicted to cover at
+        least this share of the bins (a milder form of ``new_only_if_complete`` for an
+        early re-plan: a rest predicted nearly complete is worth taking on a young
+        model, one far from complete is not). Default 0: the better run is taken.
     progress : callable(str), optional
         Receives short progress messages (the planner's too).
 
@@ -843,6 +849,10 @@ def replan_run(
     ParameterError, LogFormatError
         As :func:`prepare_replan` (bad ``at_min``, gaps, a log of another plan).
     """
+    if not 0.0 <= new_min_coverage <= 1.0:
+        raise ParameterError(
+            f"new_min_coverage is a share of the bins, 0 to 1, got {new_min_coverage!r}"
+        )
     tic = time.perf_counter()
     say = progress if progress is not None else (lambda _msg: None)
     say(f"{plan.name}: the log up to minute {at_min:g}: state, levels so far, model")
@@ -885,7 +895,10 @@ def replan_run(
         if (
             new is not None
             and new.preference() > unchanged.preference()
-            and (new.complete or not new_only_if_complete)
+            and (
+                new.complete
+                or (not new_only_if_complete and new.coverage.coverage >= new_min_coverage)
+            )
         ):
             choice, chosen, new_from = "new", new, best[2]  # type: ignore[index]
             reason = (
@@ -900,7 +913,13 @@ def replan_run(
                 if new is None
                 else f"the planner's continuation would reach only {new.coverage.coverage:.0%}"
                 f" (min {new.coverage.min_levels} levels)"
-                + (", and new steps are taken only when complete" if new_only_if_complete else "")
+                + (
+                    ", and new steps are taken only when complete"
+                    if new_only_if_complete
+                    else f", and incomplete new steps are taken only from {new_min_coverage:.0%}"
+                    if new.coverage.coverage < new_min_coverage
+                    else ""
+                )
             )
             reason = f"{why}; the plan unchanged {before}"
     return ReplanResult(

@@ -426,6 +426,15 @@ def test_an_incomplete_new_rest_is_taken_only_when_allowed(tmp_path):
     assert refused.choice == "keep" and "only when complete" in refused.reason
     t = np.linspace(0.0, prog.total_min, 801)
     np.testing.assert_allclose(refused.programme.chamber_at(t), prog.chamber_at(t), atol=1e-9)
+    # a coverage floor: the same rest is taken at its own predicted share, refused above it
+    share = taken.prediction.coverage.coverage
+    at_share = replan_run(log, plan, 60.0, new_min_coverage=share)
+    assert at_share.choice == "new"
+    above = replan_run(log, plan, 60.0, new_min_coverage=min(1.0, share + 0.01))
+    assert above.choice == "keep" and f"only from {min(1.0, share + 0.01):.0%}" in above.reason
+    for bad in (-0.1, 1.5, float("nan")):
+        with pytest.raises(ParameterError, match="new_min_coverage"):
+            replan_run(log, plan, 60.0, new_min_coverage=bad)
 
 
 def test_replan_cli_only_if_complete_keeps_the_plan_when_no_rest_completes(tmp_path, capsys):
