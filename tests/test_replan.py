@@ -539,6 +539,21 @@ def test_replan_cli_refuses_bad_input_in_one_line_and_writes_nothing(
     assert not out.exists()
 
 
+def test_replan_cli_refuses_a_coverage_floor_outside_0_to_1(tmp_path, capsys):
+    """``--min-coverage`` reaches the re-planner: a share outside 0..1 is a one-line
+    error, nothing written."""
+    from schedsyn.cli import main
+
+    plan_dir = write_plan_dir(tmp_path / "plan")
+    log = _write_log(effect_log(ModelSpec(2400.0, 3.0)), tmp_path / "log.csv", 100)
+    out = tmp_path / "re"
+    args = ["replan", str(log), str(plan_dir), "--at-min", "100", "--out", str(out)]
+    rc = main([*args, "--min-coverage", "90", "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--min-coverage" in err and "0.9" in err and err.count("\n") == 1
+    assert not out.exists()
+
+
 def test_replan_cli_refuses_to_write_into_the_plan_it_reads(tmp_path, capsys):
     from schedsyn.cli import main
 

@@ -8,9 +8,10 @@ the measured ones) and ending at 20 °C within the plan's time limit. The new st
 where the sweep in progress has left the region (the plan runs on until then). If the
 plan's own rest is predicted to complete the region, or nothing better fits, it is kept
 unchanged (``--always-replan`` asks the planner anyway). An incomplete new rest that
-does better than the plan unchanged is taken, unless ``--only-if-complete`` (for an early
-re-plan, whose model has seen little of the run: an incomplete rest chosen on it can spend
-time a later, better-informed re-plan would use better).
+does better than the plan unchanged is taken, unless ``--only-if-complete`` or below
+``--min-coverage SHARE`` (for an early re-plan, whose model has seen little of the run: a
+rest far from complete chosen on it can spend time a later, better-informed re-plan
+would use better; the closed loop takes rests predicted to cover 90 % before minute 60).
 
 Writes ``--out DIR`` (default ``out/replan``), itself a plan folder, so the run can be
 re-planned again later: ``steps.csv`` (the whole run: the executed steps, then the new
@@ -63,6 +64,14 @@ def register(sub) -> None:
         "(otherwise the plan goes on unchanged)",
     )
     p.add_argument(
+        "--min-coverage",
+        type=float,
+        default=0.0,
+        metavar="SHARE",
+        help="take incomplete new steps only when the whole run they make is predicted to "
+        "cover at least this share of the bins, 0 to 1 (default 0: the better run)",
+    )
+    p.add_argument(
         "--no-effect",
         action="store_true",
         help="identify tau and dT0 only (skip the search for other effects)",
@@ -74,6 +83,11 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..campaign import stderr_progress
 
+    if not 0.0 <= args.min_coverage <= 1.0:
+        raise ParameterError(
+            f"--min-coverage is a share of the bins, 0 to 1, got {args.min_coverage:g} "
+            "(for 90 % write 0.9)"
+        )
     out = _common.out_dir(args.out, "out/replan")
     plan = read_plan_dir(args.plan)
     if out.resolve() == plan.path.resolve():
@@ -96,6 +110,7 @@ def run(args: argparse.Namespace) -> int:
         find_effect=not args.no_effect,
         keep_if_complete=not args.always_replan,
         new_only_if_complete=args.only_if_complete,
+        new_min_coverage=args.min_coverage,
         progress=progress,
     )
     inputs = [args.log, plan.path / "steps.csv", plan.path / "plan.json"]
