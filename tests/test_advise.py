@@ -213,8 +213,11 @@ def test_bad_settings_are_one_line_errors(kw, words):
 
 
 def test_plan_advise_writes_advice_and_the_verifying_plan(tmp_path, capsys):
+    # 110 min: the bound proves 4 and 3 levels impossible, so the plan (graded, 2 levels)
+    # and the advice (one plan, at 2 levels) cost seconds; at 150 min (SHORT) each level
+    # count is planned in full, over a minute for the same CLI path
     out = tmp_path / "p"
-    argv = ["plan", "--working", "0", "6", "--levels", "4", "--duration-max-min", "150"]
+    argv = ["plan", "--working", "0", "6", "--levels", "4", "--duration-max-min", "110"]
     argv += ["--advise", "--advise-knobs", "levels", "--out", str(out), "--quiet"]
     assert main(argv) == 1  # the plan itself stays incomplete
     text = capsys.readouterr().out
