@@ -22,8 +22,7 @@ SPEC = ExperimentSpec("E", -10.0, 0.0, -20.0, 10.0, levels_required=10)
 LIMITS = Limits(duration_max_min=240.0)
 
 
-@pytest.fixture()
-def searched(monkeypatch):
+def _spy_searched(mp: pytest.MonkeyPatch) -> list[int]:
     """The level counts the planner is asked to plan complete-or-nothing, in order."""
     calls: list[int] = []
     inner = core._plan
@@ -33,15 +32,30 @@ def searched(monkeypatch):
             calls.append(spec.levels_required)
         return inner(spec, *args, **kwargs)
 
-    monkeypatch.setattr(core, "_plan", spy)
+    mp.setattr(core, "_plan", spy)
     return calls
 
 
-def test_the_graded_search_plans_few_counts_and_finds_the_most_levels(searched, tmp_path):
+@pytest.fixture()
+def searched(monkeypatch):
+    return _spy_searched(monkeypatch)
+
+
+@pytest.fixture(scope="module")
+def unlimited():
+    """SPEC planned with no effort limit, and the level counts that plan searched: made
+    once for the tests that need it (over a minute of LPs)."""
+    with pytest.MonkeyPatch.context() as mp:
+        calls = _spy_searched(mp)
+        plan = plan_experiment(SPEC, limits=LIMITS, effort_s=None)
+    return plan, calls
+
+
+def test_the_graded_search_plans_few_counts_and_finds_the_most_levels(unlimited, tmp_path):
     """Out of reach by far, the request costs two searches (the first guess and the count
     above it), not one per count below 10; the answer has the most levels a complete plan
     reaches: its count is complete by the independent check, the next one is not."""
-    plan = plan_experiment(SPEC, limits=LIMITS, effort_s=None)
+    plan, searched = unlimited
     assert len(searched) <= 2, searched
     k = plan.levels_planned
     assert k is not None and k >= 2 and not plan.complete
@@ -59,15 +73,14 @@ def test_the_graded_search_plans_few_counts_and_finds_the_most_levels(searched, 
     assert f"plans {k} in every bin" in note and "levels searched: " in note
 
 
-def test_an_effort_limit_keeps_the_first_guess_and_says_what_it_skipped(searched):
+def test_an_effort_limit_keeps_the_first_guess_and_says_what_it_skipped(searched, unlimited):
     """Spent at once, the effort limit still lets the graded search plan its first guess
     (so a graded answer comes back) but nothing after it, and the plan says so."""
     plan = plan_experiment(SPEC, limits=LIMITS, effort_s=1e-6)
     assert len(searched) == 1
     assert plan.levels_planned == searched[0]
     assert any("effort limit" in n and "effort_s" in n for n in plan.notes)
-    unlimited = plan_experiment(SPEC, limits=LIMITS, effort_s=None)
-    assert not any("effort limit" in n for n in unlimited.notes)
+    assert not any("effort limit" in n for n in unlimited[0].notes)  # no limit: no note
 
 
 def test_a_caller_can_cancel_every_search():
