@@ -52,7 +52,7 @@ PLANNER_CORE = "schedsyn/planner/core.py"
 MUTATIONS: tuple[Mutation, ...] = (
     Mutation(
         "effort-counts-cpu-time",
-        "schedsyn/planner/core.py",
+        PLANNER_CORE,
         "and lp_nonzeros_solved() - self.work_tic > self.effort_s * LP_NONZEROS_PER_EFFORT_S",
         "and time.process_time() - self.work_tic / 1e9 > self.effort_s",
         (

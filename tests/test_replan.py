@@ -554,6 +554,27 @@ def test_replan_cli_refuses_a_coverage_floor_outside_0_to_1(tmp_path, capsys):
     assert not out.exists()
 
 
+def test_replan_cli_hands_its_coverage_floor_to_the_re_planner(tmp_path, capsys, monkeypatch):
+    """``--min-coverage 0.9`` reaches :func:`replan_run` as ``new_min_coverage`` (the
+    re-planner is stubbed: the rule itself is tested on the API above)."""
+    import schedsyn.cli.replan as cli_replan
+    from schedsyn.cli import main
+
+    seen: dict = {}
+
+    def stub(*args, **kwargs):
+        seen.update(kwargs)
+        raise ParameterError("stubbed")
+
+    monkeypatch.setattr(cli_replan, "replan_run", stub)
+    plan_dir = write_plan_dir(tmp_path / "plan")
+    log = _write_log(effect_log(ModelSpec(2400.0, 3.0)), tmp_path / "log.csv", 100)
+    args = ["replan", str(log), str(plan_dir), "--at-min", "100", "--out", str(tmp_path / "re")]
+    assert main([*args, "--min-coverage", "0.9", "--quiet"]) == 2
+    capsys.readouterr()
+    assert seen["new_min_coverage"] == 0.9 and seen["new_only_if_complete"] is False
+
+
 def test_replan_cli_refuses_to_write_into_the_plan_it_reads(tmp_path, capsys):
     from schedsyn.cli import main
 
