@@ -49,6 +49,14 @@ KNOT_TOL_C = 0.25
 ROBUST_SLACK_C_PER_MIN = 0.05
 
 #: Clarabel's answers, by what they mean for the planner.
+#: Clarabel's KKT factorisation: qdldl, single-threaded. Its default ("auto") chose the
+#: multi-threaded faer for the whole-programme LPs, which took 3-4x longer on a 2-core
+#: machine (``scripts/bench_lp.py``), and threads would fight the campaign's processes.
+CLARABEL_KKT_METHOD = "qdldl"
+#: Options passed to each solver through cvxpy.
+SOLVER_OPTIONS: dict[str, dict[str, Any]] = {
+    cp.CLARABEL: {"direct_solve_method": CLARABEL_KKT_METHOD}
+}
 _CLARABEL_OK = {"Solved": "optimal", "AlmostSolved": "inaccurate"}
 _CLARABEL_INFEASIBLE = ("PrimalInfeasible", "AlmostPrimalInfeasible")
 #: How many solver-failure messages a plan keeps (the count is kept in full).
@@ -116,6 +124,8 @@ class LpStats:
     optimal: int = 0
     inaccurate: int = 0
     infeasible: int = 0
+    #: of the infeasible: proven by one row and the rate bounds, without a solver
+    infeasible_by_bounds: int = 0
     failed: int = 0
     fallbacks: int = 0
     messages: list[str] = field(default_factory=list)
@@ -133,6 +143,7 @@ class LpStats:
             "optimal": self.optimal,
             "inaccurate": self.inaccurate,
             "infeasible": self.infeasible,
+            "infeasible_by_bounds": self.infeasible_by_bounds,
             "solver_failures": self.failed,
             "highs_fallbacks": self.fallbacks,
             "lp_seconds": round(self.seconds, 3),
@@ -286,7 +297,7 @@ class Context:
                 quiet = quiet_stdout_fd() if solver == cp.HIGHS else contextlib.nullcontext()
                 with warnings.catch_warnings(), quiet:
                     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-                    problem.solve(solver=solver)
+                    problem.solve(solver=solver, **SOLVER_OPTIONS.get(solver, {}))
                 status = problem.status
             except cp.error.SolverError as exc:
                 status, message = None, f"{solver}: {exc}"
@@ -304,6 +315,35 @@ class Context:
         else:
             self.stats.record("failed", seconds, message or f"LP status {status}")
         return status in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
+
+
+#: A row proves an LP infeasible when its least value over the rate bounds exceeds its
+#: right-hand side by more than this, relative to ``max(1, |rhs|)`` (the solvers' own
+#: feasibility tolerance is 1e-8).
+BOUNDS_INFEASIBLE_TOL = 1e-6
+
+
+def bounds_prove_infeasible(
+    a: np.ndarray, b: np.ndarray, n_eq: int, n_rates: int, limits: Limits
+) -> bool:
+    """True when one row of ``A[:n_eq] x = b``, ``A[n_eq:] x <= b`` cannot hold for any
+    rates within the chamber's rate limits (the first ``n_rates`` columns; the others
+    are free).
+
+    A necessary condition only, so it proves infeasibility, never feasibility: a knot the
+    device cannot reach in time even at full rate, the bulk of the probes that scan a
+    transition's length, is caught without a solver.
+    """
+    lo = np.full(a.shape[1], -np.inf)
+    hi = np.full(a.shape[1], np.inf)
+    lo[:n_rates], hi[:n_rates] = limits.rate_min_c_per_min, limits.rate_max_c_per_min
+    with np.errstate(invalid="ignore"):  # 0 * inf: the zero coefficient's term is 0
+        least = np.where(a > 0, a * lo, np.where(a < 0, a * hi, 0.0)).sum(axis=1)
+        most = np.where(a > 0, a * hi, np.where(a < 0, a * lo, 0.0)).sum(axis=1)
+    tol = BOUNDS_INFEASIBLE_TOL * np.maximum(1.0, np.abs(b))
+    over = least - b > tol
+    over[:n_eq] |= b[:n_eq] - most[:n_eq] > tol[:n_eq]
+    return bool(over.any())
 
 
 class SubLP:
@@ -500,12 +540,19 @@ class SubLP:
         q = np.concatenate((np.asarray(cost, dtype=float), np.full(n_t, float(l1_weight))))
         self.last_size = {"variables": int(m + n_t), "constraints": int(a.shape[0])}
         a_sparse = sparse.csc_matrix(a)
+        # counted as solved either way: the effort limit cuts where it did, only sooner
         _count_work(a_sparse.nnz)
+        if bounds_prove_infeasible(a, b, n_eq, self.n, self.ctx.limits):
+            # most probes of a transition too short to reach the window end here
+            self.ctx.stats.record("infeasible", 0.0)
+            self.ctx.stats.infeasible_by_bounds += 1
+            return None
         cones = ([clarabel.ZeroConeT(n_eq)] if n_eq else []) + [
             clarabel.NonnegativeConeT(a.shape[0] - n_eq)
         ]
         settings = clarabel.DefaultSettings()
         settings.verbose = False
+        settings.direct_solve_method = CLARABEL_KKT_METHOD
         tic = time.perf_counter()
         sol = clarabel.DefaultSolver(
             sparse.csc_matrix((m + n_t, m + n_t)), q, a_sparse, b, cones, settings
@@ -578,9 +625,11 @@ def require_solvable(stats: LpStats, what: str) -> None:
     Called when a search found no structure: if the solvers failed on probes and never
     once proved one infeasible, "infeasible" would be a guess.
     """
-    if stats.failed and not stats.infeasible:
+    # the solvers' proofs: one row and the rate bounds prove only the plainly impossible
+    if stats.failed and stats.infeasible == stats.infeasible_by_bounds:
         raise SolverFailedError(
-            f"{what}: the LP solvers failed on {stats.failed} of {stats.solves} problems "
+            f"{what}: the LP solvers failed on {stats.failed} of "
+            f"{stats.solves - stats.infeasible_by_bounds} problems "
             f"and proved none infeasible ({'; '.join(stats.messages[:2])}); this is a "
             "numerical failure, not evidence that the request is impossible"
         )
