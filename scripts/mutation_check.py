@@ -51,6 +51,29 @@ PLANNER_CORE = "schedsyn/planner/core.py"
 
 MUTATIONS: tuple[Mutation, ...] = (
     Mutation(
+        "bounds-proof-wrong-side",
+        "schedsyn/planner/lp.py",
+        "least, most = lo * up + hi * down, hi * up + lo * down",
+        "least, most = hi * up + lo * down, lo * up + hi * down",
+        (
+            "tests/test_lp_bounds.py::"
+            "test_the_bounds_prove_only_what_a_solver_also_finds_infeasible",
+        ),
+        "the rate-limit proof takes a row's largest value for its least: feasible probes "
+        "are called infeasible",
+    ),
+    Mutation(
+        "bounds-proof-ignores-free-columns",
+        "schedsyn/planner/lp.py",
+        "        over &= ~np.any(a[:, n_rates:] != 0.0, axis=1)",
+        "        pass",
+        (
+            "tests/test_lp_bounds.py::"
+            "test_the_bounds_prove_only_what_a_solver_also_finds_infeasible",
+        ),
+        "rows with free columns (margins, epigraph) are judged on the rates alone",
+    ),
+    Mutation(
         "effort-counts-cpu-time",
         PLANNER_CORE,
         "and lp_nonzeros_solved() - self.work_tic > self.effort_s * LP_NONZEROS_PER_EFFORT_S",

@@ -334,15 +334,15 @@ def bounds_prove_infeasible(
     device cannot reach in time even at full rate, the bulk of the probes that scan a
     transition's length, is caught without a solver.
     """
-    lo = np.full(a.shape[1], -np.inf)
-    hi = np.full(a.shape[1], np.inf)
-    lo[:n_rates], hi[:n_rates] = limits.rate_min_c_per_min, limits.rate_max_c_per_min
-    with np.errstate(invalid="ignore"):  # 0 * inf: the zero coefficient's term is 0
-        least = np.where(a > 0, a * lo, np.where(a < 0, a * hi, 0.0)).sum(axis=1)
-        most = np.where(a > 0, a * hi, np.where(a < 0, a * lo, 0.0)).sum(axis=1)
+    rates = a[:, :n_rates]
+    up, down = np.maximum(rates, 0.0).sum(axis=1), np.minimum(rates, 0.0).sum(axis=1)
+    lo, hi = limits.rate_min_c_per_min, limits.rate_max_c_per_min
+    least, most = lo * up + hi * down, hi * up + lo * down
     tol = BOUNDS_INFEASIBLE_TOL * np.maximum(1.0, np.abs(b))
     over = least - b > tol
     over[:n_eq] |= b[:n_eq] - most[:n_eq] > tol[:n_eq]
+    if a.shape[1] > n_rates:  # a row with a free column can take any value
+        over &= ~np.any(a[:, n_rates:] != 0.0, axis=1)
     return bool(over.any())
 
 
@@ -539,14 +539,14 @@ class SubLP:
         n_t, a, b, n_eq = self._matrices(l1_weight)
         q = np.concatenate((np.asarray(cost, dtype=float), np.full(n_t, float(l1_weight))))
         self.last_size = {"variables": int(m + n_t), "constraints": int(a.shape[0])}
-        a_sparse = sparse.csc_matrix(a)
         # counted as solved either way: the effort limit cuts where it did, only sooner
-        _count_work(a_sparse.nnz)
+        _count_work(int(np.count_nonzero(a)))
         if bounds_prove_infeasible(a, b, n_eq, self.n, self.ctx.limits):
             # most probes of a transition too short to reach the window end here
             self.ctx.stats.record("infeasible", 0.0)
             self.ctx.stats.infeasible_by_bounds += 1
             return None
+        a_sparse = sparse.csc_matrix(a)
         cones = ([clarabel.ZeroConeT(n_eq)] if n_eq else []) + [
             clarabel.NonnegativeConeT(a.shape[0] - n_eq)
         ]
