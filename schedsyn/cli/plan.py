@@ -103,9 +103,9 @@ def register(sub) -> None:
         default=None,
         help="effort after which the search for other plans stops when the requested one "
         "cannot be met (fewer levels, sub-regions; default 45; 0 = no limit), in reference "
-        "seconds of LP work (about CPU seconds of one core; counted in work, so the same "
-        "request gives the same plan on any machine and under any load); the search for the "
-        "requested plan runs to its end unless its proven bound says it is unlikely to fit "
+        "seconds of LP work (one is about half a CPU second of one core; counted in work, so "
+        "the same request gives the same plan on any machine and under any load); the search "
+        "for the requested plan runs to its end unless its proven bound says it is unlikely to fit "
         "and a plan with fewer levels is in hand",
     )
     p.add_argument(

@@ -49,7 +49,10 @@ EFFORT_S = 45.0
 #: Effort is counted in LP work, not time: one reference second is this many
 #: constraint-matrix nonzeros solved (:func:`.lp.lp_nonzeros_solved`). Measured on the
 #: 2-core machine of 2026-11-25, one core: 345 000 per CPU second planning W1 for 8
-#: levels (540-min LPs), 450 000 for [-10, 0] degC at 10 levels in 240 min.
+#: levels (540-min LPs), 450 000 for [-10, 0] degC at 10 levels in 240 min. Probes that
+#: the rate limits prove infeasible count as solved (:func:`.lp.bounds_prove_infeasible`),
+#: so the cuts stayed where they were while the work got cheaper: 0.55-1.05 million per
+#: CPU second since (W4, [-10, 0] degC at 10 levels; 2026-11-26, machine loaded).
 LP_NONZEROS_PER_EFFORT_S = 400_000
 #: Device excess (degC) below which rounding is not worth a re-polish.
 EXCESS_TOL_C = 1e-6
@@ -289,7 +292,7 @@ def plan_experiment(
         levels is in hand: the sub-region fallbacks and the graded search for further
         level counts (a note says when it stopped one). Counted in LP work, not time
         (one reference second is :data:`LP_NONZEROS_PER_EFFORT_S` constraint-matrix
-        nonzeros solved, about a CPU second of one core of a 2026 CI machine), so the
+        nonzeros solved, about half a CPU second of one core of a 2026 CI machine), so the
         same request gives the same answer on any machine and under any load, only
         sooner or later. The search for the requested plan itself runs to its end,
         unless its proven bound times ``GUESS_BOUND_RATIO`` exceeds the budget (no
