@@ -362,7 +362,8 @@ def _attempt(knob: _Knob, params: ThermalParams, i: int) -> Plan | None:
     """Plan the request at ``values[i]``; the plan if complete, else None."""
     spec, lim = knob.request(i)
     try:
-        plan = plan_experiment(spec, params, lim)
+        # not graded: a plan for fewer levels never meets the request, so not searched
+        plan = plan_experiment(spec, params, lim, graded=False)
     except InfeasiblePlanError:
         return None
     return plan if plan.complete else None
@@ -578,9 +579,9 @@ def advise(
     tic = time.perf_counter()
     deadline = time.time() + settings.time_budget_s
     bound = duration_lower_bound(spec, params, limits).lower_bound_min
-    if plan is None and not assume_incomplete:
-        try:
-            plan = plan_experiment(spec, params, limits)
+    if plan is None and not assume_incomplete and bound <= limits.duration_max_min:
+        try:  # is the request itself complete? (a graded plan for fewer levels is not)
+            plan = plan_experiment(spec, params, limits, graded=False)
         except InfeasiblePlanError:
             plan = None
     if plan is not None and plan.complete:

@@ -294,8 +294,9 @@ def _plan_job(job: tuple[_Request, float, float], progress) -> tuple[float, Plan
     spec = req.spec(a, b, name=f"[{a:g}, {b:g}]")
     try:
         # no effort limit: the split asks whether a complete plan exists, so the search
-        # for the requested levels runs to its end even where the bound says it is unlikely
-        plan = plan_experiment(spec, req.params, req.limits, effort_s=None)
+        # for the requested levels runs to its end even where the bound says it is unlikely;
+        # not graded: a plan for fewer levels is of no use to it
+        plan = plan_experiment(spec, req.params, req.limits, effort_s=None, graded=False)
     except InfeasiblePlanError:
         plan = None
     if progress is not None:
