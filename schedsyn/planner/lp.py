@@ -48,7 +48,6 @@ KNOT_TOL_C = 0.25
 #: centre) may pass, degC/min; the bands are spaced by twice this more than delta.
 ROBUST_SLACK_C_PER_MIN = 0.05
 
-#: Clarabel's answers, by what they mean for the planner.
 #: Clarabel's KKT factorisation: qdldl, single-threaded. Its default ("auto") chose the
 #: multi-threaded faer for the whole-programme LPs, which took 3-4x longer on a 2-core
 #: machine (``scripts/bench_lp.py``), and threads would fight the campaign's processes.
@@ -57,6 +56,7 @@ CLARABEL_KKT_METHOD = "qdldl"
 SOLVER_OPTIONS: dict[str, dict[str, Any]] = {
     cp.CLARABEL: {"direct_solve_method": CLARABEL_KKT_METHOD}
 }
+#: Clarabel's answers, by what they mean for the planner.
 _CLARABEL_OK = {"Solved": "optimal", "AlmostSolved": "inaccurate"}
 _CLARABEL_INFEASIBLE = ("PrimalInfeasible", "AlmostPrimalInfeasible")
 #: How many solver-failure messages a plan keeps (the count is kept in full).
@@ -542,7 +542,7 @@ class SubLP:
         # counted as solved either way: the effort limit cuts where it did, only sooner
         _count_work(int(np.count_nonzero(a)))
         if bounds_prove_infeasible(a, b, n_eq, self.n, self.ctx.limits):
-            # most probes of a transition too short to reach the window end here
+            # most probes of a transition too short to reach the window in time end here
             self.ctx.stats.record("infeasible", 0.0)
             self.ctx.stats.infeasible_by_bounds += 1
             return None
