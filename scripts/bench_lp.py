@@ -3,14 +3,17 @@
 Two choices made in ``schedsyn.planner.lp``, each timed against its alternative in the
 same run, on the paper's experiments (``--experiments``, default all four):
 
-* **Clarabel's KKT factorisation** for the whole-programme LPs (the polish): the
-  programme's margin LP, captured from a real plan, solved through cvxpy with
-  ``direct_solve_method`` "qdldl" (schedsyn's choice), "auto" (Clarabel's default) and
-  "faer" on one thread; median CPU and wall time of ``--runs`` solves each.
+* **Clarabel's KKT factorisation** for the whole-programme LPs: the polish
+  (:func:`~schedsyn.planner.polish.polish_tied`: the margin LP, then the fewest-changes
+  LP) of the structure a real plan found, with ``direct_solve_method`` "qdldl"
+  (schedsyn's :data:`~schedsyn.planner.lp.CLARABEL_SETTINGS`), "auto" (Clarabel's
+  default) and "faer" on one thread; median CPU and wall time of ``--runs`` runs each,
+  and the margins each reaches.
 * **The plan as a whole** with each combination of the bounds proof
   (:func:`~schedsyn.planner.lp.bounds_prove_infeasible`, on/off) and the KKT method
   (qdldl/auto): CPU and wall time, LP solves, the share the bounds proved infeasible,
-  and whether the plan is the same as schedsyn's (durations and rates).
+  the LP work (constraint nonzeros, the effort limit's measure) done per CPU second, and
+  whether the plan is the same as schedsyn's (durations and rates).
 
 CPU time is the process's (the machine may be shared; wall time is shown beside it).
 Writes ``out/bench_lp.csv`` and prints markdown tables. Usage::
@@ -26,7 +29,6 @@ import statistics
 import time
 from pathlib import Path
 
-import cvxpy as cp
 import numpy as np
 import pandas as pd
 
@@ -70,45 +72,25 @@ def _patched(obj, name, value):
         setattr(obj, name, old)
 
 
-def margin_lp(ctx, structure) -> cp.Problem:
-    """The polish's margin LP, built as :func:`~schedsyn.planner.polish.polish_tied` does."""
-    lp = polish_module.whole_lp(ctx, structure.windows, structure.n_seg, extra=2)
-    lim = ctx.limits
-    x = cp.Variable(lp.n + 2)
-    cons = [
-        np.vstack(lp.g_rows) @ x <= np.concatenate(lp.h_rows),
-        x[: lp.n] >= lim.rate_min_c_per_min,
-        x[: lp.n] <= lim.rate_max_c_per_min,
-        x[-2] >= 0,
-        x[-2] <= polish_module.MARGIN_G_CAP_C_PER_MIN,
-        x[-1] >= 0,
-        x[-1] <= polish_module.MARGIN_T_CAP_C,
-    ]
-    if lp.e_rows:
-        cons.append(np.vstack(lp.e_rows) @ x == np.concatenate(lp.f_rows))
-    g_cap, t_cap = polish_module.MARGIN_G_CAP_C_PER_MIN, polish_module.MARGIN_T_CAP_C
-    return cp.Problem(cp.Minimize(-(x[-2] / g_cap + 0.5 * x[-1] / t_cap)), cons)
-
-
 def time_kkt(ctx, structure, runs: int) -> list[dict]:
+    """The polish (its margin LP, then its fewest-changes LP) under each KKT method."""
     rows = []
-    for method, opts in KKT_METHODS.items():
-        cpu, wall, value = [], [], None
-        for _ in range(runs):
-            prob = margin_lp(ctx, structure)  # fresh: no cvxpy cache between runs
-            prob.get_problem_data(cp.CLARABEL)
-            c0, w0 = time.process_time(), time.perf_counter()
-            prob.solve(solver=cp.CLARABEL, **opts)
-            cpu.append(time.process_time() - c0)
-            wall.append(time.perf_counter() - w0)
-            value = prob.value
+    for method, settings in KKT_METHODS.items():
+        cpu, wall = [], []
+        with _patched(lp_module, "CLARABEL_SETTINGS", settings):
+            for _ in range(runs):
+                c0, w0 = time.process_time(), time.perf_counter()
+                res = polish_module.polish_tied(ctx, structure, frozenset())
+                cpu.append(time.process_time() - c0)
+                wall.append(time.perf_counter() - w0)
         rows.append(
             {
                 "method": method,
+                "constraints": ctx.size["constraints"],
                 "cpu_s": statistics.median(cpu),
                 "wall_s": statistics.median(wall),
-                "objective": value,
-                "status": prob.status,
+                "margin_g_c_per_min": None if res is None else res[1],
+                "margin_t_c": None if res is None else res[2],
             }
         )
     return rows
@@ -118,14 +100,13 @@ def plan_with(spec, params, limits, bounds: bool, kkt: str):
     patches = contextlib.ExitStack()
     if not bounds:
         patches.enter_context(_patched(lp_module, "bounds_prove_infeasible", lambda *a: False))
-    patches.enter_context(_patched(lp_module, "CLARABEL_KKT_METHOD", kkt))
-    patches.enter_context(
-        _patched(lp_module, "SOLVER_OPTIONS", {cp.CLARABEL: {"direct_solve_method": kkt}})
-    )
+    patches.enter_context(_patched(lp_module, "CLARABEL_SETTINGS", KKT_METHODS[kkt]))
     with patches:
-        c0, w0 = time.process_time(), time.perf_counter()
+        n0, c0, w0 = lp_module.lp_nonzeros_solved(), time.process_time(), time.perf_counter()
         plan = plan_experiment(spec, params, limits)
-        return plan, time.process_time() - c0, time.perf_counter() - w0
+        cpu = time.process_time() - c0
+        work = lp_module.lp_nonzeros_solved() - n0
+        return plan, cpu, time.perf_counter() - w0, work
 
 
 def markdown(frame: pd.DataFrame) -> str:
@@ -144,7 +125,7 @@ def markdown(frame: pd.DataFrame) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--experiments", nargs="*", default=None, help="names (default: all)")
-    ap.add_argument("--runs", type=int, default=5, help="solves per KKT method (median)")
+    ap.add_argument("--runs", type=int, default=5, help="polish runs per KKT method (median)")
     ap.add_argument("--out", default="out")
     ns = ap.parse_args()
     cfg = default_campaign()
@@ -158,19 +139,15 @@ def main() -> None:
     for spec in specs:
         print(f"{spec.name}: capturing the whole-programme LP", flush=True)
         ctx, structure = capture_polish(spec, cfg.params, cfg.limits)
-        size = sum(
-            r.shape[0]
-            for r in polish_module.whole_lp(ctx, structure.windows, structure.n_seg, 2).g_rows
-        )
         for row in time_kkt(ctx, structure, ns.runs):
-            kkt_rows.append({"experiment": spec.name, "rows": size, **row})
+            kkt_rows.append({"experiment": spec.name, **row})
         reference = None
         for bounds, kkt in ((True, "qdldl"), (False, "qdldl"), (True, "auto"), (False, "auto")):
             print(
                 f"{spec.name}: planning, bounds proof {'on' if bounds else 'off'}, KKT {kkt}",
                 flush=True,
             )
-            plan, cpu, wall = plan_with(spec, cfg.params, cfg.limits, bounds, kkt)
+            plan, cpu, wall, work = plan_with(spec, cfg.params, cfg.limits, bounds, kkt)
             if reference is None:
                 reference = plan
             same = bool(
@@ -189,6 +166,8 @@ def main() -> None:
                     "lp_solves": plan.lp["lp_solves"],
                     "infeasible": plan.lp["infeasible"],
                     "infeasible_by_bounds": plan.lp["infeasible_by_bounds"],
+                    # the effort limit's unit (core.LP_NONZEROS_PER_EFFORT_S) in CPU time
+                    "lp_nonzeros_per_cpu_s": work / cpu,
                     "status": plan.status,
                     "duration_min": plan.duration_min,
                     "same_plan_as_first": same,
@@ -202,7 +181,7 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     write_frame_atomic(out / "bench_lp_kkt.csv", kkt_t)
     write_frame_atomic(out / "bench_lp.csv", plan_t)
-    print("\nwhole-programme margin LP, median of", ns.runs, "solves:\n")
+    print("\nwhole-programme polish (two LPs), median of", ns.runs, "runs:\n")
     print(markdown(kkt_t))
     print("\nwhole plans:\n")
     print(markdown(plan_t))

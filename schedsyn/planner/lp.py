@@ -48,14 +48,11 @@ KNOT_TOL_C = 0.25
 #: centre) may pass, degC/min; the bands are spaced by twice this more than delta.
 ROBUST_SLACK_C_PER_MIN = 0.05
 
-#: Clarabel's KKT factorisation: qdldl, single-threaded. Its default ("auto") chose the
+#: Clarabel's settings beyond its defaults, for every LP (directly and through cvxpy): its
+#: KKT systems factorised by qdldl, single-threaded. Its default ("auto") chose the
 #: multi-threaded faer for the whole-programme LPs, which took 3-4x longer on a 2-core
 #: machine (``scripts/bench_lp.py``), and threads would fight the campaign's processes.
-CLARABEL_KKT_METHOD = "qdldl"
-#: Options passed to each solver through cvxpy.
-SOLVER_OPTIONS: dict[str, dict[str, Any]] = {
-    cp.CLARABEL: {"direct_solve_method": CLARABEL_KKT_METHOD}
-}
+CLARABEL_SETTINGS: dict[str, Any] = {"direct_solve_method": "qdldl"}
 #: Clarabel's answers, by what they mean for the planner.
 _CLARABEL_OK = {"Solved": "optimal", "AlmostSolved": "inaccurate"}
 _CLARABEL_INFEASIBLE = ("PrimalInfeasible", "AlmostPrimalInfeasible")
@@ -297,7 +294,8 @@ class Context:
                 quiet = quiet_stdout_fd() if solver == cp.HIGHS else contextlib.nullcontext()
                 with warnings.catch_warnings(), quiet:
                     warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-                    problem.solve(solver=solver, **SOLVER_OPTIONS.get(solver, {}))
+                    opts = CLARABEL_SETTINGS if solver == cp.CLARABEL else {}
+                    problem.solve(solver=solver, **opts)
                 status = problem.status
             except cp.error.SolverError as exc:
                 status, message = None, f"{solver}: {exc}"
@@ -552,7 +550,8 @@ class SubLP:
         ]
         settings = clarabel.DefaultSettings()
         settings.verbose = False
-        settings.direct_solve_method = CLARABEL_KKT_METHOD
+        for name, value in CLARABEL_SETTINGS.items():
+            setattr(settings, name, value)
         tic = time.perf_counter()
         sol = clarabel.DefaultSolver(
             sparse.csc_matrix((m + n_t, m + n_t)), q, a_sparse, b, cones, settings
