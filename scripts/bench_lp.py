@@ -128,6 +128,8 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=5, help="polish runs per KKT method (median)")
     ap.add_argument("--out", default="out")
     ns = ap.parse_args()
+    if ns.runs < 1:
+        ap.error(f"--runs must be at least 1, got {ns.runs}")
     cfg = default_campaign()
     specs = [e for e in cfg.experiments if ns.experiments is None or e.name in ns.experiments]
     if not specs:

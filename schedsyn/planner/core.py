@@ -51,8 +51,8 @@ EFFORT_S = 45.0
 #: 2-core machine of 2026-11-25, one core: 345 000 per CPU second planning W1 for 8
 #: levels (540-min LPs), 450 000 for [-10, 0] degC at 10 levels in 240 min. Probes that
 #: the rate limits prove infeasible count as solved (:func:`.lp.bounds_prove_infeasible`),
-#: so the cuts stayed where they were while the work got cheaper: 0.55-1.05 million per
-#: CPU second since (W4, [-10, 0] degC at 10 levels; 2026-11-26, machine loaded).
+#: so the cuts stayed where they were while the work got cheaper: 0.55-0.99 million per
+#: CPU second since (W2, W4: ``scripts/bench_lp.py``).
 LP_NONZEROS_PER_EFFORT_S = 400_000
 #: Device excess (degC) below which rounding is not worth a re-polish.
 EXCESS_TOL_C = 1e-6
