@@ -51,6 +51,30 @@ PLANNER_CORE = "schedsyn/planner/core.py"
 
 MUTATIONS: tuple[Mutation, ...] = (
     Mutation(
+        "sweep-memo-ignores-the-segment-limit",
+        "schedsyn/planner/search.py",
+        "key = (u_fixed.tobytes(), d, band, max_seg, slow)",
+        "key = (u_fixed.tobytes(), d, band, slow)",
+        ("tests/test_sweep_memo.py",),
+        "a sweep searched within a longer limit is reused within a shorter one",
+    ),
+    Mutation(
+        "sweep-memo-ignores-slow",
+        "schedsyn/planner/search.py",
+        "key = (u_fixed.tobytes(), d, band, max_seg, slow)",
+        "key = (u_fixed.tobytes(), d, band, max_seg)",
+        ("tests/test_sweep_memo.py",),
+        "the slow retry gets the usual timings' failure back and never tries slow timings",
+    ),
+    Mutation(
+        "sweep-memo-counts-no-work",
+        "schedsyn/planner/search.py",
+        "        count_work(hit[1])\n",
+        "",
+        ("tests/test_sweep_memo.py",),
+        "a reused sweep counts no LP work: an effort limit would cut later than it did",
+    ),
+    Mutation(
         "bounds-proof-wrong-side",
         "schedsyn/planner/lp.py",
         "least, most = lo * up + hi * down, hi * up + lo * down",

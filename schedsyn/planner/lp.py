@@ -74,7 +74,7 @@ def lp_nonzeros_solved() -> int:
     return int(getattr(_work, "nonzeros", 0))
 
 
-def _count_work(nonzeros: int) -> None:
+def count_work(nonzeros: int) -> None:
     _work.nonzeros = lp_nonzeros_solved() + int(nonzeros)
 
 
@@ -123,6 +123,9 @@ class LpStats:
     infeasible: int = 0
     #: of the infeasible: proven by one row and the rate bounds, without a solver
     infeasible_by_bounds: int = 0
+    #: sweep placements answered from an earlier identical placement (the slow retry
+    #: re-places the sweeps before the one that got stuck): no LP solved for them
+    sweeps_reused: int = 0
     failed: int = 0
     fallbacks: int = 0
     messages: list[str] = field(default_factory=list)
@@ -141,6 +144,7 @@ class LpStats:
             "inaccurate": self.inaccurate,
             "infeasible": self.infeasible,
             "infeasible_by_bounds": self.infeasible_by_bounds,
+            "sweeps_reused": self.sweeps_reused,
             "solver_failures": self.failed,
             "highs_fallbacks": self.fallbacks,
             "lp_seconds": round(self.seconds, 3),
@@ -271,6 +275,8 @@ class Context:
         ref = responses.scenarios[0].params
         self.offsets_c = [sc.params.dt0_c - ref.dt0_c for sc in responses.scenarios]
         self.size = {"variables": 0, "constraints": 0}
+        #: placements of single sweeps already searched (see :func:`.search.greedy`)
+        self.sweep_memo: dict[tuple, tuple[Any, int]] = {}
 
     @property
     def robust(self) -> bool:
@@ -538,7 +544,7 @@ class SubLP:
         q = np.concatenate((np.asarray(cost, dtype=float), np.full(n_t, float(l1_weight))))
         self.last_size = {"variables": int(m + n_t), "constraints": int(a.shape[0])}
         # counted as solved either way: the effort limit cuts where it did, only sooner
-        _count_work(int(np.count_nonzero(a)))
+        count_work(int(np.count_nonzero(a)))
         if bounds_prove_infeasible(a, b, n_eq, self.n, self.ctx.limits):
             # most probes of a transition too short to reach the window in time end here
             self.ctx.stats.record("infeasible", 0.0)
@@ -610,7 +616,7 @@ class SubLP:
         if extra_constraints is not None:
             cons += extra_constraints(x)
         prob = cp.Problem(cp.Minimize(objective(x)), cons)
-        _count_work(int(np.count_nonzero(g)) + sum(int(np.count_nonzero(e)) for e in self.e_rows))
+        count_work(int(np.count_nonzero(g)) + sum(int(np.count_nonzero(e)) for e in self.e_rows))
         ok = self.ctx.solve_cvxpy(prob)
         self.last_size = {"variables": int(x.size), "constraints": int(h.size + 2 * self.n)}
         if not ok or x.value is None:

@@ -39,6 +39,8 @@ from .lp import (
     Responses,
     SubLP,
     Window,
+    count_work,
+    lp_nonzeros_solved,
 )
 from .request import Continuation, ExperimentSpec, Scenario, first_directions, sweep_directions
 
@@ -390,6 +392,29 @@ def return_to_end(ctx: Context, u_fixed: np.ndarray, max_seg: int) -> np.ndarray
     return None
 
 
+def _place_sweep_once(
+    ctx: Context, u_fixed: np.ndarray, d: int, band: Band, max_seg: int, slow: bool
+) -> tuple[np.ndarray, Window] | None:
+    """:func:`place_sweep`, searched once per synthesis for the same arguments.
+
+    The slow retry runs a stuck candidate's greedy again, and its sweeps before the stuck
+    one (and the stuck one's usual timings) are the same searches as before: the same
+    fixed rates, band and segment limit give the same answer (the LPs are
+    deterministic). A repeat returns the earlier answer and counts the earlier LP work
+    again (:func:`~.lp.lp_nonzeros_solved`), so an effort limit cuts where it did.
+    """
+    key = (u_fixed.tobytes(), d, band, max_seg, slow)
+    hit = ctx.sweep_memo.get(key)
+    if hit is not None:
+        ctx.stats.sweeps_reused += 1
+        count_work(hit[1])
+        return hit[0]
+    work0 = lp_nonzeros_solved()
+    res = place_sweep(ctx, u_fixed, d, band, max_seg, slow=slow)
+    ctx.sweep_memo[key] = (res, lp_nonzeros_solved() - work0)
+    return res
+
+
 def greedy(
     ctx: Context,
     directions: list[int],
@@ -407,11 +432,11 @@ def greedy(
     u_fixed = ctx.responses.fixed_rates.copy()
     windows: list[Window] = []
     for k, (d, band) in enumerate(zip(directions, sweep_bands, strict=True)):
-        res = place_sweep(ctx, u_fixed, d, band, max_seg)
+        res = _place_sweep_once(ctx, u_fixed, d, band, max_seg, slow=False)
         if res is None and slow_retry:
             # long segments cannot hold a sweep high in its band just after a turnaround
             # (the rate changes only every segment): time it near the bottom of the band
-            res = place_sweep(ctx, u_fixed, d, band, max_seg, slow=True)
+            res = _place_sweep_once(ctx, u_fixed, d, band, max_seg, slow=True)
         if res is None:
             where = "cooling" if d < 0 else "heating"
             return None, (
