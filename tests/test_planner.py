@@ -228,6 +228,28 @@ def test_robust_plan_reports_its_scenarios_and_spaces_levels_wider(small_plan, s
     assert len(small_robust_plan.scenarios) == 7  # box centre + 3 tau x 2 dT0
 
 
+def test_a_fallback_that_holds_on_the_whole_box_is_called_complete_for_it(monkeypatch):
+    """When the search for the whole box fails but the fallback's programme holds at every
+    grid point after all, the plan is complete and its notes say so, instead of the
+    fallback's note that no programme for the box was found. (The ladder is cut short
+    here: the nominal fallback is returned at once, for a box small enough to hold.)"""
+    from schedsyn.model import FirstOrderLag
+    from schedsyn.planner import core
+    from schedsyn.planner.search import synthesise
+
+    def nominal_at_once(spec, params, limits, tau_s, dt0_c, progress, stats):
+        search = synthesise(spec, [params], limits, [FirstOrderLag(params)], progress, stats)
+        return search, ["FALLBACK: planned at the nominal point (test)"], "nominal point"
+
+    monkeypatch.setattr(core, "search_robust", nominal_at_once)
+    box = dict(robust_tau_s=(2380.0, 2420.0), robust_dt0_c=(2.9, 3.1))
+    plan = plan_experiment(ExperimentSpec(**SMALL), limits=SMALL_LIMITS, **box)
+    assert plan.box_check["holds"] and plan.complete
+    assert plan.robust_fallback == "nominal point"
+    assert not any(n.startswith("FALLBACK") for n in plan.notes), plan.notes
+    assert any("holds at all 63 points" in n for n in plan.notes), plan.notes
+
+
 def test_too_wide_a_robust_box_says_which_part_is_covered(tmp_path):
     """A box too wide for the time limit: the planner falls back (inner half or quarter of
     the box, else the nominal point), never calls the plan complete, and names the part

@@ -28,7 +28,7 @@ from .informative import L1_WEIGHT_LADDER, informative_rates
 from .lp import Context, LpStats, lp_nonzeros_solved, require_solvable
 from .polish import honour_step_limits, merge_small_changes, polish, step_runs
 from .request import Continuation, ExperimentSpec, check_request
-from .robust import box_note, box_scenarios, search_robust, verify_robust
+from .robust import box_note, box_scenarios, held_note, search_robust, verify_robust
 from .search import Search, Structure, split_note, subregions, synthesise, truncate
 
 #: Rates closer than this are one step of the exported table, degC/min.
@@ -501,6 +501,10 @@ def _plan(
         if not box_check["holds"]:
             complete = False
             notes.append(box_note(box_check))
+        elif fallback is not None:
+            # the search for the whole box failed, yet the fallback's programme holds on it
+            notes = [n for n in notes if not n.startswith("FALLBACK")]
+            notes.append(held_note(fallback, box_check))
     if stats.failed:
         notes.append(
             f"{stats.failed} of {stats.solves} LP solves failed numerically in both solvers "

@@ -144,6 +144,16 @@ def box_note(box_check: dict) -> str:
     )
 
 
+def held_note(fallback: str, box_check: dict) -> str:
+    """A fallback's programme that holds on the whole box after all: the note that says so
+    (instead of the fallback's, which said no programme for the whole box was found)."""
+    return (
+        f"no programme was found by the search for the whole robust box, but the one "
+        f"planned for its fallback ({fallback}) holds at all {box_check['grid_points']} "
+        "points of the box's grid (dense check): complete for the whole box"
+    )
+
+
 def robustness_price(
     nominal: Plan,
     robust: Plan,
