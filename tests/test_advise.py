@@ -133,7 +133,12 @@ def test_advised_change_plans_complete_and_one_step_less_does_not(
     if knob == "levels":
         less = {"levels_required": item.failing_value}
     spec_no, lim_no = _request(spec, limits, less)
-    assert _fails(spec_no, lim_no, item.failing_reason)
+    if (spec_no, lim_no) == (spec, limits) and item.failing_reason == "planned":
+        # the request itself, which advise planned and found incomplete: planning it
+        # again here would repeat that very computation
+        assert not advice.complete
+    else:
+        assert _fails(spec_no, lim_no, item.failing_reason)
     # the request itself is less generous still: it fails too
     assert item.current == {"duration": 150.0, "levels": 4.0, "floor": -52.0}[knob]
 
