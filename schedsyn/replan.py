@@ -629,13 +629,8 @@ def _plan_from(
     start: float,
     progress: Callable[[str], None] | None,
     say: Callable[[str], None],
-    graded: bool = True,
 ) -> PlannerAttempt:
-    """Ask the planner for new steps from ``start`` and predict the whole run it returns.
-
-    ``graded=False`` when only a complete rest will be taken: the planner then does not
-    search fewer levels once the missing ones do not fit (see ``plan_experiment``).
-    """
+    """Ask the planner for new steps from ``start`` and predict the whole run it returns."""
     from .errors import InfeasiblePlanError
     from .planner import plan_experiment
 
@@ -649,13 +644,7 @@ def _plan_from(
     tic = time.perf_counter()
     try:
         planned = plan_experiment(
-            spec,
-            params,
-            limits,
-            model=linear,
-            continuation=continuation,
-            progress=progress,
-            graded=graded,
+            spec, params, limits, model=linear, continuation=continuation, progress=progress
         )
     except InfeasiblePlanError as exc:
         return PlannerAttempt(start, None, None, str(exc), time.perf_counter() - tic)
@@ -846,8 +835,7 @@ def replan_run(
         Take new steps only when the whole run they make is predicted complete (for an
         early re-plan, whose model has seen little of the run: an incomplete new rest
         chosen on it can spend time a later, better-informed re-plan would have used
-        better). The planner then searches only for a complete rest (no graded search
-        for fewer levels), which is quicker. Default ``False``: the better run is taken.
+        better). Default ``False``: the better run is taken.
     new_min_coverage : float, share 0..1
         Take new steps that do not complete the run only when it is predicted to cover at
         least this share of the bins (a milder form of ``new_only_if_complete`` for an
@@ -885,7 +873,7 @@ def replan_run(
         before = "completes" if unchanged.complete else f"reaches {unchanged.coverage.coverage:.0%}"
         best: tuple[RunPrediction, Any, float] | None = None
         for start in continuation_starts(request, plan_spec(plan).edge_margin_c):
-            attempt = _plan_from(request, start, progress, say, graded=not new_only_if_complete)
+            attempt = _plan_from(request, start, progress, say)
             attempts.append(attempt)
             planner_s += attempt.planner_s
             if attempt.prediction is not None and (
