@@ -37,23 +37,25 @@ def _structure(s):
 
 
 @pytest.mark.parametrize(
-    "region_c, levels, duration_min, max_candidates",
+    "duration_min, segment_min, max_candidates",
     [
-        # stuck on the last sweep: the retry re-places the first one
-        ((-5.0, 0.0), 2, 80.0, 1),
+        # one candidate, stuck on its last sweep: the retry re-places the first one
+        (80.0, 3.0, 1),
+        # every candidate, all stuck
+        (80.0, 3.0, None),
         # every candidate: one finds a structure too long, and the limit the later
         # candidates (and the retry) search within shrinks to it
-        ((-5.0, 0.0), 2, 80.0, None),
+        (90.0, 5.0, None),
     ],
 )
 def test_a_repeated_sweep_search_gives_the_same_answer_and_counts_the_same_work(
-    monkeypatch, region_c, levels, duration_min, max_candidates
+    monkeypatch, duration_min, segment_min, max_candidates
 ):
-    lo, hi = region_c
-    spec = ExperimentSpec("m", lo, hi, lo - 10.0, hi + 10.0, levels_required=levels)
+    spec = ExperimentSpec("m", -5.0, 0.0, -15.0, 10.0, levels_required=2, segment_min=segment_min)
     limits = Limits(duration_max_min=duration_min)
     found, stats, work = _synthesise(spec, limits, max_candidates)
     assert stats.sweeps_reused > 0  # the retry happened and reused sweeps
+    assert (found.overrun is not None) == (duration_min == 90.0)  # the case is as meant
 
     def every_time(ctx, u_fixed, d, band, max_seg, slow):
         return search_module.place_sweep(ctx, u_fixed, d, band, max_seg, slow=slow)
