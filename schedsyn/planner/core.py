@@ -424,8 +424,27 @@ def _plan(
         return _plan_continued(spec, params, limits, model, continuation, progress, stats, tic)
     if robust:
         params_list = box_scenarios(params, robust_tau_s, robust_dt0_c)
+
+        def holds_on_box(found: Search) -> bool:
+            """The dense box check of the programme ``found`` gives: its structure polished
+            or, when it overran, cut at the limit (as :func:`_fallback` cuts it)."""
+            if found.best is not None:
+                u, _, _ = polish(found.ctx, found.best[0])
+            elif found.overrun is not None:
+                max_seg = int(limits.duration_max_min // spec.segment_min)
+                cut = truncate(found.ctx, found.overrun, max_seg)
+                if cut is None:
+                    return False
+                u = cut.u
+            else:
+                return False
+            programme = operator_programme(u, spec, limits)
+            return bool(
+                verify_robust(programme, spec, params, robust_tau_s, robust_dt0_c, limits)["holds"]
+            )
+
         search, notes, fallback = search_robust(
-            spec, params, limits, robust_tau_s, robust_dt0_c, progress, stats
+            spec, params, limits, robust_tau_s, robust_dt0_c, progress, stats, holds_on_box
         )
     else:
         params_list = [params]

@@ -5,12 +5,14 @@ scenarios together stay linear: the box centre (the reference the sweeps are pla
 three tau values x both ends of the dT0 range (T and g are affine in dT0, so its ends
 bound it; :func:`~.request.robust_scenarios`). A robust plan is verified on a dense grid
 over the whole box (:func:`verify_robust`) and is complete only if coverage holds at every
-grid point. When no programme fits the box, :func:`search_robust` falls back to its inner
-half, its inner quarter, then the nominal point with the widest margins.
+grid point. When no programme fits the box, :func:`search_robust` falls back to the nominal
+point with the widest margins if its programme holds on the box after all, else to the
+box's inner half, its inner quarter, then that nominal plan.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -55,14 +57,43 @@ def search_robust(
     dt0_c: Range,
     progress: Progress,
     stats: LpStats,
+    holds_on_box: Callable[[Search], bool] | None = None,
 ) -> tuple[Search, list[str], str | None]:
     """Search a programme for the whole box, else the fallbacks: the search, notes saying
-    which was used, and the fallback's name (None: the whole box)."""
+    which was used, and the fallback's name (None: the whole box).
+
+    The fallbacks: the nominal plan with the widest margins when ``holds_on_box`` (the
+    dense check of its programme over the box) says it holds after all; else a programme
+    for the box's inner half, then its inner quarter; else that nominal plan. The search
+    is stricter than the dense check (each scenario's windows are placed from the box
+    centre), and the nominal plan is one scenario's search: checked first, it spares the
+    inner boxes' searches and answers for the whole box where they would answer for a part.
+    """
     params_list = box_scenarios(params, tau_s, dt0_c)
     models = [FirstOrderLag(p) for p in params_list]
     search = synthesise(spec, params_list, limits, models, progress, stats)
     if search.best is not None:
         return search, [], None
+    nominal_note = [
+        "FALLBACK: no single programme meeting the target for every scenario of the "
+        "robust box (or its inner half or quarter) was found; planned at the nominal "
+        "point with the widest margins that fit"
+    ]
+    if progress:
+        progress(
+            "no programme fits the robust box; checking the nominal plan with the widest "
+            "margins on it"
+        )
+    spec_margin = replace(spec, objective="margin")
+    margin = synthesise(spec_margin, [params], limits, [FirstOrderLag(params)], progress, stats)
+    if holds_on_box is not None and holds_on_box(margin):
+        note = (
+            "FALLBACK: no single programme meeting the target for every scenario of the "
+            "robust box was found by its search; planned at the nominal point with the "
+            "widest margins that fit, whose programme the dense check finds to hold on the "
+            "whole box (its inner half and quarter were not searched)"
+        )
+        return margin, [note], "nominal point"
     for share, word in INNER_SHARES:
         in_tau, in_dt0 = _inner(tau_s, share), _inner(dt0_c, share)
         if progress:
@@ -85,17 +116,7 @@ def search_robust(
                 ],
                 f"inner {word}",
             )
-    spec_margin = replace(spec, objective="margin")
-    search = synthesise(spec_margin, [params], limits, [FirstOrderLag(params)], progress, stats)
-    return (
-        search,
-        [
-            "FALLBACK: no single programme meeting the target for every scenario of the "
-            "robust box (or its inner half or quarter) was found; planned at the nominal "
-            "point with the widest margins that fit"
-        ],
-        "nominal point",
-    )
+    return margin, nominal_note, "nominal point"
 
 
 def verify_robust(
