@@ -90,8 +90,9 @@ def search_robust(
         note = (
             "FALLBACK: no single programme meeting the target for every scenario of the "
             "robust box was found by its search; planned at the nominal point with the "
-            "widest margins that fit, whose programme the dense check finds to hold on the "
-            "whole box (its inner half and quarter were not searched)"
+            "widest margins that fit, whose programme as first planned (before its steps "
+            "were shaped) held on the whole box by the dense check (its inner half and "
+            "quarter were not searched)"
         )
         return margin, [note], "nominal point"
     for share, word in INNER_SHARES:
