@@ -75,6 +75,34 @@ MUTATIONS: tuple[Mutation, ...] = (
         "a reused sweep counts no LP work: an effort limit would cut later than it did",
     ),
     Mutation(
+        "robust-nominal-check-skipped",
+        "schedsyn/planner/robust.py",
+        "    if holds_on_box is not None and holds_on_box(margin):",
+        "    if False and holds_on_box is not None and holds_on_box(margin):",
+        (
+            "tests/test_planner.py::test_a_nominal_plan_that_holds_on_the_box_spares_the_inner_searches",
+        ),
+        "the inner half and quarter are searched although the nominal plan holds on the box",
+    ),
+    Mutation(
+        "robust-nominal-check-always-holds",
+        "schedsyn/planner/robust.py",
+        "    if holds_on_box is not None and holds_on_box(margin):",
+        "    if holds_on_box is not None:",
+        ("tests/test_planner.py::test_too_wide_a_robust_box_says_which_part_is_covered",),
+        "a nominal plan that does not hold on the box cuts the ladder short",
+    ),
+    Mutation(
+        "robust-nominal-check-refuses-a-cut",
+        PLANNER_CORE,
+        "                u = cut.u\n",
+        "                return False\n",
+        (
+            "tests/test_planner.py::test_a_nominal_plan_that_holds_on_the_box_spares_the_inner_searches",
+        ),
+        "an over-long nominal plan cut at the limit is never checked on the box",
+    ),
+    Mutation(
         "bounds-proof-wrong-side",
         "schedsyn/planner/lp.py",
         "least, most = lo * up + hi * down, hi * up + lo * down",
