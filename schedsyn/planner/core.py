@@ -123,6 +123,15 @@ def _device_excess(limits: Limits, t_lo: float, t_hi: float) -> float:
     return max(limits.device_min_c - t_lo, t_hi - limits.device_max_c)
 
 
+def _cut_at_limit(search: Search, spec: ExperimentSpec, limits: Limits) -> Structure | None:
+    """The search's over-long structure cut to end within the time limit (None: it had
+    none, or no cut returns to the end temperature in time)."""
+    if search.overrun is None:
+        return None
+    max_seg = int(limits.duration_max_min // spec.segment_min)
+    return truncate(search.ctx, search.overrun, max_seg)
+
+
 def _fallback(
     spec: ExperimentSpec,
     limits: Limits,
@@ -136,9 +145,8 @@ def _fallback(
 ) -> _Candidate:
     """Nothing fits in time: the over-long structure cut at the limit, or the widest
     sub-regions that fit; whichever covers most of the region (by the dense check)."""
-    max_seg = int(limits.duration_max_min // spec.segment_min)
     options: list[_Candidate] = []
-    structure = None if search.overrun is None else truncate(search.ctx, search.overrun, max_seg)
+    structure = _cut_at_limit(search, spec, limits)
     if search.overrun is not None and structure is not None:
         options.append(
             _Candidate(
@@ -430,11 +438,7 @@ def _plan(
             or, when it overran, cut at the limit (as :func:`_fallback` cuts it)."""
             if found.best is not None:
                 u, _, _ = polish(found.ctx, found.best[0])
-            elif found.overrun is not None:
-                max_seg = int(limits.duration_max_min // spec.segment_min)
-                cut = truncate(found.ctx, found.overrun, max_seg)
-                if cut is None:
-                    return False
+            elif (cut := _cut_at_limit(found, spec, limits)) is not None:
                 u = cut.u
             else:
                 return False
