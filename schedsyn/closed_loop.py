@@ -5,7 +5,7 @@ effect :func:`schedsyn.discrepancy.diagnose` knows: chamber lag, rate limit, dea
 second time constant, chamber cycling). :func:`run_log` makes the log a run of a
 programme on it produces (sensor noise, 0.01 degC quantisation, ``tk_set_c``, and
 ``tk_air_c`` where the effect shows in the chamber air). :func:`run_loop` cuts that log
-at the re-planning times (after 30 min, after the first hour, then every 90 min), hands
+at the re-planning times (after 15 and 30 min, after the first hour, then every 90 min), hands
 each cut to a re-planner and runs the programme it returns; the final coverage is always
 computed on the true device's dense T and g (0.1 min, :func:`true_coverage`), never on
 estimates.
@@ -125,10 +125,16 @@ def effect_shift_c(device: ModelSpec, programme: Programme, t0_c: float = 20.0) 
     return float(np.max(np.abs(a - b)))
 
 
-#: The early re-planning time, min: once the first transit has been logged (a step test
-#: that already pins tau and dT0 down to about 10 s and 0.05 degC), and while the time
-#: left still holds every sweep a plan from the start would make.
-EARLY_MIN = (30.0,)
+#: The early re-planning times, min: once the first transit has been logged (a step test:
+#: 15 min pin tau down to about 25 s and dT0 to 0.2 degC, 30 min to 10 s and 0.05 degC),
+#: and while the time left still holds every sweep a plan from the start would make. The
+#: re-plan at 15 min comes while the device still rises on the nominal plan's first ramp:
+#: W3 on a device with tau 3000 s, dT0 0 or 3 degC peaks at about 27.5 degC near minute 30,
+#: inside the region, where its own plan heats it beyond 30 degC first; re-planned from
+#: minute 15 the run completes (the chamber heats again in time), from minute 30 it
+#: reaches 97 % and 93 %. The re-plan at 30 min stays for runs whose first 15 min say too
+#: little.
+EARLY_MIN = (15.0, 30.0)
 
 
 def replan_times(
@@ -140,11 +146,12 @@ def replan_times(
     """Re-planning times before ``total_min``: ``early_min`` (each in (0, ``first_min``)),
     then ``first_min`` (after the first hour) and every ``every_min`` after it.
 
-    The early re-plan matters where the device is slower or hotter than the plan's model
+    The early re-plans matter where the device is slower or hotter than the plan's model
     and the plan needs all its time: by minute 60 the nominal plan may have spent its
     first hour on a part of the region the device's own plan would not have, and the
     sweeps still needed no longer fit (W3, tau 2800 s, dT0 5 degC: complete from minute
-    30, 73 % from minute 60).
+    30, 73 % from minute 60; W3, tau 3000 s, dT0 0 degC: complete from minute 15, 97 %
+    from minute 30). See :data:`EARLY_MIN`.
     """
     if not (first_min > 0 and every_min > 0):
         raise ParameterError("first_min and every_min must be > 0 min")

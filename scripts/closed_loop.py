@@ -2,7 +2,7 @@
 
     python scripts/closed_loop.py [--full] [--regions W2 W3] [--tau-s ...] [--dt0-c ...]
         [--effects none chamber_lag ...] [--plan-dir W2=DIR ...] [--true-plans]
-        [--early-min 30] [--jobs N] [--out out/closed_loop]
+        [--early-min 15 30] [--jobs N] [--out out/closed_loop]
 
 For each region (the paper's W2 = [-30, 0] and W3 = [0, 30] with their approximation
 regions) the nominal plan (tau 2400 s, dT0 3 °C, Δ 0.05 °C/min; planned here or read from
@@ -10,8 +10,8 @@ regions) the nominal plan (tau 2400 s, dT0 3 °C, Δ 0.05 °C/min; planned here 
 grid strength (schedsyn.closed_loop.EFFECT_STRENGTHS) at the grid's middle point.
 
 * open loop: the nominal plan unchanged;
-* closed loop: `schedsyn replan` after 30 min (--early-min; none with --early-min and no
-  value), after 60 min, then every 90 min, each time on the log so far and the plan
+* closed loop: `schedsyn replan` after 15 and 30 min (--early-min; none with --early-min
+  and no value), after 60 min, then every 90 min, each time on the log so far and the plan
   folder the previous re-plan wrote (schedsyn.closed_loop.CliReplanner, the command's own
   code path);
 * --true-plans: a plan made for the true device itself ("would a plan for that device be
@@ -257,7 +257,7 @@ def main() -> None:
         nargs="*",
         type=float,
         default=list(EARLY_MIN),
-        help="early re-planning times before the first hour, min (default 30; none: no value)",
+        help="early re-planning times before the first hour, min (default 15 30; none: no value)",
     )
     ap.add_argument("--out", default="out/closed_loop")
     ns = ap.parse_args()

@@ -56,10 +56,11 @@ def test_open_loop_coverage_is_that_of_the_true_device_by_an_ode_and_own_count()
     assert res.replans_at_min == ()
 
 
-def test_replan_times_half_hour_first_hour_then_every_90_min():
-    assert replan_times(535.0) == [30.0, 60.0, 150.0, 240.0, 330.0, 420.0, 510.0]
+def test_replan_times_15_and_30_min_first_hour_then_every_90_min():
+    assert replan_times(535.0) == [15.0, 30.0, 60.0, 150.0, 240.0, 330.0, 420.0, 510.0]
     assert replan_times(150.0, early_min=()) == [60.0]
-    assert replan_times(50.0) == [30.0]
+    assert replan_times(50.0) == [15.0, 30.0]
+    assert replan_times(20.0) == [15.0]
     assert replan_times(300.0, early_min=(45.0, 20.0)) == [20.0, 45.0, 60.0, 150.0, 240.0]
     with pytest.raises(ParameterError):
         replan_times(500.0, every_min=0.0)
@@ -148,7 +149,7 @@ def test_the_closed_loop_re_plans_through_the_command_and_completes_what_open_lo
     closed = run_loop(dev, prog, GRID, LEVELS, DELTA, replanner=replanner)
     assert not open_.complete and closed.complete
     first = next(r for r in replanner.records if r.choice == "new")
-    assert first.at_min in (30.0, 60.0) and first.planner_called
+    assert first.at_min in (15.0, 30.0, 60.0) and first.planner_called
     assert (first.out_dir / "replan.json").is_file() and (
         tmp_path / "work" / f"log_{first.at_min:g}.csv"
     ).is_file()
@@ -197,8 +198,8 @@ def _scipy_levels(prog, dev):
 def test_the_early_re_plan_completes_a_run_that_from_the_first_hour_no_longer_fits(tmp_path):
     """One sweep to a chamber hold at -9 degC and back, a 190 min limit, a device 2.5 degC
     hotter than the plan's model (it turns back inside the region). Re-planned from
-    minute 60 on, the sweeps still needed no longer fit; with the re-plan at 30 min (the
-    default) they do: every bin complete on the true device (scipy, own pass count)."""
+    minute 60 on, the sweeps still needed no longer fit; with a re-plan at 30 min (one of
+    the defaults) they do: every bin complete on the true device (scipy, own pass count)."""
     import json
 
     from test_monitor import write_plan_dir
@@ -221,7 +222,13 @@ def test_the_early_re_plan_completes_a_run_that_from_the_first_hour_no_longer_fi
         replanner=CliReplanner(plan_dir, tmp_path / "a"),
     )
     early = run_loop(
-        dev, prog, GRID, LEVELS, DELTA, replanner=CliReplanner(plan_dir, tmp_path / "b")
+        dev,
+        prog,
+        GRID,
+        LEVELS,
+        DELTA,
+        early_min=(30.0,),
+        replanner=CliReplanner(plan_dir, tmp_path / "b"),
     )
     assert _scipy_levels(prog, dev).min() < LEVELS  # the plan alone
     assert _scipy_levels(late.programme, dev).min() < LEVELS
