@@ -51,6 +51,29 @@ PLANNER_CORE = "schedsyn/planner/core.py"
 
 MUTATIONS: tuple[Mutation, ...] = (
     Mutation(
+        "graded-never-climbs",
+        PLANNER_CORE,
+        "        while k + 1 in fits and attempt(k + 1) is not None:",
+        "        while False and k + 1 in fits and attempt(k + 1) is not None:",
+        (
+            "tests/test_graded_effort.py::"
+            "test_the_graded_search_plans_few_counts_and_finds_the_most_levels",
+        ),
+        "the graded search keeps its first guess without trying one level more",
+    ),
+    Mutation(
+        "graded-answers-one-level-fewer",
+        PLANNER_CORE,
+        "    return None if found is None else _Fewer(k, found, tuple(sorted(tried)))",
+        "    return None if found is None else _Fewer(k - 1, tried.get(k - 1) or found, "
+        "tuple(sorted(tried)))",
+        (
+            "tests/test_graded_effort.py::"
+            "test_the_graded_search_plans_few_counts_and_finds_the_most_levels",
+        ),
+        "the graded answer is one level below the most a complete plan reached",
+    ),
+    Mutation(
         "sweep-memo-ignores-the-segment-limit",
         "schedsyn/planner/search.py",
         "key = (u_fixed.tobytes(), d, band, max_seg, slow)",

@@ -22,15 +22,30 @@ SPEC = ExperimentSpec("E", -10.0, 0.0, -20.0, 10.0, levels_required=10)
 LIMITS = Limits(duration_max_min=240.0)
 
 
-def _spy_searched(mp: pytest.MonkeyPatch) -> list[int]:
-    """The level counts the planner is asked to plan complete-or-nothing, in order."""
-    calls: list[int] = []
+class _Searched(list):
+    """The level counts searched, in order; ``complete[k]``: did the search for k levels
+    find a complete plan (False: it raised or came back incomplete)?"""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.complete: dict[int, bool] = {}
+
+
+def _spy_searched(mp: pytest.MonkeyPatch) -> _Searched:
+    """The level counts the planner is asked to plan complete-or-nothing, in order, and
+    what each search found."""
+    calls = _Searched()
     inner = core._plan
 
     def spy(spec, *args, **kwargs):
-        if kwargs.get("require_complete") and not kwargs.get("graded"):
-            calls.append(spec.levels_required)
-        return inner(spec, *args, **kwargs)
+        if not (kwargs.get("require_complete") and not kwargs.get("graded")):
+            return inner(spec, *args, **kwargs)
+        k = spec.levels_required
+        calls.append(k)
+        calls.complete[k] = False
+        result = inner(spec, *args, **kwargs)
+        calls.complete[k] = bool(result.complete)
+        return result
 
     mp.setattr(core, "_plan", spy)
     return calls
@@ -62,13 +77,10 @@ def test_the_graded_search_plans_few_counts_and_finds_the_most_levels(unlimited,
     check = table_check(plan.programme.to_csv(tmp_path / "g.csv"), (-10.0, 0.0), k)
     assert check["coverage"] == 1.0 and check["min_levels"] >= k
     assert check["duration_min"] <= LIMITS.duration_max_min + 1e-9
-    with pytest.raises(InfeasiblePlanError):  # one more level: no complete plan found
-        plan_experiment(
-            dataclasses.replace(SPEC, levels_required=k + 1),
-            limits=LIMITS,
-            require_complete=True,
-            effort_s=None,
-        )
+    # one more level was searched, with no effort limit, and no complete plan found (the
+    # search for k + 1 on its own, as `plan_experiment(..., require_complete=True)`)
+    assert searched.complete.get(k + 1) is False, (searched, searched.complete)
+    assert searched.complete[k] is True
     note = next(n for n in plan.notes if n.startswith("GRADED"))
     assert f"plans {k} in every bin" in note and "levels searched: " in note
 
