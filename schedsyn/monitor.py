@@ -581,6 +581,19 @@ class MonitorReport:
     def remaining_min(self) -> float:
         return max(self.plan_total_min - self.elapsed_min, 0.0)
 
+    @property
+    def replan_at_min(self) -> float | None:
+        """Where to re-plan the rest from (the last whole minute of the log), when the run
+        is predicted short of its target and time is left; None when it is on track.
+
+        The sooner the better: a re-plan before the device's first turn can still reshape
+        the first sweep (W3 on a device with tau 3000 s: complete re-planned from minute
+        15, 97 % from minute 30; see :data:`schedsyn.closed_loop.EARLY_MIN`)."""
+        if self.predicted.complete or self.remaining_min <= 0.0:
+            return None
+        m = float(math.floor(self.elapsed_min + 1e-9))
+        return m if m > 0.0 else None
+
     def to_frame(self) -> pd.DataFrame:
         """Per-bin status: planned, so far, in progress, predicted; and a one-word status."""
         lo = self.plan.grid.lower_c
@@ -667,6 +680,7 @@ class MonitorReport:
                 "coverage": self.planned.coverage,
                 "min_levels": self.planned.min_levels,
             },
+            "replan_at_min": self.replan_at_min,
             "notes": list(self.notes),
         }
 
@@ -709,6 +723,13 @@ class MonitorReport:
             + self.predicted.summary().replace("degC", "°C")
             + f"; planned {self.planned.coverage:.0%}"
         )
+        m = self.replan_at_min
+        if m is not None:
+            lines.append(
+                f"predicted short of the target: re-plan the rest now (schedsyn replan "
+                f"{self.log_source} {p.path} --at-min {m:g}); the sooner, the more of the "
+                "run a new programme can shape"
+            )
         lines.extend(f"note: {n}" for n in self.notes)
         return "\n".join(lines)
 

@@ -51,6 +51,28 @@ PLANNER_CORE = "schedsyn/planner/core.py"
 
 MUTATIONS: tuple[Mutation, ...] = (
     Mutation(
+        "monitor-never-advises-a-replan",
+        "schedsyn/monitor.py",
+        "        if self.predicted.complete or self.remaining_min <= 0.0:",
+        "        if True:",
+        (
+            "tests/test_monitor.py::"
+            "test_a_run_predicted_short_says_how_to_re_plan_it_and_that_command_runs",
+        ),
+        "a run predicted short of its target gets no re-plan advice",
+    ),
+    Mutation(
+        "monitor-replan-minute-past-the-log",
+        "schedsyn/monitor.py",
+        "        m = float(math.floor(self.elapsed_min + 1e-9))",
+        "        m = float(math.ceil(self.elapsed_min + 1e-9))",
+        (
+            "tests/test_monitor.py::"
+            "test_a_run_predicted_short_says_how_to_re_plan_it_and_that_command_runs",
+        ),
+        "the advised re-plan minute lies past the end of the log",
+    ),
+    Mutation(
         "graded-never-climbs",
         PLANNER_CORE,
         "        while k + 1 in fits and attempt(k + 1) is not None:",

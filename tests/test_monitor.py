@@ -184,6 +184,39 @@ def test_cli_writes_status_and_json(plan_dir, tmp_path, capsys):
     assert "elapsed" in cap.out
 
 
+def test_a_run_predicted_short_says_how_to_re_plan_it_and_that_command_runs(
+    plan_dir, tmp_path, capsys
+):
+    """A device slower and hotter than the plan's model: the prediction falls short, and
+    monitor prints the replan command from the log's last whole minute, which runs as
+    printed. On the plan's own model the run is on track: no such line."""
+    import re
+    import shlex
+
+    slow = run_log(47.5, truth=ThermalParams(3000.0, 6.0))
+    out = tmp_path / "slow" / "mon"
+    out.parent.mkdir()
+    rc, cap = _cli(slow, plan_dir, out, capsys)
+    meta = json.loads((out / "monitor.json").read_text())
+    assert rc == 0 and meta["predicted_if_unchanged"]["complete"] is False
+    assert meta["replan_at_min"] == 47.0
+    (line,) = [x for x in cap.out.splitlines() if "re-plan the rest now" in x]
+    command = re.search(r"\((schedsyn replan [^)]*)\)", line).group(1)
+    assert command.endswith("--at-min 47")
+    rc = main([*shlex.split(command)[1:], "--out", str(tmp_path / "rp")])
+    assert rc in (0, 1)  # 1: the rest is not complete either (it says so)
+    assert "re-planned at minute 47" in capsys.readouterr().out
+    done = json.loads((tmp_path / "rp" / "replan.json").read_text())
+    assert done["at_min"] == 47.0
+
+    on_track = tmp_path / "track" / "mon"
+    on_track.parent.mkdir()
+    rc, cap = _cli(run_log(47.5), plan_dir, on_track, capsys)
+    meta = json.loads((on_track / "monitor.json").read_text())
+    assert meta["predicted_if_unchanged"]["complete"] is True
+    assert meta["replan_at_min"] is None and "re-plan" not in cap.out
+
+
 @pytest.mark.parametrize(
     "change, words",
     [
