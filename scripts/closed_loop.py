@@ -6,8 +6,11 @@
 
 For each region (the paper's W2 = [-30, 0] and W3 = [0, 30] with their approximation
 regions) the nominal plan (tau 2400 s, dT0 3 °C, Δ 0.05 °C/min; planned here or read from
---plan-dir) runs on every true device: each (tau, dT0) of the grid, and each effect at its
-grid strength (schedsyn.closed_loop.EFFECT_STRENGTHS) at the grid's middle point.
+--plan-dir) runs on every true device. Any plan folder a lab made (`schedsyn plan ...
+--out DIR`) runs the same way: `--regions MINE --plan-dir MINE=DIR` (its region, levels,
+delta, limits and start temperature come from the folder): each (tau, dT0) of the grid,
+and each effect at its grid strength (schedsyn.closed_loop.EFFECT_STRENGTHS) at the
+grid's middle point.
 
 * open loop: the nominal plan unchanged;
 * closed loop: `schedsyn replan` after 15 and 30 min (--early-min; none with --early-min
@@ -83,7 +86,8 @@ def one_device(
     dev = true_device(tau_s, dt0_c, effect)
     rec = read_plan_dir(plan_dir)
     grid, req, delta = rec.grid, rec.levels_required, rec.delta_c_per_min
-    open_ = run_loop(dev, rec.programme, grid, req, delta, seed=seed)
+    t0_c = rec.limits.t_init_c
+    open_ = run_loop(dev, rec.programme, grid, req, delta, seed=seed, t0_c=t0_c)
     with tempfile.TemporaryDirectory(prefix="closed_loop_") as work:
         replanner = CliReplanner(plan_dir, work)
         tic = time.perf_counter()
@@ -97,6 +101,7 @@ def one_device(
                 replanner=replanner,
                 seed=seed,
                 early_min=early,
+                t0_c=t0_c,
             )
             error = ""
         except SchedsynError as exc:  # reported in the table, the open loop stands
@@ -244,7 +249,12 @@ def write_tables(
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--full", action="store_true", help="the issue's whole grid (about an hour)")
-    ap.add_argument("--regions", nargs="+", default=["W2", "W3"], choices=sorted(REGIONS))
+    ap.add_argument(
+        "--regions",
+        nargs="+",
+        default=["W2", "W3"],
+        help="W2 and/or W3 (planned here), or the NAME of any --plan-dir NAME=DIR",
+    )
     ap.add_argument("--tau-s", nargs="+", type=float, default=None)
     ap.add_argument("--dt0-c", nargs="+", type=float, default=None)
     ap.add_argument("--effects", nargs="+", default=None, help="none and/or effect names")
@@ -267,7 +277,15 @@ def main() -> None:
     effects = ns.effects or (["none", *EFFECT_STRENGTHS] if ns.full else ["none"])
     out = Path(ns.out)
     early = tuple(ns.early_min)
+    if any("=" not in p for p in ns.plan_dir):
+        ap.error("--plan-dir takes NAME=DIR (the plan folder of schedsyn plan/campaign)")
     plan_dirs = dict(p.split("=", 1) for p in ns.plan_dir)
+    unknown = [r for r in ns.regions if r not in REGIONS and r not in plan_dirs]
+    if unknown:
+        ap.error(
+            f"--regions {' '.join(unknown)}: not W2 or W3 and no --plan-dir "
+            f"{unknown[0]}=DIR given for it"
+        )
     jobs = []
     for name in ns.regions:
         folder = str(nominal_plan_dir(name, plan_dirs, out))

@@ -235,3 +235,40 @@ def test_the_early_re_plan_completes_a_run_that_from_the_first_hour_no_longer_fi
     assert _scipy_levels(early.programme, dev).min() >= LEVELS
     assert early.programme.total_min <= 190.0
     assert late.replans_at_min[0] == 60.0 and early.replans_at_min[:2] == (30.0, 60.0)
+
+
+def test_the_script_runs_a_labs_own_plan_folder_and_refuses_an_unknown_name(tmp_path):
+    """scripts/closed_loop.py on a plan folder that is neither W2 nor W3 (a hand-made
+    one: region [-5, 5] degC, 3 levels): its open-loop coverage is the one run_loop gives
+    for the same device and folder, and a name with no folder is a one-line error."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import pandas as pd
+    from test_monitor import write_plan_dir
+
+    script = Path(__file__).resolve().parents[1] / "scripts" / "closed_loop.py"
+    plan_dir = write_plan_dir(tmp_path / "plan")
+    out = tmp_path / "out"
+    base = [sys.executable, str(script), "--tau-s", "2900", "--dt0-c", "1", "--effects", "none"]
+    proc = subprocess.run(
+        [*base, "--regions", "MINE", "--plan-dir", f"MINE={plan_dir}", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    (row,) = pd.read_csv(out / "closed_loop.csv").to_dict("records")
+    assert row["region"] == "MINE" and row["tau_s"] == 2900.0 and row["dt0_c"] == 1.0
+    open_ = run_loop(true_device(2900.0, 1.0), plan_programme(), GRID, LEVELS, DELTA)
+    assert row["open_coverage"] == pytest.approx(open_.coverage.coverage)
+    assert row["closed_coverage"] >= row["open_coverage"]
+    bad = subprocess.run(
+        [*base, "--regions", "OTHER", "--out", str(tmp_path / "x")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert bad.returncode == 2 and "OTHER" in bad.stderr and "--plan-dir" in bad.stderr
+    assert not (tmp_path / "x").exists()
