@@ -60,7 +60,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -506,6 +506,72 @@ def predict_run(request: ReplanRequest, programme: Programme) -> RunPrediction:
     return RunPrediction(programme, cov, lo, hi, tuple(problems))
 
 
+#: A re-planned run is also predicted at the corners of the identified model's box: tau and
+#: dT0 each this many standard deviations either side of the estimate.
+UNCERTAINTY_SIGMAS = 2.0
+
+
+@dataclass(frozen=True, slots=True)
+class UncertaintyCheck:
+    """The chosen run predicted at the four corners of the identified model's box
+    (``tau_s`` and ``dt0_c`` ranges, ± ``sigmas`` standard deviations; tau kept above a
+    tenth of its estimate): the worst corner's coverage and where it is. An early re-plan
+    rests on a young estimate (5 min of a W3 log: tau ± 200 s); where the run does not
+    complete at every corner, a later re-plan, on a longer log, should look again."""
+
+    sigmas: float
+    tau_s: tuple[float, float]
+    dt0_c: tuple[float, float]
+    worst: RunPrediction
+    worst_tau_s: float
+    worst_dt0_c: float
+    complete_everywhere: bool
+
+    def to_dict(self) -> dict[str, Any]:
+        c = self.worst.coverage
+        return {
+            "sigmas": self.sigmas,
+            "tau_s": list(self.tau_s),
+            "dt0_c": list(self.dt0_c),
+            "complete_at_every_corner": self.complete_everywhere,
+            "worst_coverage": c.coverage,
+            "worst_min_levels": c.min_levels,
+            "worst_tau_s": self.worst_tau_s,
+            "worst_dt0_c": self.worst_dt0_c,
+        }
+
+    def line(self) -> str:
+        box = (
+            f"on the identified model's ±{self.sigmas:g} sigma box (tau {self.tau_s[0]:.0f}"
+            f"..{self.tau_s[1]:.0f} s, dT0 {self.dt0_c[0]:.2f}..{self.dt0_c[1]:.2f} °C)"
+        )
+        if self.complete_everywhere:
+            return f"{box}: complete at every corner"
+        c = self.worst.coverage
+        return (
+            f"{box}: worst {c.coverage:.0%} (min {c.min_levels} levels) at tau "
+            f"{self.worst_tau_s:.0f} s, dT0 {self.worst_dt0_c:.2f} °C; re-plan again once "
+            "the log has pinned the model down"
+        )
+
+
+def check_uncertainty(
+    request: ReplanRequest, programme: Programme, sigmas: float = UNCERTAINTY_SIGMAS
+) -> UncertaintyCheck:
+    """``programme`` (the whole run) predicted as :func:`predict_run` does, with the
+    request's model at each corner of the identified box (the effect, if any, kept)."""
+    i, m = request.identified, request.model
+    tau = (max(m.tau_s - sigmas * i.tau_std_s, 0.1 * m.tau_s), m.tau_s + sigmas * i.tau_std_s)
+    dt0 = (m.dt0_c - sigmas * i.dt0_std_c, m.dt0_c + sigmas * i.dt0_std_c)
+    corners = [
+        (predict_run(replace(request, model=replace(m, tau_s=t, dt0_c=d)), programme), t, d)
+        for t in tau
+        for d in dt0
+    ]
+    worst, wt, wd = min(corners, key=lambda c: c[0].preference())
+    return UncertaintyCheck(sigmas, tau, dt0, worst, wt, wd, all(c[0].complete for c in corners))
+
+
 def sweep_end_min(request: ReplanRequest, edge_margin_c: float) -> float | None:
     """The first whole minute from ``M`` at which the device, going on with the plan, is
     outside the working region by ``edge_margin_c`` (``M`` itself if it already is).
@@ -677,6 +743,7 @@ class ReplanResult:
     replan_s: float = 0.0
     planner_s: float = 0.0
     attempts: tuple[PlannerAttempt, ...] = ()
+    uncertainty: UncertaintyCheck | None = None
 
     @property
     def programme(self) -> Programme:
@@ -743,6 +810,7 @@ class ReplanResult:
                 "new_steps_from_min": self.new_steps_from_min,
                 "replan_s": self.replan_s,
                 "planner_s": self.planner_s,
+                "uncertainty_box": None if self.uncertainty is None else self.uncertainty.to_dict(),
             }
         )
         return json_safe(out)
@@ -787,6 +855,8 @@ class ReplanResult:
                 + (f" and {len(short) - 10} more" if len(short) > 10 else "")
             )
         lines.extend(f"problem: {x}" for x in self.prediction.problems)
+        if self.uncertainty is not None:
+            lines.append(self.uncertainty.line())
         lines.extend(f"note: {n}" for n in r.notes)
         return "\n".join(lines)
 
@@ -934,6 +1004,7 @@ def replan_run(
         replan_s=time.perf_counter() - tic,
         planner_s=planner_s,
         attempts=tuple(attempts),
+        uncertainty=check_uncertainty(request, chosen.programme),
     )
 
 

@@ -51,6 +51,29 @@ PLANNER_CORE = "schedsyn/planner/core.py"
 
 MUTATIONS: tuple[Mutation, ...] = (
     Mutation(
+        "uncertainty-reports-the-best-corner",
+        "schedsyn/replan.py",
+        "    worst, wt, wd = min(corners, key=lambda c: c[0].preference())",
+        "    worst, wt, wd = max(corners, key=lambda c: c[0].preference())",
+        (
+            "tests/test_replan.py::"
+            "test_the_run_is_checked_at_the_corners_of_the_identified_box_as_scipy_counts_it",
+        ),
+        "the uncertainty check reports the best corner of the box as its worst",
+    ),
+    Mutation(
+        "uncertainty-dt0-not-varied",
+        "schedsyn/replan.py",
+        "        (predict_run(replace(request, model=replace(m, tau_s=t, dt0_c=d)), "
+        "programme), t, d)",
+        "        (predict_run(replace(request, model=replace(m, tau_s=t)), programme), t, d)",
+        (
+            "tests/test_replan.py::"
+            "test_the_run_is_checked_at_the_corners_of_the_identified_box_as_scipy_counts_it",
+        ),
+        "the corners of the uncertainty box vary tau only",
+    ),
+    Mutation(
         "monitor-never-advises-a-replan",
         "schedsyn/monitor.py",
         "        if self.predicted.complete or self.remaining_min <= 0.0:",

@@ -23,6 +23,7 @@ from schedsyn.monitor import read_plan_dir
 from schedsyn.programme import Programme
 from schedsyn.replan import (
     ReplanResult,
+    check_uncertainty,
     cut_programme,
     join_programmes,
     planner_request,
@@ -608,6 +609,9 @@ def test_a_run_that_follows_its_model_keeps_its_plan(tmp_path):
     assert main(["replan", str(log), str(plan_dir), "--at-min", "150", "--out", str(out)]) == 0
     meta = json.loads((out / "replan.json").read_text())
     assert meta["choice"] == "keep" and meta["planner"] is None and meta["planner_s"] == 0.0
+    box = meta["uncertainty_box"]  # the kept plan, at the corners of a 150-min estimate
+    assert box["complete_at_every_corner"] is True and box["worst_coverage"] == 1.0
+    assert box["tau_s"][0] < meta["identified"]["tau_s"] < box["tau_s"][1]
     t = np.linspace(0.0, plan_programme().total_min, 2001)
     np.testing.assert_allclose(
         read_plan_dir(out).programme.chamber_at(t), plan_programme().chamber_at(t), atol=2e-3
@@ -664,3 +668,40 @@ def test_an_effect_whose_near_equal_rival_predicts_otherwise_is_not_planned_with
     monkeypatch.setattr(disc, "diagnose", diagnosis(rate, lag))
     req = prepare_replan(log, plan, 100.0)
     assert req.model.effect == "none" and any("not identified" in n for n in req.notes)
+
+
+def test_the_run_is_checked_at_the_corners_of_the_identified_box_as_scipy_counts_it(plan):
+    """A young estimate (10 min of a noisy log of a device unlike the plan's model): the
+    run predicted at tau +- 2 sigma x dT0 +- 2 sigma, each corner integrated here by scipy
+    from the state at M after the smoothed log and counted by a plain loop; the worst
+    corner and whether every corner completes are what check_uncertainty says."""
+    frame = effect_log(ModelSpec(2900.0, 1.5), seed=2, noise_c=0.05)
+    req = prepare_replan(log_from_frame(frame, "u"), plan, 10)
+    i = req.identified
+    box = check_uncertainty(req, plan.programme)
+    assert box.tau_s == pytest.approx((i.tau_s - 2 * i.tau_std_s, i.tau_s + 2 * i.tau_std_s))
+    assert box.dt0_c == pytest.approx((i.dt0_c - 2 * i.dt0_std_c, i.dt0_c + 2 * i.dt0_std_c))
+    assert i.tau_std_s > 10.0  # a young estimate: the corners differ
+    tm, tt, tg = req.measured
+    edges, temps = _edges(plan.programme)
+    rest = np.round(np.arange(tm[-1] + 0.1, plan.programme.total_min + 1e-9, 0.1), 6)
+    results = []
+    for tau in box.tau_s:
+        for dt0 in box.dt0_c:
+            t_ode, g_ode = _ode(
+                edges, temps, tau, dt0, None, (10.0, rest[-1]), rest, y0=req.state.t_c
+            )
+            found = own_passes(np.concatenate((tt, t_ode)), np.concatenate((tg, g_ode)), *REGION)
+            levels = [
+                distinct_levels(np.array([g for k, g, _ in found if k == b]), DELTA)
+                for b in range(10)
+            ]
+            results.append((sum(v >= LEVELS for v in levels) / 10, min(levels), tau, dt0))
+    worst = min(results)
+    assert box.worst.coverage.coverage == pytest.approx(worst[0])
+    assert box.worst.coverage.min_levels == worst[1]
+    assert box.complete_everywhere == all(r[0] == 1.0 for r in results)
+    assert (box.worst_tau_s, box.worst_dt0_c) == pytest.approx(worst[2:]) or (
+        [r[:2] for r in results].count(worst[:2]) > 1  # a tie: any of the tied corners
+    )
+    assert not box.complete_everywhere and "re-plan again" in box.line()
