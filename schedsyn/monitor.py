@@ -455,7 +455,10 @@ def predict_from_state(
 
 @dataclass(frozen=True, slots=True)
 class EffectCheck:
-    """The effect the diagnosis found on the log up to M, and whether it is material."""
+    """The effect the diagnosis found on the log up to M, and whether it is material.
+
+    ``stderr``: standard errors of the effect fit's parameters, ``tau_s`` and ``dt0_c``
+    included (from its Jacobian; empty when no effect was found)."""
 
     effect: str
     parameters: dict[str, float]
@@ -464,6 +467,7 @@ class EffectCheck:
     model: ModelSpec
     t0_c: float
     warnings: tuple[str, ...] = ()
+    stderr: dict[str, float] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -536,6 +540,7 @@ def check_effect(
         d.model,
         t0,
         tuple(warnings),
+        {k: float(v) for k, v in d.stderr.items()},
     )
 
 

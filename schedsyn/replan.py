@@ -514,8 +514,10 @@ UNCERTAINTY_SIGMAS = 2.0
 @dataclass(frozen=True, slots=True)
 class UncertaintyCheck:
     """The chosen run predicted at the four corners of the identified model's box
-    (``tau_s`` and ``dt0_c`` ranges, ± ``sigmas`` standard deviations; tau kept above a
-    tenth of its estimate): the worst corner's coverage and where it is. An early re-plan
+    (``tau_s`` and ``dt0_c`` ranges, ± ``sigmas`` standard deviations of the fit the
+    model comes from, ``sigma_source``: the base fit, or the effect's own fit when the
+    rest is planned with an effect; tau kept above a tenth of its estimate): the worst
+    corner's coverage and where it is. An early re-plan
     rests on a young estimate (5 min of a W3 log: tau ± 200 s); where the run does not
     complete at every corner, a later re-plan, on a longer log, should look again."""
 
@@ -526,11 +528,13 @@ class UncertaintyCheck:
     worst_tau_s: float
     worst_dt0_c: float
     complete_everywhere: bool
+    sigma_source: str = "the base fit"
 
     def to_dict(self) -> dict[str, Any]:
         c = self.worst.coverage
         return {
             "sigmas": self.sigmas,
+            "sigma_source": self.sigma_source,
             "tau_s": list(self.tau_s),
             "dt0_c": list(self.dt0_c),
             "complete_at_every_corner": self.complete_everywhere,
@@ -543,7 +547,8 @@ class UncertaintyCheck:
     def line(self) -> str:
         box = (
             f"on the identified model's ±{self.sigmas:g} sigma box (tau {self.tau_s[0]:.0f}"
-            f"..{self.tau_s[1]:.0f} s, dT0 {self.dt0_c[0]:.2f}..{self.dt0_c[1]:.2f} °C)"
+            f"..{self.tau_s[1]:.0f} s, dT0 {self.dt0_c[0]:.2f}..{self.dt0_c[1]:.2f} °C, "
+            f"sigma of {self.sigma_source})"
         )
         if self.complete_everywhere:
             return f"{box}: complete at every corner"
@@ -560,16 +565,22 @@ def check_uncertainty(
 ) -> UncertaintyCheck:
     """``programme`` (the whole run) predicted as :func:`predict_run` does, with the
     request's model at each corner of the identified box (the effect, if any, kept)."""
-    i, m = request.identified, request.model
-    tau = (max(m.tau_s - sigmas * i.tau_std_s, 0.1 * m.tau_s), m.tau_s + sigmas * i.tau_std_s)
-    dt0 = (m.dt0_c - sigmas * i.dt0_std_c, m.dt0_c + sigmas * i.dt0_std_c)
+    i, m, e = request.identified, request.model, request.effect
+    tau_std, dt0_std, source = i.tau_std_s, i.dt0_std_c, "the base fit"
+    if m.effect != "none" and m.effect == e.effect:  # planned with the effect: its own fit
+        se_tau, se_dt0 = e.stderr.get("tau_s", math.nan), e.stderr.get("dt0_c", math.nan)
+        if se_tau > 0.0 and se_dt0 > 0.0:  # (False for NaN)
+            tau_std, dt0_std, source = se_tau, se_dt0, f"the {m.effect} fit"
+    tau = (max(m.tau_s - sigmas * tau_std, 0.1 * m.tau_s), m.tau_s + sigmas * tau_std)
+    dt0 = (m.dt0_c - sigmas * dt0_std, m.dt0_c + sigmas * dt0_std)
     corners = [
         (predict_run(replace(request, model=replace(m, tau_s=t, dt0_c=d)), programme), t, d)
         for t in tau
         for d in dt0
     ]
     worst, wt, wd = min(corners, key=lambda c: c[0].preference())
-    return UncertaintyCheck(sigmas, tau, dt0, worst, wt, wd, all(c[0].complete for c in corners))
+    every = all(c[0].complete for c in corners)
+    return UncertaintyCheck(sigmas, tau, dt0, worst, wt, wd, every, source)
 
 
 def sweep_end_min(request: ReplanRequest, edge_margin_c: float) -> float | None:

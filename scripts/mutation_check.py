@@ -51,6 +51,18 @@ PLANNER_CORE = "schedsyn/planner/core.py"
 
 MUTATIONS: tuple[Mutation, ...] = (
     Mutation(
+        "uncertainty-box-ignores-the-effect-fit",
+        "schedsyn/replan.py",
+        '    if m.effect != "none" and m.effect == e.effect:  # planned with the effect: '
+        "its own fit",
+        "    if False:",
+        (
+            "tests/test_replan.py::"
+            "test_a_material_effect_is_kept_and_a_clean_log_keeps_the_base_model",
+        ),
+        "a rest planned with an effect gets the base fit's tau and dT0 errors for its box",
+    ),
+    Mutation(
         "uncertainty-reports-the-best-corner",
         "schedsyn/replan.py",
         "    worst, wt, wd = min(corners, key=lambda c: c[0].preference())",

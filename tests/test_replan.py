@@ -111,6 +111,20 @@ def test_a_material_effect_is_kept_and_a_clean_log_keeps_the_base_model(plan):
     assert req.model.parameters[next(iter(req.model.parameters))] == pytest.approx(600.0, rel=0.1)
     clean = prepare_replan(log_from_frame(effect_log(ModelSpec(2400, 3), seed=1), "c"), plan, 240)
     assert clean.model.effect == "none"
+    # the corners of the box: the effect fit's own tau and dT0 errors where the rest is
+    # planned with the effect, the base fit's where it is not
+    box, se = check_uncertainty(req, plan.programme), req.effect.stderr
+    assert box.sigma_source == f"the {req.model.effect} fit" and se["tau_s"] > 0.0
+    assert box.tau_s == pytest.approx(
+        (req.model.tau_s - 2 * se["tau_s"], req.model.tau_s + 2 * se["tau_s"])
+    )
+    assert box.dt0_c == pytest.approx(
+        (req.model.dt0_c - 2 * se["dt0_c"], req.model.dt0_c + 2 * se["dt0_c"])
+    )
+    box = check_uncertainty(clean, plan.programme)
+    i = clean.identified
+    assert box.sigma_source == "the base fit"
+    assert box.tau_s == pytest.approx((i.tau_s - 2 * i.tau_std_s, i.tau_s + 2 * i.tau_std_s))
 
 
 def _with_gap(frame, a_s, b_s):
