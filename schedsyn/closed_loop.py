@@ -5,8 +5,8 @@ effect :func:`schedsyn.discrepancy.diagnose` knows: chamber lag, rate limit, dea
 second time constant, chamber cycling). :func:`run_log` makes the log a run of a
 programme on it produces (sensor noise, 0.01 degC quantisation, ``tk_set_c``, and
 ``tk_air_c`` where the effect shows in the chamber air). :func:`run_loop` cuts that log
-at the re-planning times (after 15 and 30 min, after the first hour, then every 90 min), hands
-each cut to a re-planner and runs the programme it returns; the final coverage is always
+at the re-planning times (after 15 and 30 min, after the first hour, then every 90 min),
+hands each cut to a re-planner and runs the programme it returns; the final coverage is always
 computed on the true device's dense T and g (0.1 min, :func:`true_coverage`), never on
 estimates.
 

@@ -517,9 +517,9 @@ class UncertaintyCheck:
     (``tau_s`` and ``dt0_c`` ranges, ± ``sigmas`` standard deviations of the fit the
     model comes from, ``sigma_source``: the base fit, or the effect's own fit when the
     rest is planned with an effect; tau kept above a tenth of its estimate): the worst
-    corner's coverage and where it is. An early re-plan
-    rests on a young estimate (5 min of a W3 log: tau ± 200 s); where the run does not
-    complete at every corner, a later re-plan, on a longer log, should look again."""
+    corner's coverage and where it is. An early re-plan rests on a young estimate (5 min
+    of a W3 log: tau ± 200 s); where the run does not complete at every corner, a later
+    re-plan, on a longer log, should look again."""
 
     sigmas: float
     tau_s: tuple[float, float]

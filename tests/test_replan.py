@@ -661,6 +661,7 @@ def test_an_effect_whose_near_equal_rival_predicts_otherwise_is_not_planned_with
             candidates=fits,
             ambiguous_with=(rival.effect,),
             warnings=(),
+            stderr={},
         )
 
     log = log_from_frame(effect_log(base, seed=1).query("time_s <= 6000"), "r")
