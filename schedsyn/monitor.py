@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import json
 import math
+import shlex
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -732,8 +733,8 @@ class MonitorReport:
         if m is not None:
             lines.append(
                 f"predicted short of the target: re-plan the rest now (schedsyn replan "
-                f"{self.log_source} {p.path} --at-min {m:g}); the sooner, the more of the "
-                "run a new programme can shape"
+                f"{shlex.quote(str(self.log_source))} {shlex.quote(str(p.path))} --at-min "
+                f"{m:g}); the sooner, the more of the run a new programme can shape"
             )
         lines.extend(f"note: {n}" for n in self.notes)
         return "\n".join(lines)

@@ -194,7 +194,7 @@ def test_a_run_predicted_short_says_how_to_re_plan_it_and_that_command_runs(
     import shlex
 
     slow = run_log(47.5, truth=ThermalParams(3000.0, 6.0))
-    out = tmp_path / "slow" / "mon"
+    out = tmp_path / "slow run" / "mon"  # a space in the log's path: the command quotes it
     out.parent.mkdir()
     rc, cap = _cli(slow, plan_dir, out, capsys)
     meta = json.loads((out / "monitor.json").read_text())
