@@ -337,6 +337,61 @@ MUTATIONS: tuple[Mutation, ...] = (
         "the sign of the cross term in the model-based estimator's gradient variance "
         "(var g = P11/tau^2 - 2 P12/tau + P22): the stated sigma several times too large",
     ),
+    Mutation(
+        "second-chance-always",
+        "schedsyn/planner/search.py",
+        "search.overrun.n_seg <= max_seg * (",
+        "search.overrun.n_seg <= 99 * max_seg * (",
+        (
+            "tests/test_second_chance.py::"
+            "test_second_chance_only_when_the_best_structure_nearly_fits",
+        ),
+        "the second chance runs on every failing search, however far off",
+    ),
+    Mutation(
+        "second-chance-never",
+        "schedsyn/planner/search.py",
+        "        near = search.overrun is not None and",
+        "        near = False and search.overrun is not None and",
+        (
+            "tests/test_second_chance.py::"
+            "test_second_chance_only_when_the_best_structure_nearly_fits",
+        ),
+        "a near miss gets no second chance",
+    ),
+    Mutation(
+        "guide-edge-ignored",
+        "schedsyn/planner/guide.py",
+        '        if edge == "speed":',
+        '        if edge == "never":',
+        (
+            "tests/test_second_chance.py::"
+            "test_profiles_costed_at_the_edge_speed_are_another_shape_within_the_same_limits",
+        ),
+        "the second chance's profiles are the first ones again",
+    ),
+    Mutation(
+        "dual-coupling-sign",
+        "schedsyn/planner/bound.py",
+        "            coef[k] += lam[p]\n            coef[i] -= lam[p]",
+        "            coef[k] -= lam[p]\n            coef[i] += lam[p]",
+        (
+            "tests/test_bound.py::"
+            "test_the_levels_dual_lies_between_the_ranks_apart_and_the_coupled_optimum",
+        ),
+        "the levels' dual pushes the ranks together instead of apart",
+    ),
+    Mutation(
+        "dual-pairs-off-by-one",
+        "schedsyn/planner/bound.py",
+        "pairs = [(k, k - 1 - surplus) for k in range(surplus + 1, n)]",
+        "pairs = [(k, k - surplus) for k in range(surplus + 1, n)]",
+        (
+            "tests/test_bound.py::"
+            "test_the_levels_dual_lies_between_the_ranks_apart_and_the_coupled_optimum",
+        ),
+        "the dual couples each rank with itself",
+    ),
 )
 
 

@@ -49,9 +49,17 @@ def parallel_profiles(
     n_by_dir: dict[int, int],
     sep_c_per_min: float,
     rate_share: float,
+    edge: str = "mean",
 ) -> dict[int, list[np.ndarray]] | None:
     """Per direction, ``n`` bin-mean speed profiles ``sep`` apart, fastest first, in travel
-    order; None when the ranks cannot be kept ``sep`` apart within the speed limits."""
+    order; None when the ranks cannot be kept ``sep`` apart within the speed limits.
+
+    ``edge``: how a profile's turns are costed. ``"mean"`` as the bound does: a sweep may
+    speed up and brake inside the edge bins, so it enters and leaves slower than their
+    mean. ``"speed"``: at the edge bins' mean itself, as if the sweep entered and left
+    at it (a sweep held within a band to past the edge does, roughly). The two give
+    different profiles (on W2 the second is a little faster throughout): another shape
+    for the search to try when the first does not fit."""
     tau = params.tau_min
     w = spec.grid.bin_c
     sides = {
@@ -75,8 +83,11 @@ def parallel_profiles(
         down *= step
         src_lo = np.searchsorted(up, v - 1e-12, side="left")
         src_hi = np.minimum(np.searchsorted(down, v + 1e-12, side="right") - 1, n_grid - 1)
-        entry = accel_time(curves.entry_speed(np.maximum(v - step, 0.0)), side.r_fwd, tau)
-        exit_ = stop_time(curves.exit_speed(np.maximum(v - step, 0.0)), side.r_back, tau)
+        if edge == "speed":
+            entry, exit_ = accel_time(v, side.r_fwd, tau), stop_time(v, side.r_back, tau)
+        else:
+            entry = accel_time(curves.entry_speed(np.maximum(v - step, 0.0)), side.r_fwd, tau)
+            exit_ = stop_time(curves.exit_speed(np.maximum(v - step, 0.0)), side.r_back, tau)
         caps = np.minimum(
             np.ceil(_caps(spec, params, limits, side, False) / step) * step,
             LIMIT_FRACTION * side.r_fwd,
@@ -122,6 +133,7 @@ def guided_bands(
     width_c_per_min: float,
     rate_share: float,
     sep_extra_c_per_min: float = 0.0,
+    edge: str = "mean",
 ) -> dict[int, list[Band]] | None:
     """Bands around parallel profiles: the corridor between neighbouring profiles, split
     at their midpoint with the gap ``delta + safety`` (+ ``sep_extra`` for robust plans)
@@ -132,7 +144,9 @@ def guided_bands(
     """
     gap = spec.delta_c_per_min + BAND_SAFETY_C_PER_MIN + sep_extra_c_per_min
     params = max(params_list, key=lambda p: p.tau_s)
-    profiles = parallel_profiles(spec, params, limits, n_by_dir, gap + width_c_per_min, rate_share)
+    profiles = parallel_profiles(
+        spec, params, limits, n_by_dir, gap + width_c_per_min, rate_share, edge
+    )
     if profiles is None:
         return None
     lo_c, hi_c, m = spec.working_lo_c, spec.working_hi_c, spec.edge_margin_c
