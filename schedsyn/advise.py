@@ -341,7 +341,9 @@ class _Job:
 
 def _bound(knob: _Knob, params: ThermalParams, i: int) -> float:
     spec, lim = knob.request(i)
-    return duration_lower_bound(spec, params, lim).lower_bound_min
+    # without the levels' dual: the bisection over a knob's values assumes the bound
+    # moves one way with it, which the dual's subgradient search does not promise
+    return duration_lower_bound(spec, params, lim, tighten=False).lower_bound_min
 
 
 def _excluded(knob: _Knob, params: ThermalParams, i: int) -> bool:

@@ -266,7 +266,9 @@ class _Request:
 
     def excluded(self, a: float, b: float) -> bool:
         """The bound proves that no complete plan covers ``[a, b]``."""
-        bound = duration_lower_bound(self.spec(a, b), self.params, self.limits)
+        # without the levels' dual: the bisections here assume that a wider region is
+        # never less excluded, which the dual's subgradient search does not promise
+        bound = duration_lower_bound(self.spec(a, b), self.params, self.limits, tighten=False)
         return bound.lower_bound_min > self.limits.duration_max_min
 
 

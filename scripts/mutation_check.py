@@ -351,8 +351,8 @@ MUTATIONS: tuple[Mutation, ...] = (
     Mutation(
         "second-chance-never",
         "schedsyn/planner/search.py",
-        "        near = search.overrun is not None and",
-        "        near = False and search.overrun is not None and",
+        "    near = search.overrun is not None and",
+        "    near = False and search.overrun is not None and",
         (
             "tests/test_second_chance.py::"
             "test_second_chance_only_when_the_best_structure_nearly_fits",
