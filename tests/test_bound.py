@@ -304,3 +304,33 @@ def test_the_levels_dual_lies_between_the_ranks_apart_and_the_coupled_optimum(se
     joint = _joint_two_ranks(probs, delta, reach, first_role)
     assert apart - 1e-9 <= dual <= joint + 1e-9, (apart, dual, joint)
     assert dual > apart + 0.5 * (joint - apart), "the dual should close most of the gap"
+
+
+def test_the_levels_dual_gives_out_the_roles_among_the_feasible_ones():
+    """A role no rank can take (the first sweep's approach impossible) makes the shape
+    impossible; a role pair one rank cannot hold alone (first and last at once) is given
+    to two ranks instead, and the bound stays finite."""
+    from schedsyn.planner.bound import _coupled, _RankProblem
+
+    step, delta = 0.01, 0.1
+    v = step * np.arange(1, 121)
+    idx = np.arange(v.size)
+    src_lo, src_hi = np.maximum(idx - 4, 0), np.minimum(idx + 4, v.size - 1)
+    caps = np.full(4, 1.1)
+    cost = 6.0 * v**2
+
+    def prob(entry, exit_):
+        return _RankProblem(v, caps, 1.0, src_lo, src_hi, entry, exit_)
+
+    never = np.full(v.size, np.inf)
+    caps_by_rank = [caps, caps - delta]
+    impossible = {(False, False): prob(cost, cost), (True, False): prob(never, cost)}
+    assert math.isinf(_coupled(impossible, caps_by_rank, 0, delta, step, 10.0))
+    apart_only = {
+        (False, False): prob(cost, cost),
+        (True, False): prob(cost + 1.0, cost),
+        (False, True): prob(cost, cost + 1.0),
+        (True, True): prob(never, never),
+    }
+    value = _coupled(apart_only, caps_by_rank, 0, delta, step, 10.0)
+    assert math.isfinite(value) and value > 2.0  # both roles' extra minute is paid

@@ -723,10 +723,10 @@ def _coupled(
         )
         values = {r: list(vals[i * n : (i + 1) * n] - correction) for i, r in enumerate(roles)}
         paths = {r: rows[i * n : (i + 1) * n] for i, r in enumerate(roles)}
-        if not all(math.isfinite(x) for vals in values.values() for x in vals):
-            return math.inf  # a rank cannot cross at all: no plan of this shape
         chosen = _assign_roles(values, n)
         total = sum(values[role][k] for k, role in enumerate(chosen)) + delta * float(lam.sum())
+        if not math.isfinite(total):
+            return math.inf  # every way of giving out the roles has a rank that cannot cross
         if total > best + 1e-9:
             best, stall = total, 0
         else:
@@ -751,7 +751,7 @@ def _assign_roles(values: dict[tuple[bool, bool], list[float]], n: int) -> list[
     every rank generic except the one (or two) holding the roles there are."""
     has_first = (True, False) in values or (True, True) in values
     has_last = (False, True) in values or (True, True) in values
-    best_cost, best = math.inf, [(False, False)] * n
+    best_cost, best = math.inf, None
     for a in range(n) if has_first else [None]:
         for b in range(n) if has_last else [None]:
             roles = [(False, False)] * n
@@ -763,6 +763,7 @@ def _assign_roles(values: dict[tuple[bool, bool], list[float]], n: int) -> list[
                 if b is not None:
                     roles[b] = (False, True)
             cost = sum(values[r][k] if r in values else math.inf for k, r in enumerate(roles))
-            if cost < best_cost:
+            if best is None or cost < best_cost:  # (all infinite: any, its total too)
                 best_cost, best = cost, roles
+    assert best is not None
     return best
