@@ -473,12 +473,17 @@ def duration_lower_bound(
             )
         return np.maximum(limits.end_c - limits.end_tol_c - tk, 0.0) / limits.rate_max_c_per_min
 
+    problems: dict[tuple[int, bool, bool], _RankProblem] = {}
+
     def problem(side: _Side, first: bool, last: bool) -> _RankProblem:
-        caps = np.ceil(_caps(spec, params, limits, side, last) / step) * step
-        src_lo, src_hi = continuity[side.d]
-        return _RankProblem(
-            v, caps, w, src_lo, src_hi, entry_cost(side, first), exit_cost(side, last)
-        )
+        key = (side.d, first, last)
+        if key not in problems:
+            caps = np.ceil(_caps(spec, params, limits, side, last) / step) * step
+            src_lo, src_hi = continuity[side.d]
+            problems[key] = _RankProblem(
+                v, caps, w, src_lo, src_hi, entry_cost(side, first), exit_cost(side, last)
+            )
+        return problems[key]
 
     def rank_caps(side: _Side, k: int, surplus: int, has_last: bool) -> np.ndarray:
         """Caps of the ``k``-th fastest sweep (from 0) of a direction in every bin. The
@@ -501,7 +506,9 @@ def duration_lower_bound(
     ) -> tuple[float, np.ndarray]:
         """Least time of the ``k``-th fastest sweep of a direction in a role (its edge
         costs), within :func:`rank_caps`, and its speed profile."""
-        key = (side.d, first, last, k, surplus, has_last)
+        # the caps depend on k and S only through the two shifts: share the solves
+        shifts = (max(0, k - surplus), max(0, k - 1 - surplus) if has_last and k else -1)
+        key = (side.d, first, last, shifts, has_last)
         if key not in solved:
             q = problem(side, first, last)
             caps = rank_caps(side, k, surplus, has_last)
