@@ -334,3 +334,15 @@ def test_the_levels_dual_gives_out_the_roles_among_the_feasible_ones():
     }
     value = _coupled(apart_only, caps_by_rank, 0, delta, step, 10.0)
     assert math.isfinite(value) and value > 2.0  # both roles' extra minute is paid
+
+
+def test_a_request_asked_twice_is_bounded_once_and_its_profiles_cannot_be_changed():
+    # a plan near its budget asks for the dual bound to decide and again to report it
+    spec = ExperimentSpec("twice", 0.0, 8.0, -5.0, 13.0, levels_required=3)
+    first = duration_lower_bound(spec, ThermalParams(), Limits(), tighten=True)
+    assert duration_lower_bound(spec, ThermalParams(), Limits(), tighten=True) is first
+    # another request (here: the bound without the dual) is its own entry
+    assert duration_lower_bound(spec, ThermalParams(), Limits(), tighten=False) is not first
+    profile = next(iter(first.profiles.values()))[0]
+    with pytest.raises(ValueError, match="read-only"):
+        profile[0] = 0.0

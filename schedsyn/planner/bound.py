@@ -65,6 +65,7 @@ levels, so it is loose where those bind; it is valid regardless.
 
 from __future__ import annotations
 
+import functools
 import heapq
 import math
 from dataclasses import dataclass, replace
@@ -425,9 +426,34 @@ def duration_lower_bound(
     the levels' dual (module doc, 6) refines it; by default only where the bound without
     it lies within :data:`DUAL_WINDOW` below the budget (where it may decide whether a
     complete plan can fit). Every variant is a valid bound.
+
+    Results are remembered per request (:data:`BOUND_CACHE_SIZE` of them, per process):
+    a plan near its budget asks for the same bound to decide and to report it, and the
+    dual costs about half a second. The profiles of a remembered bound are read-only.
     """
     params = ThermalParams() if params is None else params
     limits = Limits() if limits is None else limits
+    return _bound_cached(spec, params, limits, tighten)
+
+
+#: How many bounds :func:`duration_lower_bound` remembers (requests are frozen, hashable).
+BOUND_CACHE_SIZE = 256
+
+
+@functools.lru_cache(maxsize=BOUND_CACHE_SIZE)
+def _bound_cached(
+    spec: ExperimentSpec, params: ThermalParams, limits: Limits, tighten: bool | None
+) -> DurationBound:
+    bound = _duration_lower_bound(spec, params, limits, tighten)
+    for profs in bound.profiles.values():
+        for p in profs:
+            p.setflags(write=False)
+    return bound
+
+
+def _duration_lower_bound(
+    spec: ExperimentSpec, params: ThermalParams, limits: Limits, tighten: bool | None
+) -> DurationBound:
     tau = params.tau_min
     w = spec.grid.bin_c
     n_levels = spec.levels_required
