@@ -325,6 +325,19 @@ def test_too_short_a_request_names_the_requirement():
     assert info.value.best_coverage is not None and info.value.best_coverage < 1.0
 
 
+def test_a_bin_the_chamber_cannot_reach_is_named_in_the_error_with_the_floor_it_needs():
+    # floor -1.5 + dT0 3 = 1.5 degC: the device never enters [0, 1) degC, for any budget
+    spec = ExperimentSpec("unreachable", 0.0, 4.0, -2.0, 6.0, levels_required=3)
+    limits = Limits(chamber_min_c=-1.5, duration_max_min=200.0)
+    with pytest.raises(InfeasiblePlanError) as info:
+        plan_experiment(spec, ThermalParams(dt0_c=3.0), limits, effort_s=5.0)
+    msg = str(info.value)
+    assert "some bin cannot be crossed at all" in msg and "inf min" not in msg
+    # the binding limit and the floor that would do: lo - edge margin - dT0 - 1 degC
+    assert "cannot bring the device below 1.5 °C" in msg and "at most -4.25 °C" in msg
+    assert "\n" not in msg  # one line for the CLI
+
+
 def test_shortfall_names_the_binding_chamber_limit():
     w1 = ExperimentSpec("W1", -50, -30, -52, -20)
     notes = explain_shortfall(w1, ThermalParams(), Limits(chamber_min_c=-52.0))

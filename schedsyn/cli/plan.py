@@ -478,8 +478,10 @@ def report_plan(plan: Plan) -> list[str]:
     if plan.duration_lower_bound_min is not None:
         bound = plan.duration_lower_bound_min
         lines.append(
-            f"  proven lower bound on any complete plan: {bound:.0f} min"
-            + (f" (this plan {plan.gap_to_bound_min:+.0f} min)" if math.isfinite(bound) else "")
+            f"  proven lower bound on any complete plan: {bound:.0f} min "
+            f"(this plan {plan.gap_to_bound_min:+.0f} min)"
+            if math.isfinite(bound)
+            else "  proven: no complete plan exists (some bin cannot be crossed at all)"
         )
     if plan.coverage_nominal is not None:
         p = plan.params

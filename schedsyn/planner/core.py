@@ -200,11 +200,12 @@ def _fallback(
         )
     if not options:
         require_solvable(stats, spec.name)
+        reasons = "; ".join(list(dict.fromkeys(search.reasons))[:2])  # each once
         raise InfeasiblePlanError(
             f"{spec.name}: no programme covers any part of [{spec.working_lo_c:g}, "
             f"{spec.working_hi_c:g}] °C with {spec.levels_required} gradient levels "
             f"{spec.delta_c_per_min:g} °C/min apart within {limits.duration_max_min:g} min "
-            f"({'; '.join(search.reasons[:2])}); best reachable coverage is 0%. "
+            f"({reasons}); best reachable coverage is 0%. "
             "Lengthen the duration, narrow the region or lower the level count.",
             best_coverage=0.0,
         )
@@ -346,6 +347,18 @@ def plan_experiment(
     )
 
 
+def _no_complete_plan(bound_min: float, limits: Limits) -> str:
+    """The note of a request its proven bound rules out (an infinite bound: a bin no
+    sweep can cross, for any budget)."""
+    needs = (
+        "some bin cannot be crossed at all"
+        if not math.isfinite(bound_min)
+        else "any plan whose sweeps cross the whole region needs at least "
+        f"{bound_min:.0f} min (proven lower bound)"
+    )
+    return f"no complete plan exists within {limits.duration_max_min:g} min: {needs}"
+
+
 def _plan(
     spec: ExperimentSpec,
     params: ThermalParams,
@@ -399,15 +412,15 @@ def _plan(
     graded_ok = graded and model is None and not robust and not require_complete
     found: _Fewer | None = None
     searched_fewer = False
+    proven_note = None
     if graded_ok and continuation is None:
         # proven impossible: the search for these levels (and its fallbacks) cannot succeed,
         # and a graded plan for fewer levels beats any partial one (its weakest bin has more)
         proven = duration_lower_bound(spec, params, limits).lower_bound_min
         if proven > limits.duration_max_min:
-            note = (
-                f"no complete plan exists within {limits.duration_max_min:g} min: any plan "
-                f"whose sweeps cross the whole region needs at least {proven:.0f} min "
-                f"(proven lower bound); {spec.levels_required} levels were not searched"
+            note = proven_note = (
+                f"{_no_complete_plan(proven, limits)}; "
+                f"{spec.levels_required} levels were not searched"
             )
             if progress:
                 progress(f"{spec.name}: {note}")
@@ -477,11 +490,18 @@ def _plan(
             chosen = _fallback(
                 spec, limits, params_list, models, model, search, progress, stats, effort
             )
-        except InfeasiblePlanError:
+        except InfeasiblePlanError as err:
             # nothing at all with these levels: fewer levels, if some count fits
             fewer = _graded(None, spec, params, limits, tuple(notes), found)
             if fewer is None:
-                raise
+                # say why: the proven bound and the limit that binds, not only the search's
+                # reasons (a bin the chamber cannot reach read as "lengthen the duration")
+                why = [n for n in (proven_note, *notes) if n]
+                if not why:
+                    raise
+                raise InfeasiblePlanError(
+                    f"{err} Why: {'; '.join(why)}.", best_coverage=err.best_coverage
+                ) from err
             return with_table_meta(_finished(fewer, tic, effort))
         notes.append(chosen.note)
 
@@ -538,11 +558,7 @@ def _plan(
     if model is None:  # the proof is for the first-order lag; a robust plan meets every scenario
         bound = max(duration_lower_bound(spec, p, limits).lower_bound_min for p in params_list)
         if bound > limits.duration_max_min:
-            notes.append(
-                f"no complete plan exists within {limits.duration_max_min:g} min: any plan "
-                f"whose sweeps cross the whole region needs at least {bound:.0f} min "
-                "(proven lower bound)"
-            )
+            notes.append(_no_complete_plan(bound, limits))
     plan = Plan(
         spec=spec,
         params=params,
