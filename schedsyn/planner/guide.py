@@ -50,6 +50,7 @@ def parallel_profiles(
     sep_c_per_min: float,
     rate_share: float,
     edge: str = "mean",
+    chamber_share: bool = False,
 ) -> dict[int, list[np.ndarray]] | None:
     """Per direction, ``n`` bin-mean speed profiles ``sep`` apart, fastest first, in travel
     order; None when the ranks cannot be kept ``sep`` apart within the speed limits.
@@ -59,7 +60,13 @@ def parallel_profiles(
     mean. ``"speed"``: at the edge bins' mean itself, as if the sweep entered and left
     at it (a sweep held within a band to past the edge does, roughly). The two give
     different profiles (on W2 the second is a little faster throughout): another shape
-    for the search to try when the first does not fit."""
+    for the search to try when the first does not fit.
+
+    ``chamber_share``: the chamber floor's or ceiling's speed limit is taken, like the
+    chamber rates, at ``rate_share`` -- and at each bin's side nearest the limit
+    (:func:`_chamber_caps`) -- instead of the bound's cap at the bin's most favourable
+    point. Slower where the limit binds (W1 465 -> 480 min), so the search tries it last,
+    where nothing else fits."""
     tau = params.tau_min
     w = spec.grid.bin_c
     sides = {
@@ -92,6 +99,10 @@ def parallel_profiles(
             np.ceil(_caps(spec, params, limits, side, False) / step) * step,
             LIMIT_FRACTION * side.r_fwd,
         )
+        if chamber_share:  # the limit's speed throughout the bin, rate_share of it
+            caps = np.minimum(
+                caps, np.floor(rate_share * _chamber_caps(spec, params, limits, d) / step) * step
+            )
 
         def shifted(a: np.ndarray, k: int, fill: float) -> np.ndarray:
             out_k = np.full(n_grid, fill, dtype=float)
@@ -125,6 +136,30 @@ def parallel_profiles(
     return out
 
 
+def _chamber_caps(
+    spec: ExperimentSpec, params: ThermalParams, limits: Limits, d: int
+) -> np.ndarray:
+    """Fastest speed the chamber floor (cooling) or ceiling (heating) allows throughout
+    each bin -- at its side nearest that limit --, in travel order, degC/min.
+
+    ``g = (Tk + dT0 - T) / tau``: heating at most ``(ceiling + dT0 - T) / tau``, cooling
+    at most ``(T - floor - dT0) / tau``. The bound's caps (:func:`~.bound._caps`) take
+    each bin's most favourable point instead, in the bound's favour; a profile at that
+    speed leaves its band no room at the bin's other side (a 25-degC region above a
+    ceiling of 35.8 degC: the fast heating band's floor 0.954 degC/min at 11 degC, where
+    the ceiling allows 0.953, and every plan of it stuck).
+    """
+    lower = spec.grid.lower_c
+    upper = lower + spec.grid.bin_c
+    tau = params.tau_min
+    if d > 0:
+        v = (limits.chamber_max_c + params.dt0_c - upper) / tau
+    else:
+        v = (lower - limits.chamber_min_c - params.dt0_c) / tau
+    v = np.maximum(v, 0.0)
+    return v if d > 0 else v[::-1]
+
+
 def guided_bands(
     spec: ExperimentSpec,
     params_list: list[ThermalParams],
@@ -134,6 +169,7 @@ def guided_bands(
     rate_share: float,
     sep_extra_c_per_min: float = 0.0,
     edge: str = "mean",
+    chamber_share: bool = False,
 ) -> dict[int, list[Band]] | None:
     """Bands around parallel profiles: the corridor between neighbouring profiles, split
     at their midpoint with the gap ``delta + safety`` (+ ``sep_extra`` for robust plans)
@@ -145,7 +181,7 @@ def guided_bands(
     gap = spec.delta_c_per_min + BAND_SAFETY_C_PER_MIN + sep_extra_c_per_min
     params = max(params_list, key=lambda p: p.tau_s)
     profiles = parallel_profiles(
-        spec, params, limits, n_by_dir, gap + width_c_per_min, rate_share, edge
+        spec, params, limits, n_by_dir, gap + width_c_per_min, rate_share, edge, chamber_share
     )
     if profiles is None:
         return None
