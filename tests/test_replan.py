@@ -464,11 +464,24 @@ def test_an_incomplete_new_rest_is_taken_only_when_allowed(tmp_path, monkeypatch
             replan_run(log, plan, 60.0, new_min_coverage=bad)
 
 
-def test_replan_cli_only_if_complete_keeps_the_plan_when_no_rest_completes(tmp_path, capsys):
+def test_replan_cli_only_if_complete_keeps_the_plan_when_no_rest_completes(
+    tmp_path, capsys, monkeypatch
+):
     """The case above through the CLI: by default the better, incomplete rest is written;
     with ``--only-if-complete`` the plan goes on unchanged and replan.json says why."""
+    from schedsyn import replan as replan_module
     from schedsyn.cli import main
 
+    # as above: the flag changes only which rest is taken, not what the planner is asked,
+    # so the second run reads the first one's answer instead of planning it again
+    answers, plan_from = {}, replan_module._plan_from
+
+    def plan_once(request, start, progress, say):
+        if start not in answers:
+            answers[start] = plan_from(request, start, progress, say)
+        return answers[start]
+
+    monkeypatch.setattr(replan_module, "_plan_from", plan_once)
     prog = Programme(np.array([29.0, 60.0, 29.0, 40.0]), np.array([-1.0, 0.0, 1.0, 0.0]))
     plan_dir = write_plan_dir(tmp_path / "plan", programme=prog)
     meta = json.loads((plan_dir / "plan.json").read_text())
