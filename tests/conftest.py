@@ -74,7 +74,10 @@ def pytest_xdist_make_scheduler(config, log):
     import glob
     import json
 
-    from xdist.scheduler import LoadScopeScheduling
+    try:
+        from xdist.scheduler import LoadScopeScheduling
+    except ImportError:  # another pytest-xdist: its own default scheduling
+        return None
 
     class SharedFixtureScheduling(LoadScopeScheduling):
         """``load``, but the tests sharing a module fixture are one unit of work (the
