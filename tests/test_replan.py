@@ -420,15 +420,11 @@ def test_a_device_turning_short_of_the_edge_is_re_planned_from_m_not_a_sweep_lat
     assert min(distinct_levels(g, DELTA) for g in old) < LEVELS
 
 
-def test_an_incomplete_new_rest_is_taken_only_when_allowed(tmp_path, monkeypatch):
-    """The plan of the test above with a 170 min limit: at 60 min no rest completes; the
-    best one raises the lowest level count, so it is taken by default, and refused (the
-    plan goes on) when new steps are taken only if complete."""
+def _plan_each_start_once(monkeypatch) -> None:
+    """Answer each continuation request (its start minute) once per test: options that
+    change only which rest is taken run the same planner search again otherwise."""
     from schedsyn import replan as replan_module
-    from schedsyn.replan import replan_run
 
-    # the options below change only which rest is taken, not what the planner is asked
-    # (a continuation is never graded): each planner request is answered once (about 13 s)
     answers, plan_from = {}, replan_module._plan_from
 
     def plan_once(request, start, progress, say):
@@ -438,11 +434,27 @@ def test_an_incomplete_new_rest_is_taken_only_when_allowed(tmp_path, monkeypatch
 
     monkeypatch.setattr(replan_module, "_plan_from", plan_once)
 
+
+def _short_plan_dir(tmp_path):
+    """A 158-min plan (cool, hold, heat, hold) whose limit leaves little room: 170 min."""
     prog = Programme(np.array([29.0, 60.0, 29.0, 40.0]), np.array([-1.0, 0.0, 1.0, 0.0]))
     plan_dir = write_plan_dir(tmp_path / "plan", programme=prog)
     meta = json.loads((plan_dir / "plan.json").read_text())
     meta["limits"]["duration_max_min"] = 170.0
     (plan_dir / "plan.json").write_text(json.dumps(meta))
+    return prog, plan_dir
+
+
+def test_an_incomplete_new_rest_is_taken_only_when_allowed(tmp_path, monkeypatch):
+    """The plan of the test above with a 170 min limit: at 60 min no rest completes; the
+    best one raises the lowest level count, so it is taken by default, and refused (the
+    plan goes on) when new steps are taken only if complete."""
+    from schedsyn.replan import replan_run
+
+    # the options below change only which rest is taken, not what the planner is asked
+    # (a continuation is never graded): each planner request is answered once (about 13 s)
+    _plan_each_start_once(monkeypatch)
+    prog, plan_dir = _short_plan_dir(tmp_path)
     plan = read_plan_dir(plan_dir)
     frame = synth_effect_log(prog, ModelSpec(2400.0, 5.5), sample_s=10.0, noise_c=0.01, seed=1)
     log = log_from_frame(frame.drop(columns=["t_true_c", "g_true_c_per_min"]), "r")
@@ -469,24 +481,12 @@ def test_replan_cli_only_if_complete_keeps_the_plan_when_no_rest_completes(
 ):
     """The case above through the CLI: by default the better, incomplete rest is written;
     with ``--only-if-complete`` the plan goes on unchanged and replan.json says why."""
-    from schedsyn import replan as replan_module
     from schedsyn.cli import main
 
     # as above: the flag changes only which rest is taken, not what the planner is asked,
     # so the second run reads the first one's answer instead of planning it again
-    answers, plan_from = {}, replan_module._plan_from
-
-    def plan_once(request, start, progress, say):
-        if start not in answers:
-            answers[start] = plan_from(request, start, progress, say)
-        return answers[start]
-
-    monkeypatch.setattr(replan_module, "_plan_from", plan_once)
-    prog = Programme(np.array([29.0, 60.0, 29.0, 40.0]), np.array([-1.0, 0.0, 1.0, 0.0]))
-    plan_dir = write_plan_dir(tmp_path / "plan", programme=prog)
-    meta = json.loads((plan_dir / "plan.json").read_text())
-    meta["limits"]["duration_max_min"] = 170.0
-    (plan_dir / "plan.json").write_text(json.dumps(meta))
+    _plan_each_start_once(monkeypatch)
+    prog, plan_dir = _short_plan_dir(tmp_path)
     frame = synth_effect_log(prog, ModelSpec(2400.0, 5.5), sample_s=10.0, noise_c=0.01, seed=1)
     log = tmp_path / "log.csv"
     frame.drop(columns=["t_true_c", "g_true_c_per_min"]).to_csv(log, index=False)
