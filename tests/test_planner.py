@@ -1,5 +1,8 @@
 """The planner: bands by construction, plans checked by independent re-simulation."""
 
+import dataclasses
+import math
+
 import numpy as np
 import pytest
 from independent import chamber_knots, levels_per_bin, ode_trajectories
@@ -687,3 +690,13 @@ def test_the_finer_sampling_runs_only_where_the_count_is_close_to_changing(monke
         seen.clear()
         check_programme(read_steps(data / name), spec, limits, [ThermalParams()])
         assert seen == ([0.1, 0.02] if fine else [0.1]), name
+
+
+def test_the_report_says_no_complete_plan_exists_when_the_bound_is_infinite(small_plan):
+    from schedsyn.cli.plan import report_plan
+
+    finite = [line for line in report_plan(small_plan) if "proven" in line]
+    assert len(finite) == 1 and "min (this plan +" in finite[0]
+    proven_none = dataclasses.replace(small_plan, duration_lower_bound_min=math.inf)
+    (line,) = [line for line in report_plan(proven_none) if "proven" in line]
+    assert "no complete plan exists" in line and "inf" not in line
