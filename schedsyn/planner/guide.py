@@ -65,8 +65,8 @@ def parallel_profiles(
     ``chamber_share``: the chamber floor's or ceiling's speed limit is taken, like the
     chamber rates, at ``rate_share`` -- and at each bin's side nearest the limit
     (:func:`_chamber_caps`) -- instead of the bound's cap at the bin's most favourable
-    point. Slower where the limit binds (W1 465 -> 480 min), so the search tries it last,
-    where nothing else fits."""
+    point. Slower where the limit binds (W1 465 -> 480 min), so the search tries it after
+    every other design (:data:`~.search.CANDIDATES`)."""
     tau = params.tau_min
     w = spec.grid.bin_c
     sides = {
@@ -145,7 +145,7 @@ def _chamber_caps(
     ``g = (Tk + dT0 - T) / tau``: heating at most ``(ceiling + dT0 - T) / tau``, cooling
     at most ``(T - floor - dT0) / tau``. The bound's caps (:func:`~.bound._caps`) take
     each bin's most favourable point instead, in the bound's favour; a profile at that
-    speed leaves its band no room at the bin's other side (a 25-degC region above a
+    speed leaves its band no room at the bin's other side (a 25-degC region below a
     ceiling of 35.8 degC: the fast heating band's floor 0.954 degC/min at 11 degC, where
     the ceiling allows 0.953, and every plan of it stuck).
     """

@@ -100,10 +100,11 @@ CANDIDATES: tuple[Guided | Classic, ...] = (
     Classic((1.0, 0.7, 1.0, 0.9), True, "exact"),
     Classic((1.0, 1.0, 1.0, 1.0), True, "exact"),
     # last: guided profiles that keep clear of the chamber floor and ceiling throughout
-    # each bin (slower where a limit binds: W1 465 -> 480 min, so only where nothing else
-    # fits). A 25-degC region under a ceiling 11.6 degC above it (counting dT0) got stuck
-    # with every other candidate (its fast band asked for the ceiling's own speed at
-    # 11 degC) and ended with 2 of 3 levels; this one plans it complete in 264 min.
+    # each bin (slower where a limit binds: W1 465 -> 480 min, so only where no guided
+    # design above gave a structure). A 25-degC region under a ceiling 11.6 degC above it
+    # (counting dT0) got stuck with every other candidate (its fast band asked for the
+    # ceiling's own speed at 11 degC) and ended with 2 of 3 levels; with this one it
+    # plans complete in 249 min.
     Guided(0.9, 0.04, chamber_share=True),
 )
 #: Tried last, when no structure fits (slow retries and level splits included) but one
