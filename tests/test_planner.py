@@ -336,6 +336,7 @@ def test_a_bin_the_chamber_cannot_reach_is_named_in_the_error_with_the_floor_it_
         plan_experiment(spec, ThermalParams(dt0_c=3.0), limits, effort_s=5.0)
     msg = str(info.value)
     assert "some bin cannot be crossed at all" in msg and "inf min" not in msg
+    assert "not searched" not in msg  # the levels were searched (for a partial plan)
     # the binding limit and the floor that would do: lo - edge margin - dT0 - 1 degC
     assert "cannot bring the device below 1.5 °C" in msg and "at most -4.25 °C" in msg
     assert "\n" not in msg  # one line for the CLI

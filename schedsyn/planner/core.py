@@ -418,10 +418,8 @@ def _plan(
         # and a graded plan for fewer levels beats any partial one (its weakest bin has more)
         proven = duration_lower_bound(spec, params, limits).lower_bound_min
         if proven > limits.duration_max_min:
-            note = proven_note = (
-                f"{_no_complete_plan(proven, limits)}; "
-                f"{spec.levels_required} levels were not searched"
-            )
+            proven_note = _no_complete_plan(proven, limits)
+            note = f"{proven_note}; {spec.levels_required} levels were not searched"
             if progress:
                 progress(f"{spec.name}: {note}")
             found = _fewer_levels(spec, params, limits, progress, effort)
