@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
+import math
 import os
 import re
 import shutil
@@ -62,8 +63,26 @@ def write_text_atomic(path: Path | str, text: str, inputs: Iterable[Path | str] 
     return write_atomic(path, lambda p: p.write_text(text, encoding="utf-8"), inputs)
 
 
+def strict_json(obj: Any) -> Any:
+    """``obj`` with every NaN and infinity replaced by None (JSON ``null``).
+
+    JSON has no NaN or infinity; Python writes ``NaN`` and ``Infinity``, which strict
+    parsers (JavaScript's, jq, most other languages') refuse. A file that must tell an
+    infinite value from a missing one says so in a field of its own.
+    """
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: strict_json(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [strict_json(v) for v in obj]
+    return obj
+
+
 def write_json_atomic(path: Path | str, obj: Any, inputs: Iterable[Path | str] = ()) -> Path:
-    return write_text_atomic(path, json.dumps(obj, indent=2, sort_keys=False) + "\n", inputs)
+    """Write ``obj`` as strict JSON (NaN and infinity as ``null``, :func:`strict_json`)."""
+    text = json.dumps(strict_json(obj), indent=2, sort_keys=False, allow_nan=False)
+    return write_text_atomic(path, text + "\n", inputs)
 
 
 def write_frame_atomic(path: Path | str, frame, inputs: Iterable[Path | str] = ()) -> Path:

@@ -53,6 +53,7 @@ from .effects import ModelSpec
 from .errors import LogFormatError, ParameterError, SchedsynError
 from .estimate import estimate_gradient
 from .grid import BinGrid
+from .io import strict_json as json_safe  # re-exported: NaN/inf to None
 from .logs import MeasuredLog, log_from_frame
 from .params import Limits, ThermalParams
 from .programme import Programme, read_steps
@@ -874,17 +875,6 @@ def monitor_run(
         dense=dense,
         planned_dense=planned_dense,
     )
-
-
-def json_safe(obj: Any) -> Any:
-    """NaN/inf to None, recursively (JSON has no NaN)."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [json_safe(v) for v in obj]
-    return obj
 
 
 __all__ = [

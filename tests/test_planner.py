@@ -701,3 +701,30 @@ def test_the_report_says_no_complete_plan_exists_when_the_bound_is_infinite(smal
     proven_none = dataclasses.replace(small_plan, duration_lower_bound_min=math.inf)
     (line,) = [line for line in report_plan(proven_none) if "proven" in line]
     assert "no complete plan exists" in line and "inf" not in line
+
+
+def _strict_load(path):
+    """json.loads that refuses NaN and Infinity, as strict parsers (JavaScript, jq) do."""
+    import json
+
+    def refuse(name):
+        raise ValueError(f"{path.name} holds {name}, which is not JSON")
+
+    return json.loads(path.read_text(encoding="utf-8"), parse_constant=refuse)
+
+
+def test_plan_json_is_strict_json_and_says_when_no_complete_plan_exists(small_plan, tmp_path):
+    from schedsyn.cli.plan import write_plan_outputs
+
+    write_plan_outputs(small_plan, tmp_path / "finite")
+    doc = _strict_load(tmp_path / "finite" / "plan.json")
+    assert doc["duration_lower_bound_min"] == pytest.approx(small_plan.duration_lower_bound_min)
+    assert doc["complete_plan_proven_impossible"] is False
+    # a bound past the budget, and an infinite one (some bin cannot be crossed at all)
+    over = small_plan.limits.duration_max_min + 1.0
+    for bound, written in ((over, over), (math.inf, None)):
+        proven = dataclasses.replace(small_plan, duration_lower_bound_min=bound)
+        write_plan_outputs(proven, tmp_path / str(bound))
+        doc = _strict_load(tmp_path / str(bound) / "plan.json")
+        assert doc["duration_lower_bound_min"] == written
+        assert doc["complete_plan_proven_impossible"] is True

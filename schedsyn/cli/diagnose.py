@@ -12,7 +12,7 @@ import json
 import numpy as np
 
 from ..discrepancy import DIAGNOSE_MAX_ROWS, DiagnoseSettings, diagnose
-from ..io import write_frame_atomic, write_json_atomic
+from ..io import strict_json, write_frame_atomic, write_json_atomic
 from ..logs import read_log, thin_log
 from ..models_io import write_model
 from . import _common
@@ -125,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             print(note)
     if args.json:
-        print(json.dumps(d.to_json_dict()))
+        print(json.dumps(strict_json(d.to_json_dict()), allow_nan=False))
         _common.stderr(wrote)
     else:
         _common.say(

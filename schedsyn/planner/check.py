@@ -91,6 +91,14 @@ class Plan:
     informative: dict | None = None
 
     @property
+    def complete_plan_proven_impossible(self) -> bool | None:
+        """The proven lower bound exceeds the budget (or is infinite): no complete plan
+        exists. None where the proof does not apply."""
+        if self.duration_lower_bound_min is None:
+            return None
+        return bool(self.duration_lower_bound_min > self.limits.duration_max_min)
+
+    @property
     def gap_to_bound_min(self) -> float | None:
         """How much longer than the proven lower bound this plan is, min."""
         if self.duration_lower_bound_min is None:
@@ -166,8 +174,11 @@ class Plan:
             "notes": list(self.notes),
             "robust_box_check": self.box_check,
             "continued_from_min": self.continued_from_min,
+            # null where the proof does not apply; an infinite bound (some bin cannot be
+            # crossed at all) is null too (JSON has no infinity): the next field tells
             "duration_lower_bound_min": self.duration_lower_bound_min,
             "gap_to_bound_min": self.gap_to_bound_min,
+            "complete_plan_proven_impossible": self.complete_plan_proven_impossible,
             "coverage_nominal": (
                 None if self.coverage_nominal is None else self.coverage_nominal.coverage
             ),
