@@ -25,14 +25,21 @@ class LogFormatError(SchedsynError, ValueError):
 
 
 class InfeasiblePlanError(SchedsynError):
-    """No programme meets the request; the message says which requirement and by how much."""
+    """No programme meets the request; the message says which requirement and by how much.
 
-    def __init__(self, message: str, best_coverage: float | None = None):
+    ``best_plan``: when a plan was made but does not meet the requirement (a complete plan
+    was required), that plan (:class:`schedsyn.planner.Plan`), else None.
+    """
+
+    def __init__(
+        self, message: str, best_coverage: float | None = None, best_plan: object | None = None
+    ):
         super().__init__(message)
         self.best_coverage = best_coverage
+        self.best_plan = best_plan
 
-    def __reduce__(self):  # keep best_coverage across process boundaries
-        return (type(self), (str(self), self.best_coverage))
+    def __reduce__(self):  # keep best_coverage and best_plan across process boundaries
+        return (type(self), (str(self), self.best_coverage, self.best_plan))
 
 
 class SolverFailedError(SchedsynError):

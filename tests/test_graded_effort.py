@@ -11,7 +11,7 @@ import pytest
 from independent import table_check
 
 from schedsyn.errors import InfeasiblePlanError, ParameterError
-from schedsyn.params import Limits
+from schedsyn.params import Limits, ThermalParams
 from schedsyn.planner import ExperimentSpec, core, plan_experiment
 from schedsyn.planner.lp import lp_nonzeros_solved
 from schedsyn.planner.search import STOPPED
@@ -163,3 +163,53 @@ def test_the_same_request_gets_the_same_answer_on_a_slower_machine(monkeypatch):
     assert slow.levels_planned == first.levels_planned
     assert slow.programme.to_frame().equals(first.programme.to_frame())
     assert [n for n in slow.notes if "effort" in n] == [n for n in first.notes if "effort" in n]
+
+
+def test_when_no_count_is_complete_the_part_of_the_region_that_fits_is_planned(tmp_path):
+    """A floor 2.7 degC below the region's cold edge (1.3 degC dT0, tau 3600 s): cooling
+    to past -31 degC is a crawl, so no level count gives a plan of the whole region in
+    240 min. The graded search's plan of a sub-region with fewer levels is returned
+    (it was dropped: 'no programme covers any part', exit 2), its coverage re-counted
+    from an independent ODE solution of the exported table."""
+    spec = ExperimentSpec(
+        "cold",
+        -31.0,
+        -25.0,
+        -33.0,
+        -20.0,
+        levels_required=4,
+        delta_c_per_min=0.08,
+        segment_min=15.0,
+    )
+    params = ThermalParams(tau_s=3600.0, dt0_c=1.3)
+    limits = Limits(chamber_min_c=-33.7, duration_max_min=240.0)
+    plan = plan_experiment(spec, params, limits)
+    assert not plan.complete and plan.status == "incomplete"
+    k = plan.levels_planned
+    assert k is not None and 2 <= k < spec.levels_required
+    (note,) = [n for n in plan.notes if n.startswith("PARTIAL")]
+    assert f"even {k} levels" in note
+    # the cold-edge limit is named, and a bin that cannot be reached is not hidden
+    assert any("chamber floor -33.7" in n for n in plan.notes)
+    steps = plan.programme.to_csv(tmp_path / "steps.csv")
+    res = table_check(
+        steps,
+        (spec.working_lo_c, spec.working_hi_c),
+        k,
+        tau_s=params.tau_s,
+        dt0_c=params.dt0_c,
+        delta=spec.delta_c_per_min,
+    )
+    assert 0.0 < res["coverage"] < 1.0  # part of the region at k levels, not all
+    assert f"{k} levels to {res['coverage']:.0%} of the bins" in note
+    assert plan.coverage.min_levels == res["min_levels"]
+    assert res["duration_min"] <= limits.duration_max_min + 1e-9
+    assert res["device_min_c"] >= limits.device_min_c
+    assert abs(res["chamber_end_c"] - limits.end_c) <= limits.end_tol_c
+    rates = res["rates_c_per_min"]
+    assert (
+        limits.rate_min_c_per_min - 1e-3
+        <= rates.min()
+        <= rates.max()
+        <= limits.rate_max_c_per_min + 1e-3
+    )

@@ -2,6 +2,7 @@
 
 import dataclasses
 import math
+import pickle
 
 import numpy as np
 import pytest
@@ -603,6 +604,18 @@ def test_require_complete_never_returns_a_graded_plan():
     assert not graded.complete and graded.levels_planned == 2
     with pytest.raises(InfeasiblePlanError, match="target cannot be met|no programme"):
         plan_experiment(spec, limits=limits, require_complete=True)
+
+
+def test_the_plan_that_fell_short_survives_a_process_boundary_with_its_error(small_plan):
+    """A worker's InfeasiblePlanError carries the plan it made (``best_plan``: the graded
+    search keeps a sub-region plan of fewer levels from it) to the parent process."""
+    err = InfeasiblePlanError("short", best_coverage=0.5, best_plan=small_plan)
+    again = pickle.loads(pickle.dumps(err))
+    assert str(again) == "short" and again.best_coverage == 0.5
+    assert again.best_plan.duration_min == small_plan.duration_min
+    assert np.array_equal(
+        again.best_plan.programme.rates_c_per_min, small_plan.programme.rates_c_per_min
+    )
 
 
 def test_an_over_long_plan_that_cannot_be_cut_leaves_the_other_fallbacks(monkeypatch):

@@ -413,6 +413,7 @@ def _plan(
     found: _Fewer | None = None
     searched_fewer = False
     proven_note = None
+    partials: list[Plan] = []  # the graded search's plans that are not complete
     if graded_ok and continuation is None:
         # proven impossible: the search for these levels (and its fallbacks) cannot succeed,
         # and a graded plan for fewer levels beats any partial one (its weakest bin has more)
@@ -422,7 +423,7 @@ def _plan(
             note = f"{proven_note}; {spec.levels_required} levels were not searched"
             if progress:
                 progress(f"{spec.name}: {note}")
-            found = _fewer_levels(spec, params, limits, progress, effort)
+            found = _fewer_levels(spec, params, limits, progress, effort, partials=partials)
             searched_fewer = True
             fewer = _graded(None, spec, params, limits, (note,), found)
             if fewer is not None:
@@ -430,7 +431,7 @@ def _plan(
         elif proven * GUESS_BOUND_RATIO > limits.duration_max_min:
             # possible but unlikely (no complete plan found so far was this close to its
             # bound): the graded answer first, then the requested levels while effort lasts
-            found = _fewer_levels(spec, params, limits, progress, effort)
+            found = _fewer_levels(spec, params, limits, progress, effort, partials=partials)
             searched_fewer = True
             if found is not None:
                 search_stop = effort.spent
@@ -482,7 +483,7 @@ def _plan(
     else:
         notes += explain_shortfall(spec, params, limits)
         if graded_ok and not searched_fewer:  # first: the effort limit cuts sub-regions
-            found = _fewer_levels(spec, params, limits, progress, effort)
+            found = _fewer_levels(spec, params, limits, progress, effort, partials=partials)
             searched_fewer = True
         try:
             chosen = _fallback(
@@ -491,6 +492,9 @@ def _plan(
         except InfeasiblePlanError as err:
             # nothing at all with these levels: fewer levels, if some count fits
             fewer = _graded(None, spec, params, limits, tuple(notes), found)
+            if fewer is None:  # no count complete: the best part of the region, if any
+                why = [n for n in (proven_note, *notes) if n]
+                fewer = _best_partial(partials, spec, params, limits, tuple(why))
             if fewer is None:
                 # say why: the proven bound and the limit that binds, not only the search's
                 # reasons (a bin the chamber cannot reach read as "lengthen the duration")
@@ -608,6 +612,7 @@ def _plan(
             f"{spec.name}: the target cannot be met: {'; '.join(notes + problems)}; best "
             f"reachable coverage is {cov.coverage:.0%}",
             best_coverage=cov.coverage,
+            best_plan=plan,
         )
     return plan
 
@@ -784,9 +789,12 @@ def _fewer_levels(
     progress: Callable[[str], None] | None,
     effort: _Effort,
     floor: int = 0,
+    partials: list[Plan] | None = None,
 ) -> _Fewer | None:
     """The most levels per bin below ``levels_required`` (and above ``floor``) that a
-    complete plan reaches, with that plan; None when no count gives one.
+    complete plan reaches, with that plan; None when no count gives one. The plans of
+    the counts searched that are not complete (sub-regions, cut at the limit) are
+    appended to ``partials``: the last resort when nothing else can be planned.
 
     The effort is bounded: each count is planned complete or not at all (no truncated
     or partial plans; sub-regions only while ``effort`` lasts), counts whose proven
@@ -819,7 +827,7 @@ def _fewer_levels(
         if progress:
             progress(f"the target cannot be met: planning {levels} levels per bin instead")
         try:
-            alt = _plan(  # complete or nothing: sub-regions may give it, not truncation
+            alt = _plan(  # complete or nothing (a partial plan kept apart: a last resort)
                 dataclasses.replace(spec, levels_required=levels),
                 params,
                 limits,
@@ -833,7 +841,11 @@ def _fewer_levels(
                 effort=effort,
                 search_stop=effort.stop if first else effort.spent,
             )
-        except (InfeasiblePlanError, SolverFailedError):
+        except InfeasiblePlanError as err:
+            alt = None
+            if isinstance(err.best_plan, Plan) and partials is not None:
+                partials.append(err.best_plan)
+        except SolverFailedError:
             alt = None  # (numerical failures prove nothing; that count is skipped)
         tried[levels] = alt if alt is not None and alt.complete else None
         effort.answered = effort.answered or tried[levels] is not None
@@ -898,6 +910,50 @@ def _graded(
     )
 
 
+def _best_partial(
+    partials: Sequence[Plan],
+    spec: ExperimentSpec,
+    params: ThermalParams,
+    limits: Limits,
+    notes: tuple[str, ...],
+) -> Plan | None:
+    """The last resort when no level count gives a complete plan and nothing at all
+    fits with the requested levels: the best of the graded search's partial plans (a
+    sub-region, or cut at the limit, with fewer levels), so that the user gets the part
+    of the region that can be calibrated, with every reason the rest cannot. Ranked by
+    keeping every limit, then the most levels in the weakest bin, then the most bins at
+    the plan's own level count, then that count. None when there is none."""
+    if not partials:
+        return None
+
+    def rank(p: Plan) -> tuple:
+        cov = p.coverage
+        return (not p.violations, cov.min_levels, cov.coverage, p.spec.levels_required)
+
+    best = max(partials, key=rank)
+    k = best.spec.levels_required
+    cov, cov01, _, _, _ = check_programme(best.programme, spec, limits, [params])
+    return dataclasses.replace(
+        best,
+        spec=spec,
+        coverage=cov,
+        coverage_0p1=cov01,
+        complete=False,
+        status="incomplete",
+        levels_planned=k,
+        notes=(
+            *notes,
+            f"PARTIAL: no plan gives every bin even {k} levels within "
+            f"{limits.duration_max_min:g} min; this one gives {k} levels to "
+            f"{best.coverage.coverage:.0%} of the bins (the part of the region that fits; "
+            f"weakest bin {cov.min_levels} levels, {cov.coverage:.0%} of the bins at "
+            f"{spec.levels_required})",
+            *best.notes,
+        ),
+        duration_lower_bound_min=duration_lower_bound(spec, params, limits).lower_bound_min,
+    )
+
+
 #: Complete plans take at least this multiple of their proven lower bound (the bound
 #: relaxes turning and level separation): 1.25-2.1 over the benchmark's complete plans,
 #: 1.4 typically. The graded search's first guess is the most levels whose bound times
@@ -933,6 +989,7 @@ def _respec(plan: Plan, spec: ExperimentSpec, note: str, require_complete: bool)
         raise InfeasiblePlanError(
             f"{spec.name}: the target cannot be met: {'; '.join(out.notes)}",
             best_coverage=out.coverage.coverage,
+            best_plan=out,
         )
     return with_table_meta(out)
 

@@ -33,8 +33,13 @@ def explain_shortfall(spec: ExperimentSpec, params: ThermalParams, limits: Limit
         notes.append(
             f"at {spec.working_lo_c:g} °C the chamber floor {limits.chamber_min_c:g} °C "
             f"allows cooling gradients of at most {g_cool:.3f} °C/min "
-            f"(g = (Tk_min + dT0 - T)/tau); {n_cool} cooling levels {delta:g} °C/min apart "
-            "need clearly more: lower the floor or the level count"
+            f"(g = (Tk_min + dT0 - T)/tau); "
+            + (
+                f"{n_cool} cooling levels {delta:g} °C/min apart need"
+                if n_cool > 1
+                else f"even one cooling level (at least {delta / 2:g} °C/min) needs"
+            )
+            + " clearly more: lower the floor or the level count"
         )
     g_heat = (limits.chamber_max_c + params.dt0_c - spec.working_hi_c) / tau
     if g_heat <= 0:
@@ -45,8 +50,13 @@ def explain_shortfall(spec: ExperimentSpec, params: ThermalParams, limits: Limit
     elif g_heat < n_heat * delta + HEADROOM_C_PER_MIN:
         notes.append(
             f"at {spec.working_hi_c:g} °C the chamber ceiling {limits.chamber_max_c:g} °C "
-            f"allows heating gradients of at most {g_heat:.3f} °C/min; {n_heat} heating "
-            "levels need clearly more: raise the ceiling or lower the level count"
+            f"allows heating gradients of at most {g_heat:.3f} °C/min; "
+            + (
+                f"{n_heat} heating levels need"
+                if n_heat > 1
+                else f"even one heating level (at least {delta / 2:g} °C/min) needs"
+            )
+            + " clearly more: raise the ceiling or lower the level count"
         )
     # turning room between the working edges and the device limits
     n_dir = max(n_cool, n_heat)
