@@ -6,7 +6,7 @@ import pickle
 
 import numpy as np
 import pytest
-from independent import chamber_knots, levels_per_bin, ode_trajectories
+from independent import chamber_knots, levels_per_bin, ode_trajectories, table_check
 from scipy.integrate import solve_ivp
 
 from schedsyn import (
@@ -341,6 +341,30 @@ def test_a_bin_the_chamber_cannot_reach_is_named_in_the_error_with_the_floor_it_
     # the binding limit and the floor that would do: lo - edge margin - dT0 - 1 degC
     assert "cannot bring the device below 1.5 °C" in msg and "at most -4.25 °C" in msg
     assert "\n" not in msg  # one line for the CLI
+
+
+def test_the_part_of_the_region_the_chamber_can_reach_is_planned(tmp_path):
+    """The same floor with a fast device (tau 600 s) and [0, 6] degC: the bins below
+    1.5 degC (floor + dT0) cannot be reached, but [3, 6] can, with room for a cooling band
+    above the floor. The answer is a plan of that part (it was an error), with the floor
+    the whole region needs; the part's levels re-counted from an independent ODE solution."""
+    spec = ExperimentSpec("reach", 0.0, 6.0, -2.0, 8.0, levels_required=2)
+    params = ThermalParams(tau_s=600.0, dt0_c=3.0)
+    limits = Limits(chamber_min_c=-1.5, duration_max_min=200.0)
+    plan = plan_experiment(spec, params, limits, effort_s=5.0)
+    assert not plan.complete and math.isinf(plan.duration_lower_bound_min)
+    (note,) = [n for n in plan.notes if n.startswith("PARTIAL")]
+    assert "[3, 6] °C" in note
+    assert any("a floor of at most -4.25 °C is needed" in n for n in plan.notes)
+    res = table_check(
+        plan.programme.to_csv(tmp_path / "steps.csv"), (0.0, 6.0), 2, tau_s=600.0, dt0_c=3.0
+    )
+    assert (res["levels"][3:] >= 2).all()  # the part: [3, 4), [4, 5), [5, 6)
+    assert (res["levels"][:2] == 0).all()  # below floor + dT0 = 1.5 degC: never entered
+    assert list(res["levels"]) == list(plan.coverage.levels)
+    assert res["duration_min"] <= 200.0 + 1e-9 and res["device_min_c"] > 1.5
+    assert abs(res["chamber_end_c"] - limits.end_c) <= limits.end_tol_c
+    assert res["rates_c_per_min"].min() >= limits.rate_min_c_per_min - 1e-3
 
 
 def test_shortfall_names_the_binding_chamber_limit():

@@ -20,12 +20,14 @@ from ..errors import InfeasiblePlanError, ParameterError, SolverFailedError
 from ..model import FirstOrderLag, LinearThermalModel
 from ..params import Limits, ThermalParams
 from ..programme import Programme
+from .bands import BAND_SAFETY_C_PER_MIN, BAND_WIDTH_C_PER_MIN
 from .bound import duration_lower_bound
 from .check import Plan, check_programme, step_limit_problems
 from .continuation import plan_continuation
 from .explain import explain_shortfall
 from .informative import L1_WEIGHT_LADDER, informative_rates
 from .lp import Context, LpStats, lp_nonzeros_solved, require_solvable
+from .physics import LIMIT_FRACTION
 from .polish import honour_step_limits, merge_small_changes, polish, step_runs
 from .request import Continuation, ExperimentSpec, check_request
 from .robust import box_note, box_scenarios, held_note, search_robust, verify_robust
@@ -426,6 +428,8 @@ def _plan(
             found = _fewer_levels(spec, params, limits, progress, effort, partials=partials)
             searched_fewer = True
             fewer = _graded(None, spec, params, limits, (note,), found)
+            if fewer is None and math.isinf(proven):  # some bin cannot be reached at all
+                fewer = _plan_reachable_part(spec, params, limits, progress, effort, proven_note)
             if fewer is not None:
                 return with_table_meta(_finished(fewer, tic, effort))
         elif proven * GUESS_BOUND_RATIO > limits.duration_max_min:
@@ -910,6 +914,60 @@ def _graded(
     )
 
 
+def _plan_reachable_part(
+    spec: ExperimentSpec,
+    params: ThermalParams,
+    limits: Limits,
+    progress: Callable[[str], None] | None,
+    effort: _Effort,
+    proven_note: str,
+) -> Plan | None:
+    """Some bin cannot be reached at all (the chamber floor or ceiling, with dT0, stops
+    the device short of it): the plan of the part of the region that can be
+    (:func:`reachable_part`; graded when the levels do not fit), reported for the whole
+    region with the notes that name the limit that would do; None when no part can be
+    planned."""
+    part = reachable_part(spec, params, limits)
+    if part is None or not math.isfinite(
+        duration_lower_bound(part, params, limits).lower_bound_min
+    ):
+        return None
+    if progress:
+        progress(
+            f"{spec.name}: planning the part the chamber can reach, "
+            f"[{part.working_lo_c:g}, {part.working_hi_c:g}] °C"
+        )
+    try:
+        plan = _plan(
+            part,
+            params,
+            limits,
+            model=None,
+            robust_tau_s=None,
+            robust_dt0_c=None,
+            progress=progress,
+            require_complete=False,
+            continuation=None,
+            graded=True,
+            effort=effort,
+            search_stop=effort.stop,
+        )
+    except (InfeasiblePlanError, SolverFailedError):
+        return None
+    levels = plan.levels_planned or part.levels_required
+    return _reported_for(
+        plan,
+        spec,
+        params,
+        limits,
+        (proven_note, *explain_shortfall(spec, params, limits)),
+        f"PARTIAL: the chamber cannot bring the device through every bin; this plan is "
+        f"for the part it can, [{part.working_lo_c:g}, {part.working_hi_c:g}] °C, with "
+        f"{levels} levels in {plan.coverage.coverage:.0%} of its bins (the other bins get "
+        "what its sweeps give them",
+    )
+
+
 def _best_partial(
     partials: Sequence[Plan],
     spec: ExperimentSpec,
@@ -932,26 +990,77 @@ def _best_partial(
 
     best = max(partials, key=rank)
     k = best.spec.levels_required
-    cov, cov01, _, _, _ = check_programme(best.programme, spec, limits, [params])
-    return dataclasses.replace(
+    return _reported_for(
         best,
+        spec,
+        params,
+        limits,
+        notes,
+        f"PARTIAL: no plan gives every bin even {k} levels within "
+        f"{limits.duration_max_min:g} min; this one gives {k} levels to "
+        f"{best.coverage.coverage:.0%} of the bins (the part of the region that fits",
+    )
+
+
+def _reported_for(
+    part: Plan,
+    spec: ExperimentSpec,
+    params: ThermalParams,
+    limits: Limits,
+    notes: tuple[str, ...],
+    head: str,
+) -> Plan:
+    """``part`` (a plan of part of ``spec``'s region, or with fewer levels) reported
+    for ``spec``: coverage re-counted over the whole region at the requested levels,
+    never complete; ``head`` (an open parenthesis, closed here with the weakest bin and
+    the share at the requested levels) after ``notes``, then ``part``'s own notes."""
+    cov, cov01, _, _, _ = check_programme(part.programme, spec, limits, [params])
+    return dataclasses.replace(
+        part,
         spec=spec,
         coverage=cov,
         coverage_0p1=cov01,
         complete=False,
         status="incomplete",
-        levels_planned=k,
+        levels_planned=part.levels_planned or part.spec.levels_required,
         notes=(
             *notes,
-            f"PARTIAL: no plan gives every bin even {k} levels within "
-            f"{limits.duration_max_min:g} min; this one gives {k} levels to "
-            f"{best.coverage.coverage:.0%} of the bins (the part of the region that fits; "
-            f"weakest bin {cov.min_levels} levels, {cov.coverage:.0%} of the bins at "
-            f"{spec.levels_required})",
-            *best.notes,
+            f"{head}; weakest bin {cov.min_levels} levels, {cov.coverage:.0%} of the bins "
+            f"at {spec.levels_required})",
+            *part.notes,
         ),
         duration_lower_bound_min=duration_lower_bound(spec, params, limits).lower_bound_min,
     )
+
+
+#: How far past the edge margin a region's edge must lie from the temperature the chamber
+#: floor or ceiling drives the device towards (limit + dT0), degC, to count as reachable
+#: in reasonable time: the exponential approach takes ``tau ln(gap / 1 degC)`` for the
+#: last stretch (the shortfall note's advice assumes the same degree). At least as far as
+#: one gradient band of that direction needs: ``tau (delta/2 + safety + width)`` over
+#: ``LIMIT_FRACTION``.
+REACH_HEADROOM_C = 1.0
+
+
+def reachable_part(
+    spec: ExperimentSpec, params: ThermalParams, limits: Limits
+) -> ExperimentSpec | None:
+    """The widest part of the working region, in whole bins, that the chamber floor and
+    ceiling let the device pass by the edge margin with :data:`REACH_HEADROOM_C` to spare,
+    and fast enough for one gradient band; None when that is the whole region or not a
+    single bin."""
+    w = spec.grid.bin_c
+    one_band_c_per_min = spec.delta_c_per_min / 2 + BAND_SAFETY_C_PER_MIN + BAND_WIDTH_C_PER_MIN
+    room = spec.edge_margin_c + max(
+        REACH_HEADROOM_C, params.tau_min * one_band_c_per_min / LIMIT_FRACTION
+    )
+    lo_need = limits.chamber_min_c + params.dt0_c + room
+    hi_need = limits.chamber_max_c + params.dt0_c - room
+    lo = spec.working_lo_c + max(0, math.ceil((lo_need - spec.working_lo_c) / w - 1e-9)) * w
+    hi = spec.working_hi_c - max(0, math.ceil((spec.working_hi_c - hi_need) / w - 1e-9)) * w
+    if hi - lo < w - 1e-9 or (lo, hi) == (spec.working_lo_c, spec.working_hi_c):
+        return None
+    return dataclasses.replace(spec, working_lo_c=float(lo), working_hi_c=float(hi))
 
 
 #: Complete plans take at least this multiple of their proven lower bound (the bound
