@@ -955,6 +955,7 @@ def _plan_reachable_part(
     except (InfeasiblePlanError, SolverFailedError):
         return None
     levels = plan.levels_planned or part.levels_required
+    share = float(np.mean(plan.coverage.levels >= levels))  # (a graded plan counts at L)
     return _reported_for(
         plan,
         spec,
@@ -963,7 +964,7 @@ def _plan_reachable_part(
         (proven_note, *explain_shortfall(spec, params, limits)),
         f"PARTIAL: the chamber cannot bring the device through every bin; this plan is "
         f"for the part it can, [{part.working_lo_c:g}, {part.working_hi_c:g}] °C, with "
-        f"{levels} levels in {plan.coverage.coverage:.0%} of its bins (the other bins get "
+        f"{levels} levels in {share:.0%} of its bins (the other bins get "
         "what its sweeps give them",
     )
 
