@@ -831,18 +831,13 @@ def _fewer_levels(
         if progress:
             progress(f"the target cannot be met: planning {levels} levels per bin instead")
         try:
-            alt = _plan(  # complete or nothing (a partial plan kept apart: a last resort)
+            alt = _plan_nominal(  # complete or nothing (a partial plan kept: a last resort)
                 dataclasses.replace(spec, levels_required=levels),
                 params,
                 limits,
-                model=None,
-                robust_tau_s=None,
-                robust_dt0_c=None,
-                progress=progress,
-                require_complete=True,
-                continuation=None,
+                progress,
+                effort,
                 graded=False,
-                effort=effort,
                 search_stop=effort.stop if first else effort.spent,
             )
         except InfeasiblePlanError as err:
@@ -914,6 +909,35 @@ def _graded(
     )
 
 
+def _plan_nominal(
+    spec: ExperimentSpec,
+    params: ThermalParams,
+    limits: Limits,
+    progress: Callable[[str], None] | None,
+    effort: _Effort,
+    *,
+    graded: bool,
+    search_stop: Callable[[], bool] | None = None,
+) -> Plan:
+    """:func:`_plan` for a variant of the request with the first-order model and no box:
+    graded (the best plan, complete or not) or complete-or-nothing (``graded=False``:
+    :class:`InfeasiblePlanError` with the plan that fell short as ``best_plan``)."""
+    return _plan(
+        spec,
+        params,
+        limits,
+        model=None,
+        robust_tau_s=None,
+        robust_dt0_c=None,
+        progress=progress,
+        require_complete=not graded,
+        continuation=None,
+        graded=graded,
+        effort=effort,
+        search_stop=search_stop or effort.stop,
+    )
+
+
 def _plan_reachable_part(
     spec: ExperimentSpec,
     params: ThermalParams,
@@ -938,20 +962,7 @@ def _plan_reachable_part(
             f"[{part.working_lo_c:g}, {part.working_hi_c:g}] °C"
         )
     try:
-        plan = _plan(
-            part,
-            params,
-            limits,
-            model=None,
-            robust_tau_s=None,
-            robust_dt0_c=None,
-            progress=progress,
-            require_complete=False,
-            continuation=None,
-            graded=True,
-            effort=effort,
-            search_stop=effort.stop,
-        )
+        plan = _plan_nominal(part, params, limits, progress, effort, graded=True)
     except (InfeasiblePlanError, SolverFailedError):
         return None
     levels = plan.levels_planned or part.levels_required
