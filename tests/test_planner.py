@@ -529,9 +529,10 @@ def test_plan_experiment_raises_solver_failed_when_the_solvers_fail(monkeypatch)
     failed = type("Result", (), {"status": 4, "message": "numerical difficulties", "x": None})
     monkeypatch.setattr(clarabel, "DefaultSolver", _FailedClarabel)
     monkeypatch.setattr(optimize, "linprog", lambda *a, **k: failed())
-    # SMALL narrowed to [-2, 0] degC: every LP still fails, in the search for 3 levels and
-    # in the graded search for 2, in a third of the time SMALL takes
-    spec = ExperimentSpec(**dict(SMALL, working_lo_c=-2.0, approx_lo_c=-12.0))
+    # SMALL narrowed to [-2, 0] degC at 2 levels: every LP of its search fails (and no
+    # fewer count is left for a graded search: with 3 levels its failures added two thirds
+    # of the time and were swallowed as "that count is skipped", so they decided nothing)
+    spec = ExperimentSpec(**dict(SMALL, working_lo_c=-2.0, approx_lo_c=-12.0, levels_required=2))
     with pytest.raises(SolverFailedError) as info:
         plan_experiment(spec, ThermalParams(), SMALL_LIMITS)
     assert not isinstance(info.value, InfeasiblePlanError)
