@@ -110,28 +110,33 @@ def test_effort_s_must_be_a_positive_time(bad):
 
 
 def test_an_unlikely_request_gets_its_graded_plan_first(searched, monkeypatch):
-    """5 levels in 240 min: the bound (about 207 min) allows it, but no complete plan
-    known came within 1.3x of its bound. The graded plan (4 levels) is made first, and
-    the search for 5 runs only while the effort lasts: spent at once, the answer is the
-    graded plan, and the plan says the search was cut."""
-    spec = dataclasses.replace(SPEC, levels_required=5)
-    bound = core.duration_lower_bound(spec, limits=LIMITS).lower_bound_min
-    assert bound <= LIMITS.duration_max_min < bound * core.GUESS_BOUND_RATIO
-    stopped: list[bool] = []  # per search for 5 levels: was it cut?
+    """3 levels in [-4, 0] degC within 135 min: the bound (about 110 min) allows it, but
+    no complete plan known came within 1.3x of its bound. The graded plan (2 levels) is
+    made first, and the search for 3 runs only while the effort lasts: spent at once, the
+    answer is the graded plan, and the plan says the search was cut. (SPEC at 5 levels
+    in 240 min is the same case, with a search three times as long.)"""
+    spec = ExperimentSpec("U", -4.0, 0.0, -14.0, 10.0, levels_required=3)
+    limits = Limits(duration_max_min=135.0)
+    bound = core.duration_lower_bound(spec, limits=limits).lower_bound_min
+    assert bound <= limits.duration_max_min < bound * core.GUESS_BOUND_RATIO
+    stopped: list[bool] = []  # per search for 3 levels: was it cut?
     inner = core.synthesise
 
     def spy(spec_, *args, **kwargs):
         result = inner(spec_, *args, **kwargs)
-        if spec_.levels_required == 5:
+        if spec_.levels_required == 3:
             stopped.append(STOPPED in result.reasons)
         return result
 
     monkeypatch.setattr(core, "synthesise", spy)
-    cut = plan_experiment(spec, limits=LIMITS, effort_s=1e-6)
-    assert searched[0] < 5 and cut.levels_planned == searched[0]
+    cut = plan_experiment(spec, limits=limits, effort_s=1e-6)
+    assert searched[0] < 3 and cut.levels_planned == searched[0]
     assert any("effort limit" in n for n in cut.notes)
     assert stopped == [True]
-    full = plan_experiment(spec, limits=LIMITS, effort_s=None)
+    # no limit: the search for 3 runs to its end. One nonzero per reference second spends
+    # any finite limit at once (the default's 45 s too), so None must not act as one
+    monkeypatch.setattr(core, "LP_NONZEROS_PER_EFFORT_S", 1)
+    full = plan_experiment(spec, limits=limits, effort_s=None)
     assert not any("effort limit" in n for n in full.notes)
     assert stopped[-1] is False
     assert full.complete or full.levels_planned is not None
