@@ -6,9 +6,11 @@ fewest any split can have (checked against a brute force over every region)."""
 from __future__ import annotations
 
 import dataclasses
+import fcntl
 import functools
 import json
 import math
+import pickle
 
 import numpy as np
 import pandas as pd
@@ -36,22 +38,20 @@ LIMITS = dataclasses.replace(Limits(), duration_max_min=105.0)
 
 
 #: How split_range plans each probe (no effort limit, not graded: "is there a complete
-#: plan?"), and what the planner answered to each request the module's split planned:
-#: (spec without its name, params, limits) -> Plan or InfeasiblePlanError
+#: plan?"), and whether the planner planned complete each request the module's split
+#: planned: (spec without its name, params, limits) -> bool
 PLAN_KW = {"effort_s": None, "graded": False}
-PLANNED: dict[tuple, object] = {}
+PLANNED: dict[tuple, bool] = {}
 
 
 def _key(spec, params, limits) -> tuple:
     return (dataclasses.replace(spec, name="key"), params, limits)  # the name plans nothing
 
 
-@pytest.fixture(scope="module")
-def split_out(tmp_path_factory):
+def _split(out) -> int:
     """The split, remembering the planner's own answer to each probe it plans, so that a
     test asking about the very same request (equal spec but for its name, params, limits,
     and split's keywords) reads that answer instead of repeating a search of 10 s."""
-    out = tmp_path_factory.mktemp("split") / "out"
     argv = ["split", "--range", "-10", "10", "--levels", str(LEVELS)]
     argv += ["--duration-max-min", "105", "--backend", "serial", "--out", str(out), "--quiet"]
     real = split_module.plan_experiment
@@ -60,16 +60,36 @@ def split_out(tmp_path_factory):
         if kw != PLAN_KW:  # not the question the tests ask: not remembered
             return real(spec, params, limits, **kw)
         try:
-            PLANNED[_key(spec, params, limits)] = real(spec, params, limits, **kw)
-        except InfeasiblePlanError as exc:
-            PLANNED[_key(spec, params, limits)] = exc
+            plan = real(spec, params, limits, **kw)
+        except InfeasiblePlanError:
+            PLANNED[_key(spec, params, limits)] = False
             raise
-        return PLANNED[_key(spec, params, limits)]
+        PLANNED[_key(spec, params, limits)] = plan.complete
+        return plan
 
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(split_module, "plan_experiment", record)
-        rc = main(argv)
-    return rc, out
+        return main(argv)
+
+
+@pytest.fixture(scope="module")
+def split_out(tmp_path_factory, worker_id):
+    """The split, run once per test run: under pytest-xdist the module's tests may land on
+    both workers, and the second one reads the first one's output and answers (pytest-xdist's
+    documented way to run a fixture once: a lock in the run's shared temporary folder)."""
+    root = tmp_path_factory.getbasetemp()
+    if worker_id != "master":
+        root = root.parent  # shared by this run's workers
+    shared = root / "split-once"
+    with open(root / "split-once.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        done = shared / "answers.pickle"
+        if not done.exists():
+            rc = _split(shared / "out")
+            done.write_bytes(pickle.dumps((rc, dict(PLANNED))))
+        rc, answers = pickle.loads(done.read_bytes())
+    PLANNED.update(answers)
+    return rc, shared / "out"
 
 
 def test_split_covers_the_range_with_no_gap_each_plan_complete_by_separate_code(split_out):
@@ -122,7 +142,7 @@ def _plans_complete(spec, params) -> bool:
     when the split planned this very request, else planned here.)"""
     known = PLANNED.get(_key(spec, params, LIMITS))
     if known is not None:
-        return not isinstance(known, InfeasiblePlanError) and known.complete
+        return known
     try:
         return plan_experiment(spec, params, LIMITS, **PLAN_KW).complete
     except InfeasiblePlanError:  # not even part of the region fits
