@@ -52,8 +52,10 @@ def _memo_bypassed():
     """Every sweep searched again: ``_place_sweep_once`` as plain ``place_sweep``."""
     old = search_module._place_sweep_once
 
-    def every_time(ctx, u_fixed, d, band, max_seg, slow):
-        return search_module.place_sweep(ctx, u_fixed, d, band, max_seg, slow=slow)
+    def every_time(ctx, u_fixed, d, band, max_seg, slow, every_sample=False):
+        return search_module.place_sweep(
+            ctx, u_fixed, d, band, max_seg, slow=slow, every_sample=every_sample
+        )
 
     search_module._place_sweep_once = every_time
     try:

@@ -118,6 +118,18 @@ SECOND_CHANCE: tuple[Guided, ...] = (
     Guided(0.8, 0.06, "speed"),
 )
 NEAR_MISS_SHARE = 0.1
+#: The slow retry (a stuck candidate's greedy, once more) also scans each stuck sweep's
+#: window start minute by minute, not in segment steps, where segments are longer than
+#: this (min). The segment-step scan tries the window at one phase of the segment grid;
+#: with segments as long as the device's time constant, a sweep fits only where its
+#: band's bends meet the rate changes at segment ends: [43, 58] degC at 5 levels,
+#: tau 600 s, 10-min segments, under a 62.7 degC ceiling, had its middle heating band fit
+#: at 3 of every 10 minutes and never at the phase scanned, so no candidate planned.
+PHASE_RETRY_MIN_SEGMENT_MIN = 3.0
+#: Segments' worth of window starts that scan covers from the first start the rate
+#: limits alone do not rule out (a sweep that fits at no phase over a few segments after
+#: the device can first reach its window only waits longer at the same phases).
+PHASE_SCAN_SEGMENTS = 3
 
 
 def candidate_bands(
@@ -249,7 +261,13 @@ class Structure:
 
 
 def place_sweep(
-    ctx: Context, u_fixed: np.ndarray, d: int, band: Band, max_seg: int, slow: bool = False
+    ctx: Context,
+    u_fixed: np.ndarray,
+    d: int,
+    band: Band,
+    max_seg: int,
+    slow: bool = False,
+    every_sample: bool = False,
 ) -> tuple[np.ndarray, Window] | None:
     """Shortest transition + window for one sweep.
 
@@ -257,7 +275,13 @@ def place_sweep(
     crossings are planned fast first, then slower (:meth:`~.bands.Band.timing_options`;
     ``slow``: only the last-resort timings near the bottom of the band).
     The transition is scanned in segment steps (feasibility is not monotone enough for
-    bisection over the whole range), then refined to the minute.
+    bisection over the whole range), then refined to the minute. ``every_sample``: scanned
+    minute by minute instead, for ``PHASE_SCAN_SEGMENTS`` segments from the first start
+    the rate limits do not rule out. The segment-step scan tries the window at one phase
+    of the segment grid only; where a segment is as long as the device's time constant,
+    whether a sweep fits depends on that phase (its band's bends must meet the rate
+    changes at segment ends), and the phase tried may never fit
+    (:data:`PHASE_RETRY_MIN_SEGMENT_MIN`).
     """
     spec, r = ctx.spec, ctx.responses
     seg = spec.segment_min
@@ -317,13 +341,23 @@ def place_sweep(
     hi_x = min(s_max - s_start - d_fast, int(MAX_TRANSITION_MIN / SAMPLE_MIN))
     if hi_x < 0:
         return None
-    step = max(1, int(round(seg / SAMPLE_MIN)))
-    prev, found = -1, None
+    seg_samples = max(1, int(round(seg / SAMPLE_MIN)))
+    step = 1 if every_sample else seg_samples
+    stats = ctx.stats
+    prev, found, last_x, capped = -1, None, hi_x, False
     for x in range(0, hi_x + 1, step):
+        if x > last_x:
+            break
+        solved = stats.solves - stats.infeasible_by_bounds
         res = attempt(x)
         if res is not None:
             found = (x, res)
             break
+        if every_sample and not capped and stats.solves - stats.infeasible_by_bounds > solved:
+            # the first start the rate limits alone do not rule out: the scan covers
+            # PHASE_SCAN_SEGMENTS segments from here (later starts wait longer at the
+            # same phases)
+            last_x, capped = x + PHASE_SCAN_SEGMENTS * seg_samples - 1, True
         prev = x
     if found is None:
         return None
@@ -417,7 +451,13 @@ def return_to_end(ctx: Context, u_fixed: np.ndarray, max_seg: int) -> np.ndarray
 
 
 def _place_sweep_once(
-    ctx: Context, u_fixed: np.ndarray, d: int, band: Band, max_seg: int, slow: bool
+    ctx: Context,
+    u_fixed: np.ndarray,
+    d: int,
+    band: Band,
+    max_seg: int,
+    slow: bool,
+    every_sample: bool = False,
 ) -> tuple[np.ndarray, Window] | None:
     """:func:`place_sweep`, searched once per synthesis for the same arguments.
 
@@ -427,14 +467,14 @@ def _place_sweep_once(
     deterministic). A repeat returns the earlier answer and counts the earlier LP work
     again (:func:`~.lp.lp_nonzeros_solved`), so an effort limit cuts where it did.
     """
-    key = (u_fixed.tobytes(), d, band, max_seg, slow)
+    key = (u_fixed.tobytes(), d, band, max_seg, slow, every_sample)
     hit = ctx.sweep_memo.get(key)
     if hit is not None:
         ctx.stats.sweeps_reused += 1
         count_work(hit[1])
         return hit[0]
     work0 = lp_nonzeros_solved()
-    res = place_sweep(ctx, u_fixed, d, band, max_seg, slow=slow)
+    res = place_sweep(ctx, u_fixed, d, band, max_seg, slow=slow, every_sample=every_sample)
     ctx.sweep_memo[key] = (res, lp_nonzeros_solved() - work0)
     return res
 
@@ -461,6 +501,13 @@ def greedy(
             # long segments cannot hold a sweep high in its band just after a turnaround
             # (the rate changes only every segment): time it near the bottom of the band
             res = _place_sweep_once(ctx, u_fixed, d, band, max_seg, slow=True)
+        if res is None and slow_retry and ctx.spec.segment_min > PHASE_RETRY_MIN_SEGMENT_MIN:
+            # long segments: the window at every phase of the segment grid, usual
+            # timings first (the scan above tries one phase only)
+            for slow in (False, True):
+                res = _place_sweep_once(ctx, u_fixed, d, band, max_seg, slow, every_sample=True)
+                if res is not None:
+                    break
         if res is None:
             where = "cooling" if d < 0 else "heating"
             return None, (
