@@ -45,7 +45,9 @@ def explain_shortfall(spec: ExperimentSpec, params: ThermalParams, limits: Limit
     if g_heat <= 0:
         notes.append(
             f"the chamber ceiling {limits.chamber_max_c:g} °C cannot bring the device above "
-            f"{limits.chamber_max_c + params.dt0_c:g} °C"
+            f"{limits.chamber_max_c + params.dt0_c:g} °C (ceiling + dT0), so the bins above "
+            f"it are unreachable; a ceiling of at least "
+            f"{spec.working_hi_c + spec.edge_margin_c - params.dt0_c + 1:g} °C is needed"
         )
     elif g_heat < n_heat * delta + HEADROOM_C_PER_MIN:
         notes.append(
