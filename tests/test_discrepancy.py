@@ -9,8 +9,6 @@ fit step.
 
 import json
 import math
-import os
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -78,21 +76,20 @@ def _run(job):
     }
 
 
-@pytest.fixture(scope="module")
-def blind():
-    jobs = [(e, s) for e in EFFECTS for s in range(N_PER_EFFECT)]
-    jobs += [("none", s) for s in range(N_CLEAN)]
-    workers = min(2, os.cpu_count() or 1)
-    with ProcessPoolExecutor(workers) as pool:
-        rows = list(pool.map(_run, jobs, chunksize=2))
-    return pd.DataFrame(rows)
+def _blind_rows(effect: str) -> pd.DataFrame:
+    """The blind run's logs with this hidden effect ("none": clean ones), each diagnosed
+    without knowing the truth. Each test draws and diagnoses only its own effect's logs (the
+    same seeds as one run of all 70), so pytest-xdist spreads them over its workers instead
+    of one worker, with a process pool of its own, doing all 70 before the first test."""
+    n = N_CLEAN if effect == "none" else N_PER_EFFECT
+    return pd.DataFrame([_run((effect, seed)) for seed in range(n)])
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("effect", list(EFFECTS))
-def test_blind_names_effect_and_parameter(blind, effect):
-    rows = blind[blind["truth"] == effect]
-    assert len(rows) == N_PER_EFFECT
+def test_blind_names_effect_and_parameter(effect):
+    rows = _blind_rows(effect)
+    assert (rows["truth"] == effect).all() and len(rows) == N_PER_EFFECT
     good = rows[rows["correct"] & (rows["err"] <= 0.25)]
     detail = rows[["found", "err", "before", "after", "truth_params", "found_params"]]
     # named right AND main parameter within 25 % in at least 9 of 10 logs
@@ -108,9 +105,9 @@ def test_blind_names_effect_and_parameter(blind, effect):
 
 
 @pytest.mark.slow
-def test_blind_says_none_on_clean_logs(blind):
-    rows = blind[blind["truth"] == "none"]
-    assert len(rows) == N_CLEAN
+def test_blind_says_none_on_clean_logs():
+    rows = _blind_rows("none")
+    assert (rows["truth"] == "none").all() and len(rows) == N_CLEAN
     assert (rows["found"] == "none").sum() >= 19, rows[["found", "before"]].to_string()
 
 
