@@ -8,6 +8,7 @@ passes are counted by a plain loop written here.
 from __future__ import annotations
 
 import json
+import pickle
 
 import numpy as np
 import pandas as pd
@@ -17,7 +18,7 @@ from test_monitor import DELTA, LEVELS, REGION, own_passes, plan_programme, writ
 
 from schedsyn.coverage import distinct_levels
 from schedsyn.effects import ModelSpec
-from schedsyn.errors import LogFormatError, ParameterError
+from schedsyn.errors import InfeasiblePlanError, LogFormatError, ParameterError
 from schedsyn.logs import log_from_frame
 from schedsyn.monitor import read_plan_dir
 from schedsyn.programme import Programme
@@ -420,19 +421,33 @@ def test_a_device_turning_short_of_the_edge_is_re_planned_from_m_not_a_sweep_lat
     assert min(distinct_levels(g, DELTA) for g in old) < LEVELS
 
 
+#: The planner's answer to each request the re-plans below made, by the request itself
+#: (spec, params, limits, model, continuation; pickled): a Plan or the InfeasiblePlanError
+PLANNED: dict[bytes, object] = {}
+
+
 def _plan_each_start_once(monkeypatch) -> None:
-    """Answer each continuation request (its start minute) once per test: options that
-    change only which rest is taken run the same planner search again otherwise."""
-    from schedsyn import replan as replan_module
+    """Answer each planner request once per module: options that change only which rest is
+    taken ask the planner the very same (a continuation is never graded), as does the CLI
+    on the same log and plan, and would run the same search again. A request differing in
+    anything but the progress callback is planned. The whole run is still predicted from
+    each test's own request (replan._plan_from)."""
+    import schedsyn.planner as planner_module
 
-    answers, plan_from = {}, replan_module._plan_from
+    real = planner_module.plan_experiment
 
-    def plan_once(request, start, progress, say):
-        if start not in answers:
-            answers[start] = plan_from(request, start, progress, say)
-        return answers[start]
+    def plan_once(spec, params, limits, progress=None, **kwargs):
+        key = pickle.dumps((spec, params, limits, sorted(kwargs.items())))
+        if key not in PLANNED:
+            try:
+                PLANNED[key] = real(spec, params, limits, progress=progress, **kwargs)
+            except InfeasiblePlanError as exc:
+                PLANNED[key] = exc
+        if isinstance(PLANNED[key], InfeasiblePlanError):
+            raise PLANNED[key]
+        return PLANNED[key]
 
-    monkeypatch.setattr(replan_module, "_plan_from", plan_once)
+    monkeypatch.setattr(planner_module, "plan_experiment", plan_once)
 
 
 def _short_plan_dir(tmp_path):
@@ -484,7 +499,8 @@ def test_replan_cli_only_if_complete_keeps_the_plan_when_no_rest_completes(
     from schedsyn.cli import main
 
     # as above: the flag changes only which rest is taken, not what the planner is asked,
-    # so the second run reads the first one's answer instead of planning it again
+    # and the CLI asks what the test above asked, so each run reads the planner's answer to
+    # that very request instead of planning it again
     _plan_each_start_once(monkeypatch)
     prog, plan_dir = _short_plan_dir(tmp_path)
     frame = synth_effect_log(prog, ModelSpec(2400.0, 5.5), sample_s=10.0, noise_c=0.01, seed=1)
