@@ -7,6 +7,7 @@ import pickle
 import numpy as np
 import pytest
 from independent import chamber_knots, levels_per_bin, ode_trajectories, table_check
+from run_once import once_per_run
 from scipy.integrate import solve_ivp
 
 from schedsyn import (
@@ -29,6 +30,7 @@ from schedsyn.planner import (
     plan_experiment,
     turning_speed,
 )
+from schedsyn.planner.core import EFFORT_S
 
 SMALL = dict(
     name="S",
@@ -201,9 +203,32 @@ def test_exported_table_reproduces_the_reported_coverage(small_plan, tmp_path):
 ROBUST_BOX = dict(robust_tau_s=(2200.0, 2600.0), robust_dt0_c=(2.0, 4.0))
 
 
+#: SMALL for ROBUST_BOX exactly as `schedsyn plan --working -10 0 --approx -20 10 --levels 3
+#: --duration-max-min 300 --robust-tau-s 2200:2600 --robust-dt0-c 2:4` asks the planner
+#: (tests/test_cli_plan.py), named as the CLI names it: (spec, params, limits, keywords)
+SMALL_ROBUST_REQUEST = (
+    ExperimentSpec(**dict(SMALL, name="plan")),
+    ThermalParams(),
+    SMALL_LIMITS,
+    {"model": None, **ROBUST_BOX, "progress": None, "effort_s": EFFORT_S},
+)
+
+
+def small_robust_once(tmp_path_factory, worker_id):
+    """The planner's answer to SMALL_ROBUST_REQUEST, planned once per test run (20 s):
+    tests/test_cli_plan.py's robust test asks the planner the very same request."""
+    spec, params, limits, kwargs = SMALL_ROBUST_REQUEST
+    return once_per_run(
+        tmp_path_factory,
+        worker_id,
+        "small-robust-plan",
+        lambda: plan_experiment(spec, params, limits, **kwargs),
+    )
+
+
 @pytest.fixture(scope="module")
-def small_robust_plan():
-    return plan_experiment(ExperimentSpec(**SMALL), limits=SMALL_LIMITS, **ROBUST_BOX)
+def small_robust_plan(tmp_path_factory, worker_id):
+    return small_robust_once(tmp_path_factory, worker_id)
 
 
 def test_robust_plan_holds_across_its_box_by_independent_resimulation(small_robust_plan, tmp_path):
