@@ -13,16 +13,20 @@ from scipy.integrate import solve_ivp
 
 from schedsyn import Limits, ThermalParams
 from schedsyn.coverage import distinct_levels
-from schedsyn.planner import Continuation, ExperimentSpec, plan_experiment
+from schedsyn.planner import Continuation, ExperimentSpec, plan_experiment, search
 from schedsyn.programme import Programme
 
 pytestmark = pytest.mark.filterwarnings("ignore:Solution may be inaccurate:UserWarning")
 
 
-def test_a_continuation_that_fits_only_with_sub_region_sweeps_still_completes():
+def test_a_continuation_that_fits_only_with_sub_region_sweeps_still_completes(monkeypatch):
     """30 min of cooling done, nothing measured, 200 min in all: three sweeps of the whole
     region [-10, 0] do not fit, sweeps designed for a
-    narrower sub-region do and still pass every bin three times 0.05 degC/min apart."""
+    narrower sub-region do and still pass every bin three times 0.05 degC/min apart.
+
+    Without the pinned structures (tried before the sub-regions, they fit this one too:
+    the fallback under test would not be reached)."""
+    monkeypatch.setattr(search, "PINNED", ())
     spec = ExperimentSpec("C", -10.0, 0.0, -20.0, 10.0, levels_required=3)
     params = ThermalParams()
     prefix = Programme(np.array([30.0]), np.array([-0.5]))

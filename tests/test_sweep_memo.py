@@ -57,9 +57,9 @@ def test_a_repeated_sweep_search_gives_the_same_answer_and_counts_the_same_work(
     assert stats.sweeps_reused > 0  # the retry happened and reused sweeps
     assert (found.overrun is not None) == (duration_min == 90.0)  # the case is as meant
 
-    def every_time(ctx, u_fixed, d, band, max_seg, slow, every_sample=False):
+    def every_time(ctx, u_fixed, d, band, max_seg, slow, every_sample=False, pinned=False):
         return search_module.place_sweep(
-            ctx, u_fixed, d, band, max_seg, slow=slow, every_sample=every_sample
+            ctx, u_fixed, d, band, max_seg, slow=slow, every_sample=every_sample, pinned=pinned
         )
 
     monkeypatch.setattr(search_module, "_place_sweep_once", every_time)
@@ -75,11 +75,12 @@ def test_a_repeated_sweep_search_gives_the_same_answer_and_counts_the_same_work(
 
 def test_only_the_same_fixed_rates_band_limit_and_timing_are_answered_from_memory(monkeypatch):
     """The key: a sweep searched within another segment limit, after other fixed rates,
-    in another band, with the other timings or scanned minute by minute is searched again."""
+    in another band, with the other timings, scanned minute by minute or with its edge bins
+    pinned is searched again."""
     calls = []
 
-    def fake(ctx, u_fixed, d, band, max_seg, slow=False, every_sample=False):
-        calls.append((u_fixed.tolist(), d, band, max_seg, slow, every_sample))
+    def fake(ctx, u_fixed, d, band, max_seg, slow=False, every_sample=False, pinned=False):
+        calls.append((u_fixed.tolist(), d, band, max_seg, slow, every_sample, pinned))
         return None if slow else (np.full(2, float(len(calls))), None)
 
     monkeypatch.setattr(search_module, "place_sweep", fake)
@@ -92,9 +93,10 @@ def test_only_the_same_fixed_rates_band_limit_and_timing_are_answered_from_memor
         (u, 1, band, 39, False),  # another limit
         (u, 1, band, 40, True),  # slow timings
         (u, 1, band, 40, False, True),  # the window start scanned minute by minute
+        (u, 1, band, 40, False, False, True),  # the edge bins pinned
         (u, -1, band, 40, False),  # the other direction
         (u, 1, object(), 40, False),  # another band
         (np.array([1.0, -0.5]), 1, band, 40, False),  # other fixed rates
     ):
         search_module._place_sweep_once(ctx, *args)
-    assert len(calls) == 7 and ctx.stats.sweeps_reused == 1
+    assert len(calls) == 8 and ctx.stats.sweeps_reused == 1

@@ -11,9 +11,9 @@ every band constraint is linear in the rates.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from functools import cache
+from functools import cache, partial
 
 import numpy as np
 
@@ -118,6 +118,35 @@ class Band:
             out.append(np.array(pieces))
         return out
 
+    def timing_speeds(self, slow: bool = False) -> list[Callable[[np.ndarray], np.ndarray]]:
+        """The speeds (degC/min, functions of T) behind :meth:`timing_options`, in its order."""
+        if slow or self.speed_c_per_min is None:
+            fractions = SLOW_BAND_FRACTIONS if slow else BAND_FRACTIONS
+
+            def at_fraction(t: np.ndarray, f: float) -> np.ndarray:
+                lo, hi = self.bounds(t)
+                return lo + f * (hi - lo)
+
+            return [partial(at_fraction, f=f) for f in fractions]
+
+        profile = self.speed_c_per_min
+
+        def at_share(t: np.ndarray, share: float) -> np.ndarray:
+            return np.interp(t, self.knots_c, profile) * share
+
+        return [partial(at_share, share=share) for share in PROFILE_SHARES]
+
+    def bin_minutes(self, lo_c: float, hi_c: float) -> tuple[float, float]:
+        """Least and most time a sweep held to the band takes to cross ``[lo_c, hi_c]``:
+        ``(integral of dT / hi(T), integral of dT / lo(T))``, min."""
+        t = np.linspace(lo_c, hi_c, MINUTES_POINTS)
+        lo, hi = self.bounds(t)
+        floor = MINUTES_FLOOR_C_PER_MIN
+        return (
+            float(np.trapezoid(1.0 / np.maximum(hi, floor), t)),
+            float(np.trapezoid(1.0 / np.maximum(lo, floor), t)),
+        )
+
     def edge_speeds(self) -> tuple[float, float]:
         """``(entry, exit)`` lower-bound speed of a sweep in this band, degC/min."""
         lo = self.lo_c_per_min
@@ -133,6 +162,18 @@ def band_knots(spec: ExperimentSpec, insets_c: Sequence[float] | None = None) ->
     insets_c = KNOT_INSETS_C if insets_c is None else insets_c
     inner = [k for k in insets_c if 2 * k + 2 <= hi - lo]
     return (lo - m, *(lo + k for k in inner), *(hi - k for k in reversed(inner)), hi + m)
+
+
+def minutes_between(
+    speed: Callable[[np.ndarray], np.ndarray], points_c: Sequence[float]
+) -> np.ndarray:
+    """Minutes to travel between consecutive temperatures of ``points_c`` at ``speed(T)``."""
+    out = []
+    for a, b in zip(points_c[:-1], points_c[1:], strict=True):
+        t = np.linspace(min(a, b), max(a, b), MINUTES_POINTS)
+        v = np.maximum(speed(t), MINUTES_FLOOR_C_PER_MIN)
+        out.append(float(np.trapezoid(1.0 / v, t)))
+    return np.array(out)
 
 
 @dataclass(frozen=True, slots=True)

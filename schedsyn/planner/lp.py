@@ -21,6 +21,7 @@ solver failure is never mistaken for infeasibility.
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import sys
 import threading
@@ -185,20 +186,32 @@ class Responses:
         t0 = limits.t_init_c
         if continuation is not None and continuation.t0_c is not None:
             t0 = continuation.t0_c
-        self.resp = [
-            affine_response(s.model, self.durations, self.times, limits.start_c, t0)
-            for s in scenarios
-        ]
-        if continuation is not None and continuation.start_correction_c:
-            at = continuation.at_min
-            for sc, resp in zip(scenarios, self.resp, strict=True):
-                tau = sc.params.tau_min
-                decay = np.where(
-                    self.times >= at, np.exp(-np.maximum(self.times - at, 0.0) / tau), 0.0
-                )
-                c = continuation.start_correction_c
-                resp.b_t[:] = resp.b_t + c * decay
-                resp.b_g[:] = resp.b_g - c / tau * decay
+        self._start_c, self._t0_c, self._continuation = limits.start_c, t0, continuation
+        self.resp = [self._response(s, self.times) for s in scenarios]
+        #: T rows at times between the samples, by (scenario, time): see :meth:`t_rows_at`
+        self._t_rows: dict[tuple[int, float], tuple[np.ndarray, float]] = {}
+
+    def _response(self, scenario: Scenario, times: np.ndarray):
+        resp = affine_response(scenario.model, self.durations, times, self._start_c, self._t0_c)
+        cont = self._continuation
+        if cont is not None and cont.start_correction_c:
+            at, tau = cont.at_min, scenario.params.tau_min
+            decay = np.where(times >= at, np.exp(-np.maximum(times - at, 0.0) / tau), 0.0)
+            c = cont.start_correction_c
+            resp.b_t[:] = resp.b_t + c * decay
+            resp.b_g[:] = resp.b_g - c / tau * decay
+        return resp
+
+    def t_rows_at(self, scenario: int, times_min: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+        """``(a_t, b_t)``: T at any times (between the planner samples too), affine in the
+        rates of every segment of the grid, exactly as at the samples (cached by time)."""
+        missing = [t for t in times_min if (scenario, float(t)) not in self._t_rows]
+        if missing:
+            resp = self._response(self.scenarios[scenario], np.asarray(missing, dtype=float))
+            for i, t in enumerate(missing):
+                self._t_rows[(scenario, float(t))] = (resp.a_t[i], float(resp.b_t[i]))
+        rows = [self._t_rows[(scenario, float(t))] for t in times_min]
+        return np.array([r[0] for r in rows]), np.array([r[1] for r in rows])
 
     def sample_of(self, j_boundary: int) -> int:
         """Planner sample index at the boundary before segment ``j_boundary``."""
@@ -212,6 +225,43 @@ class Responses:
         """Segments of the grid that fit in ``duration_max_min`` from t = 0."""
         fixed_end = self.edges_min[self.n_fixed]
         return self.n_fixed + int((duration_max_min - fixed_end + 1e-9) // self.seg_min)
+
+
+#: Pinned edge bins: a crossing of a bin's boundary is pinned to within this, min.
+PIN_MIN = 0.1
+#: Pinned edge bins: a sweep ends at least this far beyond the region's edge, degC (its
+#: pass of the edge bin must end before the next sweep's begins).
+PIN_EXIT_C = 0.05
+#: Pinned edge bins: the crossing times are kept this much inside the band's, min. None
+#: needed: the bands' safety gap (``BAND_SAFETY_C_PER_MIN``) already covers counting a
+#: pass's mean gradient on samples 0.1 min apart.
+PIN_TIME_SAFETY_MIN = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class EdgePins:
+    """A sweep's two edge bins held by their crossing times (issue 12).
+
+    Held pointwise to its band, a sweep must enter and leave the region at band speed and
+    turn round outside it. Held by crossing times, it may speed up inside the entry bin
+    and brake inside the exit bin, as long as it crosses each within ``[min, max]``
+    minutes -- its mean gradient there, the level the bin is counted at, stays within the
+    band: it enters the entry bin within ``[entry_min, entry_min + PIN_MIN]`` and leaves
+    it within ``[entry_min + PIN_MIN + entry_min_min, entry_min + entry_max_min]``; the
+    same for the exit bin from ``exit_min``. Every time is in minutes from t = 0.
+    """
+
+    entry_min: float
+    entry_min_min: float
+    entry_max_min: float
+    exit_min: float
+    exit_min_min: float
+    exit_max_min: float
+
+    @property
+    def end_min(self) -> float:
+        """Latest time the sweep leaves its exit bin."""
+        return self.exit_min + self.exit_max_min
 
 
 @dataclass(slots=True)
@@ -233,6 +283,20 @@ class Window:
     #: robust plans: knot tolerance (degC) of each scenario's cuts; a scenario that is
     #: not the reference crosses a knot between two samples wherever it happens to
     knot_tol_c: tuple[tuple[float, ...], ...] | None = None
+    #: edge bins held by their crossing times (:class:`EdgePins`) instead of pointwise
+    pins: EdgePins | None = None
+
+    def banded_range(self, scenario: int = 0) -> tuple[int, int]:
+        """First and last sample held pointwise to the band (all of the window, unless
+        its edge bins are pinned: then from the entry bin's latest exit to the exit
+        bin's earliest entry)."""
+        start, end, _ = self.bounds_of(scenario)
+        if self.pins is None:
+            return start, end
+        p = self.pins
+        return int(math.ceil(p.entry_min + p.entry_max_min - 1e-9)), int(
+            math.floor(p.exit_min + 1e-9)
+        )
 
     def bounds_of(self, scenario: int) -> tuple[int, int, tuple[int, ...]]:
         if self.per_scenario is None:
@@ -243,8 +307,8 @@ class Window:
         """``(first_sample, last_sample, piece_index, knot_at_last_or_None)`` in travel order."""
         n_piece = len(self.band.knots_c) - 1
         order = list(range(n_piece)) if self.direction > 0 else list(range(n_piece))[::-1]
-        start, end, cuts = self.bounds_of(scenario)
-        bounds = [start, *cuts, end]
+        _, _, cuts = self.bounds_of(scenario)
+        bounds = [*self.banded_range(scenario)[:1], *cuts, self.banded_range(scenario)[1]]
         out = []
         for j, pi in enumerate(order):
             knot = None
@@ -368,6 +432,8 @@ class SubLP:
         r = ctx.responses
         self.ctx = ctx
         self.j0 = int(u_fixed.size)
+        self.j1 = int(j1)
+        self.u_fixed = np.asarray(u_fixed, dtype=float)
         self.n = j1 - self.j0
         self.extra = extra
         self.s_from = r.sample_of(self.j0)
@@ -476,6 +542,9 @@ class SubLP:
                     pieces_done += 1
                     self.le(at[k], knot + off + tol - bt[k])
                     self.ge(at[k], knot + off - tol - bt[k])
+            if win.pins is not None:
+                self._pins(win, si, at, bt, ag, bg, mt)
+                continue
             lo_edge, hi_edge = spec.working_lo_c - m, spec.working_hi_c + m
             if d < 0:  # starts above the region, ends below it
                 self.ge(at[s0], hi_edge - bt[s0], mt)
@@ -483,6 +552,50 @@ class SubLP:
             else:
                 self.le(at[s0], lo_edge - bt[s0], mt)
                 self.ge(at[s1], hi_edge - bt[s1], mt)
+
+    def t_at(self, scenario: int, times_min: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+        """``(A, b)`` with T at ``times_min`` = ``A @ free rates + b`` (earlier rates fixed)."""
+        a_full, b_full = self.ctx.responses.t_rows_at(scenario, times_min)
+        return a_full[:, self.j0 : self.j1], b_full + a_full[:, : self.j0] @ self.u_fixed
+
+    def _pins(self, win: Window, si: int, at, bt, ag, bg, mt) -> None:
+        """A pinned sweep's edge bins: their crossing times and, inside them, its direction.
+
+        With ``y = d T`` rising along the sweep and ``e`` a bin's boundary crossed first,
+        ``e'`` the one crossed last: ``y(t0) <= d e`` and ``y(t0 + PIN) >= d e`` (it enters
+        within the pin), ``y(t0 + PIN + min) <= d e'`` and ``y(t0 + max) >= d e'`` (it
+        leaves after ``min`` and before ``max``: its mean gradient over the bin is
+        between ``w / max`` and ``w / min``). Inside a bin the gradient is free -- the
+        sweep may speed up or brake there -- but it moves forward at every sample from
+        the pin to the earliest exit (one pass, not two). It ends ``PIN_EXIT_C`` beyond
+        the region (``mt``: further, the polish's edge margin).
+        """
+        spec, p, d = self.ctx.spec, win.pins, win.direction
+        assert p is not None
+        if self.ctx.robust:  # the scenarios' offsets and own crossings are not modelled
+            raise ValueError("pinned edge bins are for plans of one model, not robust boxes")
+        w = spec.grid.bin_c
+        lo, hi = spec.working_lo_c, spec.working_hi_c
+        e_in, e_out = (hi, lo) if d < 0 else (lo, hi)
+        eps = PIN_MIN
+        bins = (
+            (p.entry_min, p.entry_min_min, p.entry_max_min, e_in, e_in + d * w),
+            (p.exit_min, p.exit_min_min, p.exit_max_min, e_out - d * w, e_out),
+        )
+        for k, (t0, dmin, dmax, first, last) in enumerate(bins):
+            times = (t0, t0 + eps, t0 + eps + dmin, t0 + dmax)
+            a, b = self.t_at(si, times)
+            self.le(d * a[0], d * first - d * b[0])  # not yet in at t0
+            self.ge(d * a[1], d * first - d * b[1])  # in by t0 + PIN
+            self.le(d * a[2], d * last - d * b[2])  # not out before t0 + PIN + min
+            # out by t0 + max (and, leaving the region, a little beyond it)
+            beyond, extra = (PIN_EXIT_C, mt) if k == 1 else (0.0, None)
+            self.ge(d * a[3], d * last + beyond - d * b[3], extra)
+            # forward at every sample from the pin to the earliest exit: one pass
+            i0 = int(math.ceil(t0 / SAMPLE_MIN - 1e-9)) - self.s_from
+            i1 = int(math.floor((t0 + eps + dmin) / SAMPLE_MIN + 1e-9)) - self.s_from
+            if i1 >= i0:
+                self.ge(d * ag[i0 : i1 + 1], -d * bg[i0 : i1 + 1])
 
     def exit_speed(self, win: Window, column: int) -> None:
         """Extra column ``column`` >= d * g at the window end, for every scenario."""

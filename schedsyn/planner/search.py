@@ -20,21 +20,25 @@ import numpy as np
 
 from ..model import LinearThermalModel
 from ..params import Limits, ThermalParams
+from . import lp
 from .bands import (
     BAND_SAFETY_C_PER_MIN,
     DESIGNS,
     Band,
     band_feasibility,
     make_bands,
+    minutes_between,
     order_bands,
     transit_band,
 )
 from .guide import guided_bands
 from .lp import (
     KNOT_TOL_C,
+    PIN_MIN,
     ROBUST_SLACK_C_PER_MIN,
     SAMPLE_MIN,
     Context,
+    EdgePins,
     LpStats,
     Responses,
     SubLP,
@@ -66,6 +70,8 @@ class Guided:
     edge: str = "mean"
     #: the chamber floor's and ceiling's speed limit taken at ``rate_share`` too
     chamber_share: bool = False
+    #: edge bins held by their crossing times (:class:`~.lp.EdgePins`)
+    pinned: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,6 +84,8 @@ class Classic:
     caps: tuple[float, float, float, float]
     dynamic: bool
     design: str
+    #: edge bins held by their crossing times (:class:`~.lp.EdgePins`)
+    pinned: bool = False
 
 
 #: The structures the search tries, in order. Guided bands first: designed around the
@@ -107,8 +115,16 @@ CANDIDATES: tuple[Guided | Classic, ...] = (
     # plans complete in 249 min.
     Guided(0.9, 0.04, chamber_share=True),
 )
-#: Tried last, when no structure fits (slow retries and level splits included) but one
-#: came within NEAR_MISS_SHARE of the limit: guided
+#: Tried last, when nothing else fits (slow retries, level splits and the second chance
+#: included): the same designs with each sweep's edge bins held by their crossing times
+#: instead of pointwise (:class:`~.lp.EdgePins`), so that it may brake and speed up
+#: inside them and turn round just past the edge. Their starts are scanned minute by
+#: minute (about three times the LPs), so only where the usual structures fail: a slow
+#: chamber (-0.5 / +1.5 degC/min) on [-50, -30] degC in 720 min was 90 % covered at 5
+#: levels and is complete in 717 min with them.
+PINNED: tuple[Guided | Classic, ...] = tuple(replace(c, pinned=True) for c in CANDIDATES)
+#: Tried when no structure fits (slow retries and level splits included) but one came
+#: within NEAR_MISS_SHARE of the limit (before ``PINNED``): guided
 #: profiles whose turns are costed at the edge bins' speed (another placement of the
 #: same levels; min over both sets: [-20, 0] °C with 8 levels 558 -> 537 min, under its
 #: 540; others within +-5 % either way).
@@ -268,6 +284,7 @@ def place_sweep(
     max_seg: int,
     slow: bool = False,
     every_sample: bool = False,
+    pinned: bool = False,
 ) -> tuple[np.ndarray, Window] | None:
     """Shortest transition + window for one sweep.
 
@@ -282,19 +299,32 @@ def place_sweep(
     whether a sweep fits depends on that phase (its band's bends must meet the rate
     changes at segment ends), and the phase tried may never fit
     (:data:`PHASE_RETRY_MIN_SEGMENT_MIN`).
+
+    ``pinned``: the edge bins are held by their crossing times (:class:`~.lp.EdgePins`):
+    the window starts where the sweep enters the region, its knot crossings and the
+    entry of its exit bin are timed from there (:func:`pinned_timings`), and it ends
+    when it has left the exit bin; every start is scanned. None when the band leaves no
+    room for the pins.
     """
     spec, r = ctx.spec, ctx.responses
     seg = spec.segment_min
     s_start = r.sample_of(u_fixed.size)
     s_max = r.sample_of(max_seg)
-    # piece durations (samples) in travel order, from the band's top speed down
+    pin_plan = pinned_timings(spec, band, slow) if pinned else None
+    if pinned and pin_plan is None:
+        return None
+    # piece durations (samples) in travel order, from the band's top speed down; pinned:
+    # the samples of the knot crossings after the window start
     options = []
-    for minutes in band.timing_options(slow):
-        if d < 0:
-            minutes = minutes[::-1]
-        # round the planned knot times, not each piece (rounded pieces drift)
-        at = np.round(np.cumsum(minutes) / SAMPLE_MIN)
-        options.append(np.maximum(1, np.diff(np.concatenate(([0.0], at)))).astype(int))
+    if pin_plan is not None:
+        options = [np.asarray(cuts, dtype=int) for cuts, _, _ in pin_plan[0]]
+    else:
+        for minutes in band.timing_options(slow):
+            if d < 0:
+                minutes = minutes[::-1]
+            # round the planned knot times, not each piece (rounded pieces drift)
+            at = np.round(np.cumsum(minutes) / SAMPLE_MIN)
+            options.append(np.maximum(1, np.diff(np.concatenate(([0.0], at)))).astype(int))
     d_fast = int(options[0].sum())
 
     def solve_window(win: Window, j1: int, scenarios: list[int] | None) -> np.ndarray | None:
@@ -310,14 +340,21 @@ def place_sweep(
         return None if sol is None else sol[:-1]
 
     def attempt(x: int) -> tuple[np.ndarray, Window] | None:
-        for steps in options:
+        for k_opt, steps in enumerate(options):
             s0 = s_start + x
             bounds = s0 + np.concatenate(([0], np.cumsum(steps)))
             s1 = int(bounds[-1])
+            pins = None
+            if pin_plan is not None:  # steps: the knot crossings' samples from s0
+                _, exit_after, x_hi = pin_plan[0][k_opt]
+                e_lo, e_hi, x_lo, _ = pin_plan[1]
+                pins = EdgePins(s0, e_lo, e_hi, s0 + exit_after, x_lo, x_hi)
+                bounds = np.concatenate(([s0], s0 + steps, [0]))
+                s1 = int(math.ceil(pins.end_min / SAMPLE_MIN - 1e-9))
             if s1 > s_max:
                 return None
             j1 = min(r.segments_to(s1), max_seg)
-            win = Window(d, band, s0, s1, tuple(int(c) for c in bounds[1:-1]))
+            win = Window(d, band, s0, s1, tuple(int(c) for c in bounds[1:-1]), pins=pins)
             if not ctx.robust:
                 sol = solve_window(win, j1, None)
                 if sol is not None:
@@ -338,11 +375,15 @@ def place_sweep(
                 return sol_all, win_all
         return None
 
+    if pin_plan is not None:
+        d_fast = int(math.ceil(pin_plan[0][0][1] + pin_plan[0][0][2]))
     hi_x = min(s_max - s_start - d_fast, int(MAX_TRANSITION_MIN / SAMPLE_MIN))
     if hi_x < 0:
         return None
     seg_samples = max(1, int(round(seg / SAMPLE_MIN)))
-    step = 1 if every_sample else seg_samples
+    # pinned: its crossing times are fixed to a tenth of a minute, so whether it fits
+    # depends on where they fall between the rate changes: every start is tried
+    step = 1 if every_sample or pinned else seg_samples
     stats = ctx.stats
     prev, found, last_x, capped = -1, None, hi_x, False
     for x in range(0, hi_x + 1, step):
@@ -370,6 +411,54 @@ def place_sweep(
         else:
             lo_x = mid
     return found[1]
+
+
+#: A pinned sweep leaves its exit bin at most this long after the timing speed would.
+PIN_EXIT_SLACK_MIN = 0.5
+
+
+def pinned_timings(
+    spec: ExperimentSpec, band: Band, slow: bool
+) -> tuple[list[tuple[tuple[int, ...], float, float]], tuple[float, float, float, float]] | None:
+    """How a pinned sweep (:class:`~.lp.EdgePins`) in ``band`` is timed, or None when
+    the band leaves no room for the pins.
+
+    Returns, per timing speed of the band (:meth:`~.bands.Band.timing_speeds`), the
+    samples after the entry pin at which it crosses the inner knots, the minutes after it
+    at which it enters the exit bin and the most minutes it may take over the exit bin
+    (the timing speed's crossing time plus ``PIN_EXIT_SLACK_MIN``, within the band's:
+    the next sweep can start only after it); and the least and most minutes the band
+    allows over the entry and over the exit bin (``PIN_TIME_SAFETY_MIN`` inside them).
+    None where the region has fewer than three bins, a knot lies inside an edge bin, or
+    the band's crossing times of an edge bin span less than ``PIN_MIN``.
+    """
+    d, w = band.direction, spec.grid.bin_c
+    lo, hi = spec.working_lo_c, spec.working_hi_c
+    if spec.grid.n_bins < 3:
+        return None
+    e_in, e_out = (hi, lo) if d < 0 else (lo, hi)
+    knots = [k for k in band.knots_c[1:-1] if d * (e_in + d * w) < d * k < d * (e_out - d * w)]
+    if len(knots) != len(band.knots_c) - 2:
+        return None  # a knot inside an edge bin: the pins would cut its piece
+    knots = sorted(knots, key=lambda k: d * k)
+    points = [e_in, *knots, e_out - d * w]
+    safety = lp.PIN_TIME_SAFETY_MIN
+    spans = []
+    for a, b in ((e_in, e_in + d * w), (e_out - d * w, e_out)):
+        fast, slow_ = band.bin_minutes(min(a, b), max(a, b))
+        spans += [fast + safety, slow_ - safety]
+    if spans[1] - spans[0] < PIN_MIN or spans[3] - spans[2] < PIN_MIN:
+        return None
+    plans = []
+    for speed in band.timing_speeds(slow):
+        times = np.cumsum(minutes_between(speed, [*points, e_out]))
+        cuts = tuple(int(c) for c in np.maximum(1, np.round(times[:-2] / SAMPLE_MIN)))
+        # out of the exit bin about when the timing speed would be (not at the band's
+        # slowest: the next sweep could start only after that)
+        exit_bin = float(times[-1] - times[-2]) + PIN_EXIT_SLACK_MIN
+        exit_max = min(spans[3], max(exit_bin, spans[2] + PIN_MIN))
+        plans.append((cuts, float(times[-2]), exit_max))
+    return plans, (spans[0], spans[1], spans[2], spans[3])
 
 
 def scenario_windows(
@@ -458,6 +547,7 @@ def _place_sweep_once(
     max_seg: int,
     slow: bool,
     every_sample: bool = False,
+    pinned: bool = False,
 ) -> tuple[np.ndarray, Window] | None:
     """:func:`place_sweep`, searched once per synthesis for the same arguments.
 
@@ -467,14 +557,16 @@ def _place_sweep_once(
     deterministic). A repeat returns the earlier answer and counts the earlier LP work
     again (:func:`~.lp.lp_nonzeros_solved`), so an effort limit cuts where it did.
     """
-    key = (u_fixed.tobytes(), d, band, max_seg, slow, every_sample)
+    key = (u_fixed.tobytes(), d, band, max_seg, slow, every_sample, pinned)
     hit = ctx.sweep_memo.get(key)
     if hit is not None:
         ctx.stats.sweeps_reused += 1
         count_work(hit[1])
         return hit[0]
     work0 = lp_nonzeros_solved()
-    res = place_sweep(ctx, u_fixed, d, band, max_seg, slow=slow, every_sample=every_sample)
+    res = place_sweep(
+        ctx, u_fixed, d, band, max_seg, slow=slow, every_sample=every_sample, pinned=pinned
+    )
     ctx.sweep_memo[key] = (res, lp_nonzeros_solved() - work0)
     return res
 
@@ -486,6 +578,7 @@ def greedy(
     max_seg: int,
     progress: Progress,
     slow_retry: bool = False,
+    pinned: bool = False,
 ) -> tuple[Structure | None, str]:
     """Place the sweeps one after another, each as early and as short as feasible.
 
@@ -496,16 +589,18 @@ def greedy(
     u_fixed = ctx.responses.fixed_rates.copy()
     windows: list[Window] = []
     for k, (d, band) in enumerate(zip(directions, sweep_bands, strict=True)):
-        res = _place_sweep_once(ctx, u_fixed, d, band, max_seg, slow=False)
-        if res is None and slow_retry:
+        res = _place_sweep_once(ctx, u_fixed, d, band, max_seg, slow=False, pinned=pinned)
+        if res is None and (slow_retry or pinned):
             # long segments cannot hold a sweep high in its band just after a turnaround
             # (the rate changes only every segment): time it near the bottom of the band
-            res = _place_sweep_once(ctx, u_fixed, d, band, max_seg, slow=True)
+            res = _place_sweep_once(ctx, u_fixed, d, band, max_seg, slow=True, pinned=pinned)
         if res is None and slow_retry and ctx.spec.segment_min > PHASE_RETRY_MIN_SEGMENT_MIN:
             # long segments: the window at every phase of the segment grid, usual
             # timings first (the scan above tries one phase only)
             for slow in (False, True):
-                res = _place_sweep_once(ctx, u_fixed, d, band, max_seg, slow, every_sample=True)
+                res = _place_sweep_once(
+                    ctx, u_fixed, d, band, max_seg, slow, every_sample=True, pinned=pinned
+                )
                 if res is not None:
                     break
         if res is None:
@@ -570,7 +665,8 @@ def synthesise(
     (:func:`level_splits`, the squeezed direction getting fewer), each direction's
     surplus sweeps repeating a level in its transit band (:func:`~.bands.transit_band`);
     the first that fits is kept (``Search.split`` says which). Requests the usual
-    structures plan are not affected.
+    structures plan are not affected. Still nothing: a near miss gets ``SECOND_CHANCE``,
+    and last every design is tried with its sweeps' edge bins pinned (``PINNED``).
     """
     seg = spec.segment_min
     n_fixed = 0 if continuation is None else continuation.prefix.n_segments
@@ -634,7 +730,9 @@ def synthesise(
             limit = search.best[0].n_seg - 1
         elif search.overrun is not None:
             limit = min(limit, search.overrun.n_seg - 1)
-        structure, why = greedy(ctx, directions, order, limit, progress, slow_retry)
+        structure, why = greedy(
+            ctx, directions, order, limit, progress, slow_retry, pinned=candidate.pinned
+        )
         if structure is None:
             search.reasons.append(why)
             return "stuck"
@@ -719,6 +817,18 @@ def synthesise(
                     search.reasons.append(STOPPED)
                     return search
                 attempt(candidate, first, seps[-1], slow_retry=False)
+    if search.best is None and not robust and max_candidates is None:
+        # still nothing (near miss included): the edge bins held by their crossing times
+        for first in firsts:
+            guided_found = False
+            for candidate in PINNED:
+                if guided_found and isinstance(candidate, Classic):
+                    break
+                if stop is not None and stop():
+                    search.reasons.append(STOPPED)
+                    return search
+                outcome = attempt(candidate, first, seps[-1], slow_retry=False)
+                guided_found = guided_found or (outcome == "fits" and isinstance(candidate, Guided))
     return search
 
 
