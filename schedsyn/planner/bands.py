@@ -84,16 +84,6 @@ class Band:
         hi0, hi_1 = self.hi_c_per_min[i], self.hi_c_per_min[i + 1]
         return t0, lo0, (lo_1 - lo0) / (t1 - t0), hi0, (hi_1 - hi0) / (t1 - t0)
 
-    def minutes(self, fraction: float = 0.5) -> np.ndarray:
-        """Time to cross each piece at ``lo + fraction (hi - lo)`` (min per piece)."""
-        out = []
-        for i in range(len(self.knots_c) - 1):
-            t = np.linspace(self.knots_c[i], self.knots_c[i + 1], MINUTES_POINTS)
-            lo, hi = self.bounds(t)
-            v = np.maximum(lo + fraction * (hi - lo), MINUTES_FLOOR_C_PER_MIN)
-            out.append(float(np.trapezoid(1.0 / v, t)))
-        return np.array(out)
-
     def timing_options(self, slow: bool = False) -> list[np.ndarray]:
         """Minutes per piece (ascending T) to time a sweep by, in order of preference.
 
@@ -102,21 +92,7 @@ class Band:
         quarter of its width (``BAND_FRACTIONS``). ``slow``: the last resort, near the
         bottom of the band (``SLOW_BAND_FRACTIONS``), either kind.
         """
-        if slow:
-            return [self.minutes(f) for f in SLOW_BAND_FRACTIONS]
-        if self.speed_c_per_min is None:
-            return [self.minutes(f) for f in BAND_FRACTIONS]
-        out = []
-        for share in PROFILE_SHARES:
-            pieces = []
-            for i in range(len(self.knots_c) - 1):
-                t = np.linspace(self.knots_c[i], self.knots_c[i + 1], MINUTES_POINTS)
-                speed = np.interp(t, self.knots_c, self.speed_c_per_min) * share
-                pieces.append(
-                    float(np.trapezoid(1.0 / np.maximum(speed, MINUTES_FLOOR_C_PER_MIN), t))
-                )
-            out.append(np.array(pieces))
-        return out
+        return [minutes_between(speed, self.knots_c) for speed in self.timing_speeds(slow)]
 
     def timing_speeds(self, slow: bool = False) -> list[Callable[[np.ndarray], np.ndarray]]:
         """The speeds (degC/min, functions of T) behind :meth:`timing_options`, in its order."""
