@@ -18,7 +18,7 @@ from independent import assert_plan_complete, ode_trajectories
 
 from schedsyn.model import FirstOrderLag
 from schedsyn.params import Limits, ThermalParams
-from schedsyn.planner import ExperimentSpec, LpStats, plan_experiment, search
+from schedsyn.planner import ExperimentSpec, LpStats, lp, plan_experiment, search
 from schedsyn.planner.bands import BAND_SAFETY_C_PER_MIN, order_bands
 from schedsyn.planner.lp import PIN_EXIT_C, PIN_MIN, Context, Responses
 from schedsyn.planner.request import Scenario, first_directions, sweep_directions
@@ -53,6 +53,24 @@ def test_the_temperature_between_samples_is_the_ode_solution():
     # cached rows are the same rows
     a2, b2 = responses.t_rows_at(0, times[::-1])
     np.testing.assert_allclose(a2 @ u + b2, ours[::-1])
+
+
+def test_the_rows_between_samples_are_kept_in_bounded_memory(monkeypatch):
+    """A long pinned search asks for many times: the cache is emptied when full, and the
+    rows asked for after that are still right."""
+    monkeypatch.setattr(lp, "T_ROWS_CACHE_MAX", 10)
+    seg, n = 3.0, 20
+    u = np.linspace(-1.0, 2.0, n)
+    responses = Responses([Scenario(PARAMS, FirstOrderLag(PARAMS))], n, seg, Limits())
+    expect = None
+    for k in range(8):
+        times = 0.37 + k + np.arange(4) * 7.1
+        a, b = responses.t_rows_at(0, times)
+        assert len(responses._t_rows) <= 10
+        if k == 0:
+            expect = a @ u + b
+    a, b = responses.t_rows_at(0, 0.37 + np.arange(4) * 7.1)
+    np.testing.assert_allclose(a @ u + b, expect)
 
 
 def _runs_in(temp: np.ndarray, lo: float, hi: float) -> list[tuple[int, int]]:

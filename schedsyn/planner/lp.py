@@ -206,6 +206,8 @@ class Responses:
         """``(a_t, b_t)``: T at any times (between the planner samples too), affine in the
         rates of every segment of the grid, exactly as at the samples (cached by time)."""
         missing = [t for t in times_min if (scenario, float(t)) not in self._t_rows]
+        if missing and len(self._t_rows) + len(missing) > T_ROWS_CACHE_MAX:
+            self._t_rows.clear()  # a long pinned search asks for many times: bounded memory
         if missing:
             resp = self._response(self.scenarios[scenario], np.asarray(missing, dtype=float))
             for i, t in enumerate(missing):
@@ -227,6 +229,10 @@ class Responses:
         return self.n_fixed + int((duration_max_min - fixed_end + 1e-9) // self.seg_min)
 
 
+#: Rows of T between the samples kept by :meth:`Responses.t_rows_at` (a row per time
+#: holds every segment's coefficient: 20,000 rows of a 12-h grid of 3-min segments take
+#: about 50 MB).
+T_ROWS_CACHE_MAX = 20_000
 #: Pinned edge bins: a crossing of a bin's boundary is pinned to within this, min.
 PIN_MIN = 0.1
 #: Pinned edge bins: a sweep ends at least this far beyond the region's edge, degC (its
