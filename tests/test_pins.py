@@ -62,14 +62,17 @@ def test_the_rows_between_samples_are_kept_in_bounded_memory(monkeypatch):
     seg, n = 3.0, 20
     u = np.linspace(-1.0, 2.0, n)
     responses = Responses([Scenario(PARAMS, FirstOrderLag(PARAMS))], n, seg, Limits())
-    expect = None
-    for k in range(8):
-        times = 0.37 + k + np.arange(4) * 7.1
+    first = 0.37 + np.arange(4) * 7.1
+    a, b = responses.t_rows_at(0, first)
+    expect = a @ u + b
+    for k in range(1, 8):
+        # a time already kept beside new ones, as a search asks: the emptying must not
+        # lose the kept one
+        times = np.concatenate(([first[0]], 0.37 + k + np.arange(3) * 7.1))
         a, b = responses.t_rows_at(0, times)
         assert len(responses._t_rows) <= 10
-        if k == 0:
-            expect = a @ u + b
-    a, b = responses.t_rows_at(0, 0.37 + np.arange(4) * 7.1)
+        np.testing.assert_allclose((a @ u + b)[0], expect[0])
+    a, b = responses.t_rows_at(0, first)
     np.testing.assert_allclose(a @ u + b, expect)
 
 

@@ -208,6 +208,7 @@ class Responses:
         missing = [t for t in times_min if (scenario, float(t)) not in self._t_rows]
         if missing and len(self._t_rows) + len(missing) > T_ROWS_CACHE_MAX:
             self._t_rows.clear()  # a long pinned search asks for many times: bounded memory
+            missing = list(times_min)  # the ones that were kept are gone too
         if missing:
             resp = self._response(self.scenarios[scenario], np.asarray(missing, dtype=float))
             for i, t in enumerate(missing):
