@@ -20,7 +20,6 @@ import numpy as np
 
 from ..model import LinearThermalModel
 from ..params import Limits, ThermalParams
-from . import lp
 from .bands import (
     BAND_SAFETY_C_PER_MIN,
     DESIGNS,
@@ -35,6 +34,7 @@ from .guide import guided_bands
 from .lp import (
     KNOT_TOL_C,
     PIN_MIN,
+    PIN_TIME_SAFETY_MIN,
     ROBUST_SLACK_C_PER_MIN,
     SAMPLE_MIN,
     Context,
@@ -442,7 +442,7 @@ def pinned_timings(
         return None  # a knot inside an edge bin: the pins would cut its piece
     knots = sorted(knots, key=lambda k: d * k)
     points = [e_in, *knots, e_out - d * w]
-    safety = lp.PIN_TIME_SAFETY_MIN
+    safety = PIN_TIME_SAFETY_MIN
     spans = []
     for a, b in ((e_in, e_in + d * w), (e_out - d * w, e_out)):
         fast, slow_ = band.bin_minutes(min(a, b), max(a, b))
