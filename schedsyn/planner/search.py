@@ -343,18 +343,18 @@ def place_sweep(
         for k_opt, steps in enumerate(options):
             s0 = s_start + x
             bounds = s0 + np.concatenate(([0], np.cumsum(steps)))
-            s1 = int(bounds[-1])
+            s1, cuts = int(bounds[-1]), tuple(int(c) for c in bounds[1:-1])
             pins = None
             if pin_plan is not None:  # steps: the knot crossings' samples from s0
                 _, exit_after, x_hi = pin_plan[0][k_opt]
                 e_lo, e_hi, x_lo, _ = pin_plan[1]
                 pins = EdgePins(s0, e_lo, e_hi, s0 + exit_after, x_lo, x_hi)
-                bounds = np.concatenate(([s0], s0 + steps, [0]))
+                cuts = tuple(int(s0 + c) for c in steps)
                 s1 = int(math.ceil(pins.end_min / SAMPLE_MIN - 1e-9))
             if s1 > s_max:
                 return None
             j1 = min(r.segments_to(s1), max_seg)
-            win = Window(d, band, s0, s1, tuple(int(c) for c in bounds[1:-1]), pins=pins)
+            win = Window(d, band, s0, s1, cuts, pins=pins)
             if not ctx.robust:
                 sol = solve_window(win, j1, None)
                 if sol is not None:
