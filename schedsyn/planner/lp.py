@@ -314,8 +314,8 @@ class Window:
         """``(first_sample, last_sample, piece_index, knot_at_last_or_None)`` in travel order."""
         n_piece = len(self.band.knots_c) - 1
         order = list(range(n_piece)) if self.direction > 0 else list(range(n_piece))[::-1]
-        _, _, cuts = self.bounds_of(scenario)
-        bounds = [*self.banded_range(scenario)[:1], *cuts, self.banded_range(scenario)[1]]
+        first, last = self.banded_range(scenario)
+        bounds = [first, *self.bounds_of(scenario)[2], last]
         out = []
         for j, pi in enumerate(order):
             knot = None
