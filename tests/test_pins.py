@@ -189,3 +189,38 @@ def test_where_the_usual_structure_overruns_the_pinned_one_plans_complete(tmp_pa
     assert_plan_complete(plan, tmp_path)
     assert plan.duration_lower_bound_min is not None
     assert plan.duration_lower_bound_min <= plan.duration_min <= BUDGET.duration_max_min
+
+
+def test_a_pinned_sweep_that_fits_nowhere_scans_pin_scan_min_of_starts(monkeypatch):
+    """Every start minute matters to a pinned sweep, but not for ever: one that fits at
+    no start scans every minute for PIN_SCAN_MIN from the first start the rate limits do
+    not rule out, then gives up (before, all of MAX_TRANSITION_MIN: 20-45 s per stuck
+    sweep on w4-ceiling-65). The LP is made to find nothing; the starts asked are read
+    off the windows it was given."""
+    seg = SPEC.segment_min
+    max_seg = int(LIMITS.duration_max_min // seg)
+    responses = Responses([Scenario(PARAMS, FirstOrderLag(PARAMS))], max_seg, seg, LIMITS)
+    ctx = Context(SPEC, LIMITS, responses, LpStats())
+    directions = sweep_directions(SPEC, first_directions(SPEC, LIMITS)[0])
+    n_by_dir = {d: directions.count(d) for d in (+1, -1)}
+    sep = SPEC.delta_c_per_min + BAND_SAFETY_C_PER_MIN
+    bands = candidate_bands(Guided(0.9, 0.04, pinned=True), SPEC, [PARAMS], LIMITS, n_by_dir, sep)
+    assert bands is not None
+    d = directions[0]
+    band = order_bands(directions, bands, PARAMS, LIMITS)[0]
+    starts: list[int] = []
+    window = lp.SubLP.window
+
+    def recording_window(self, win):
+        starts.append(win.start_sample)
+        return window(self, win)
+
+    def nothing_fits(self, cost, l1_weight=0.0):
+        self.ctx.stats.record("infeasible", 0.0)  # solved, not ruled out by bounds
+        return None
+
+    monkeypatch.setattr(lp.SubLP, "window", recording_window)
+    monkeypatch.setattr(lp.SubLP, "solve_direct", nothing_fits)
+    assert place_sweep(ctx, np.zeros(0), d, band, max_seg, pinned=True) is None
+    span = int(round(search.PIN_SCAN_MIN / lp.SAMPLE_MIN))
+    assert sorted(set(starts)) == list(range(starts[0], starts[0] + span))

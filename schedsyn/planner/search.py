@@ -146,6 +146,11 @@ PHASE_RETRY_MIN_SEGMENT_MIN = 3.0
 #: limits alone do not rule out (a sweep that fits at no phase over a few segments after
 #: the device can first reach its window only waits longer at the same phases).
 PHASE_SCAN_SEGMENTS = 3
+#: A pinned sweep's scan covers at least this long from that first start, min: on
+#: w1-slow-chamber-720 its sweeps fitted at most 10 min after it, while a pinned sweep
+#: that fits nowhere scanned every minute of ``MAX_TRANSITION_MIN`` (20-45 s each on
+#: w4-ceiling-65, most of that request's search).
+PIN_SCAN_MIN = 30.0
 
 
 def candidate_bands(
@@ -303,8 +308,9 @@ def place_sweep(
     ``pinned``: the edge bins are held by their crossing times (:class:`~.lp.EdgePins`):
     the window starts where the sweep enters the region, its knot crossings and the
     entry of its exit bin are timed from there (:func:`pinned_timings`), and it ends
-    when it has left the exit bin; every start is scanned. None when the band leaves no
-    room for the pins.
+    when it has left the exit bin; every start is scanned for ``PIN_SCAN_MIN`` (at least
+    ``PHASE_SCAN_SEGMENTS`` segments) from the first the rate limits do not rule out.
+    None when the band leaves no room for the pins.
     """
     spec, r = ctx.spec, ctx.responses
     seg = spec.segment_min
@@ -394,11 +400,14 @@ def place_sweep(
         if res is not None:
             found = (x, res)
             break
-        if every_sample and not capped and stats.solves - stats.infeasible_by_bounds > solved:
+        if step == 1 and not capped and stats.solves - stats.infeasible_by_bounds > solved:
             # the first start the rate limits alone do not rule out: the scan covers
-            # PHASE_SCAN_SEGMENTS segments from here (later starts wait longer at the
-            # same phases)
-            last_x, capped = x + PHASE_SCAN_SEGMENTS * seg_samples - 1, True
+            # PHASE_SCAN_SEGMENTS segments from here, pinned sweeps at least
+            # PIN_SCAN_MIN (later starts wait longer at the same phases)
+            span = PHASE_SCAN_SEGMENTS * seg_samples
+            if pinned:
+                span = max(span, int(round(PIN_SCAN_MIN / SAMPLE_MIN)))
+            last_x, capped = x + span - 1, True
         prev = x
     if found is None:
         return None
