@@ -121,11 +121,25 @@ class DiagnoseSettings:
                 )
 
 
-def setpoint_programme(time_s: np.ndarray, tk_set_c: np.ndarray, tol_c: float = 0.05) -> Programme:
-    """Piecewise-linear :class:`Programme` through a sampled setpoint (Douglas-Peucker).
+#: Samples a reconstructed setpoint segment needs inside it (its ends excluded) to be
+#: refitted as a least-squares line (:func:`setpoint_programme`).
+SETPOINT_REFIT_MIN_SAMPLES = 3
 
-    Breakpoints are added where the setpoint leaves the chord between the current ones by
-    more than ``tol_c``; time zero is the first sample.
+
+def setpoint_programme(time_s: np.ndarray, tk_set_c: np.ndarray, tol_c: float = 0.05) -> Programme:
+    """Piecewise-linear :class:`Programme` through a sampled setpoint.
+
+    Douglas-Peucker finds the segments: a breakpoint is added where the setpoint leaves the
+    chord between the current ones by more than ``tol_c`` (so a setpoint logged to 0.1
+    °C is not taken for a staircase). Each segment is then refitted as the least-squares
+    line through the samples inside it (its two end samples excluded), and adjacent lines
+    meet where they cross. Douglas-Peucker alone puts its corners on sample times: a rate
+    change between two samples became a corner up to a sample early or late, and the long
+    hold after it a slow ramp within ``tol_c`` of the hold (0.02-0.05 °C over hours, on
+    10-s logs), which the diagnosis then read as an effect of the device. Segments with
+    fewer than :data:`SETPOINT_REFIT_MIN_SAMPLES` inside, and crossings outside the gap
+    between two lines' samples (a jump of the setpoint), keep the sampled corners. Time
+    zero is the first sample.
     """
     t = (np.asarray(time_s, dtype=float) - float(time_s[0])) / 60.0
     y = np.asarray(tk_set_c, dtype=float)
@@ -144,9 +158,37 @@ def setpoint_programme(time_s: np.ndarray, tk_set_c: np.ndarray, tol_c: float = 
             stack.append((i, i + k))
             stack.append((i + k, j))
             keep[i + k] = True
-    tb, yb = t[keep], y[keep]
+    tb, yb = _refit_corners(t, y, np.flatnonzero(keep))
     d = np.diff(tb)
     return Programme(d, np.diff(yb) / d, float(yb[0]))
+
+
+def _refit_corners(t: np.ndarray, y: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Corner times and values of the setpoint through the Douglas-Peucker breakpoints
+    ``idx`` (sample indices, first and last included): least-squares lines through each
+    segment's inner samples, adjacent lines joined where they cross between their
+    samples; elsewhere the sampled breakpoint (see :func:`setpoint_programme`)."""
+    lines: list[tuple[float, float] | None] = []  # (slope, value at t = 0) per segment
+    for a, b in zip(idx[:-1], idx[1:], strict=True):
+        if b - a - 1 >= SETPOINT_REFIT_MIN_SAMPLES:
+            slope, icpt = np.polyfit(t[a + 1 : b], y[a + 1 : b], 1)
+            lines.append((float(slope), float(icpt)))
+        else:
+            lines.append(None)
+    tb, yb = t[idx].copy(), y[idx].copy()
+    if lines[0] is not None:
+        tb[0], yb[0] = t[0], lines[0][0] * t[0] + lines[0][1]
+    if lines[-1] is not None:
+        tb[-1], yb[-1] = t[-1], lines[-1][0] * t[-1] + lines[-1][1]
+    for m in range(1, idx.size - 1):
+        before, after = lines[m - 1], lines[m]
+        if before is None or after is None or before[0] == after[0]:
+            continue
+        k = idx[m]
+        tc = (after[1] - before[1]) / (before[0] - after[0])
+        if t[k - 1] < tc < t[k + 1]:  # else the setpoint jumps: as sampled
+            tb[m], yb[m] = tc, before[0] * tc + before[1]
+    return tb, yb
 
 
 @dataclass(frozen=True, slots=True)

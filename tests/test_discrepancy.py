@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from independent import ode_trajectories
 
 from schedsyn import Programme, read_steps
 from schedsyn.discrepancy import (
@@ -167,6 +168,61 @@ def test_setpoint_reconstruction_recovers_breakpoints():
     dense = np.linspace(0, t[-1] / 60.0, 5000)
     assert np.max(np.abs(rec.chamber_at(dense) - prog.chamber_at(dense))) < 0.15
     assert rec.n_segments <= 2 * prog.n_segments
+
+
+#: a chamber programme whose rate changes fall between the 10-s samples of its log:
+#: ramps and holds, minutes (durations) and degC/min (rates), from 20 degC
+OFF_GRID = (
+    (47.37, 2.1),
+    (61.83, 0.0),
+    (52.29, -0.83),
+    (75.11, 0.0),
+    (33.53, 1.37),
+    (58.71, 0.0),
+    (41.17, -1.0),
+    (49.93, 0.0),
+)
+
+
+def _off_grid_log(noise_c: float, seed: int = 3) -> tuple[pd.DataFrame, np.ndarray, np.ndarray]:
+    """A clean 10-s log of OFF_GRID (first-order lag, default model; scipy's ODE
+    solver), with the programme's knots (min, degC)."""
+    dur = np.array([d for d, _ in OFF_GRID])
+    rate = np.array([r for _, r in OFF_GRID])
+    knots_t = np.concatenate(([0.0], np.cumsum(dur)))
+    knots_tk = 20.0 + np.concatenate(([0.0], np.cumsum(dur * rate)))
+    t_min, temp, _ = ode_trajectories(knots_t, knots_tk, 2400.0, 3.0, dt_min=10.0 / 60.0)
+    rng = np.random.default_rng(seed)
+    frame = pd.DataFrame(
+        {
+            "time_s": np.round(t_min * 60.0, 6),
+            "t_int_c": temp[0] + noise_c * rng.standard_normal(t_min.size),
+            "tk_set_c": np.round(np.interp(t_min, knots_t, knots_tk), 4),
+        }
+    )
+    return frame, knots_t, knots_tk
+
+
+def test_a_setpoint_that_changes_rate_between_samples_is_rebuilt_with_flat_holds():
+    """Corners off the sample grid: the rebuilt setpoint holds where the programme holds
+    and is the programme to well below the sensor noise except within a sample of a
+    corner (Douglas-Peucker alone put the corners on samples and made the holds slow
+    ramps up to 0.05 degC off, which the diagnosis read as a device effect)."""
+    frame, knots_t, knots_tk = _off_grid_log(0.0)
+    rec = setpoint_programme(frame["time_s"].to_numpy(), frame["tk_set_c"].to_numpy())
+    dense = np.linspace(0.0, knots_t[-1] - 1e-6, 20001)
+    err = np.abs(rec.chamber_at(dense) - np.interp(dense, knots_t, knots_tk))
+    near = np.min(np.abs(dense[:, None] - knots_t[None, :]), axis=1) < 10.0 / 60.0
+    assert np.max(err[~near]) < 2e-3
+    assert np.max(err) < 0.15  # within a sample of a corner: at most the cut corner
+
+
+def test_a_clean_log_with_rate_changes_between_samples_names_no_effect():
+    """The false alarms the setpoint's sampled corners caused (self-heating slopes and
+    second time constants on clean 10-s logs) are gone."""
+    frame, _, _ = _off_grid_log(0.005)
+    d = diagnose_frame(frame, SETTINGS)
+    assert d.effect == "none", (d.effect, d.parameters)
 
 
 def test_residual_analysis_white_periodic_and_where():
