@@ -570,6 +570,11 @@ def _periodic_start(base: CandidateFit, data: _Data) -> list[tuple[float, float,
     return starts or [(0.5, p_lo * 4, 0.0)]
 
 
+#: Fractions of the programme's fastest cooling and heating rates the chamber rate limit
+#: is started from, every pair (:func:`_effect_starts`).
+RATE_LIMIT_FRACTIONS = (0.3, 0.5, 0.7, 0.85, 1.05)
+
+
 def _effect_starts(eff: Effect, base: CandidateFit, data: _Data) -> list[np.ndarray]:
     b = np.array([base.values[n] for n in _BASE_NAMES])
     tau = b[0]
@@ -579,7 +584,12 @@ def _effect_starts(eff: Effect, base: CandidateFit, data: _Data) -> list[np.ndar
         rates = data.programme.rates_c_per_min
         cool = max(-float(rates.min()), 0.05)
         heat = max(float(rates.max()), 0.05)
-        extra = [(0.5 * cool, 1.05 * heat), (0.8 * cool, 1.05 * heat), (1.05 * cool, 0.6 * heat)]
+        # every pair of fractions: a limit the start leaves unbinding has no gradient, so
+        # the local fit cannot find it; one with both limits binding is needed when both
+        # bind (a start grid scored by one evaluation each; see _fit)
+        extra = [
+            (f_c * cool, f_h * heat) for f_c in RATE_LIMIT_FRACTIONS for f_h in RATE_LIMIT_FRACTIONS
+        ]
     elif eff.name == "chamber_cycling":
         extra = _periodic_start(base, data)
     elif eff.name == "asymmetric_tau":
@@ -613,10 +623,54 @@ def fit_candidate(
         starts = [np.array([start.values[n] for n in names])]
     else:
         starts = _effect_starts(eff, base, data)
+        if name == "chamber_rate_limit":
+            starts = _profiled_starts(name, starts, lo, hi, data)
     fit = _fit(name, starts, lo, hi, data, n_refine=1 if eff.linear else 2)
     if name == "chamber_rate_limit":
         fit = _unbind_rate_limits(fit, data)
     return fit
+
+
+#: Evaluations a start of the rate-limit grid gets to fit the device (tau, dT0, T0)
+#: with its limits held (:func:`_profiled_starts`).
+PROFILE_MAX_NFEV = 12
+
+
+def _profiled_starts(
+    effect: str, starts: Sequence[np.ndarray], lo: np.ndarray, hi: np.ndarray, data: _Data
+) -> list[np.ndarray]:
+    """``starts`` with the device's own parameters (tau, dT0, T0) fitted to each one's
+    effect parameters, held. The grid's starts carry the base fit's device, which
+    absorbed the effect (a rate-limited chamber read as tau 4200 s and dT0 10 degC
+    where the device had 2800 s and 3 degC): scored with it, the right limits ranked
+    low and the fit ended in a local minimum with a limit at "none" (10x the noise
+    left; red team, 2026-11-26)."""
+    names = EFFECTS[effect].param_names
+    nb = len(_BASE_NAMES)
+    out = []
+    for s0 in starts:
+        s0 = np.clip(np.asarray(s0, dtype=float), lo, hi)
+
+        def fun(x: np.ndarray, s0: np.ndarray = s0) -> np.ndarray:
+            theta = np.concatenate((x, s0[nb:]))
+            r_t, r_a = _residuals(_spec(effect, theta, names), theta[2], data)
+            return r_t if r_a is None else np.concatenate((r_t, r_a))
+
+        try:
+            res = optimize.least_squares(
+                fun,
+                s0[:nb],
+                bounds=(lo[:nb], hi[:nb]),
+                x_scale="jac",
+                method="trf",
+                diff_step=1e-4,
+                max_nfev=PROFILE_MAX_NFEV,
+            )
+        except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - defensive
+            out.append(s0)
+            continue
+        out.append(np.concatenate((res.x, s0[nb:])))
+    return out
 
 
 #: A rate limit the log never reaches is reported as this (degC/min): no limit.

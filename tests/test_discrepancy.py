@@ -225,6 +225,48 @@ def test_a_clean_log_with_rate_changes_between_samples_names_no_effect():
     assert d.effect == "none", (d.effect, d.parameters)
 
 
+def _rate_limited_log(cool_c_per_min: float, heat_c_per_min: float, air: bool) -> pd.DataFrame:
+    """A 10-s log of a chamber that cannot follow its setpoint faster than the given
+    rates (its air a 5-s lag of the setpoint, clipped to them) driving the default
+    device; scipy's ODE solver, not the package's model."""
+    from scipy.integrate import solve_ivp
+
+    knots_s = np.array([0, 60, 100, 136, 196, 246, 300]) * 60.0
+    knots_c = np.array([20, -40, -40, 50, 50, 0, 0.0])
+    rc, rh = cool_c_per_min / 60.0, heat_c_per_min / 60.0
+
+    def rhs(t, y):
+        setpoint = np.interp(t, knots_s, knots_c)
+        return [np.clip((setpoint - y[0]) / 5.0, -rc, rh), (y[0] + 3.0 - y[1]) / 2400.0]
+
+    t = np.arange(0.0, knots_s[-1] + 1e-9, 10.0)
+    sol = solve_ivp(rhs, (0.0, t[-1]), [20.0, 23.0], t_eval=t, max_step=5.0, rtol=1e-8)
+    rng = np.random.default_rng(3)
+    frame = pd.DataFrame(
+        {
+            "time_s": t,
+            "t_int_c": sol.y[1] + 0.02 * rng.standard_normal(t.size),
+            "tk_set_c": np.interp(t, knots_s, knots_c),
+        }
+    )
+    if air:
+        frame["tk_air_c"] = sol.y[0] + 0.05 * rng.standard_normal(t.size)
+    return frame
+
+
+@pytest.mark.parametrize("air", [True, False])
+def test_a_chamber_limited_both_ways_is_found_with_both_limits(air):
+    """Cooling held to 0.5 and heating to 1.0 degC/min under a programme of -1 and +2.5:
+    both limits found, the gap closed to the noise. A start grid scored with the base
+    fit's device (tau and dT0 bent to absorb the limits) found a chamber lag of 1855 s
+    with the air logged, and a heating limit of 'none' on other logs."""
+    d = diagnose_frame(_rate_limited_log(0.5, 1.0, air), SETTINGS)
+    assert d.effect == "chamber_rate_limit", (d.effect, d.parameters)
+    assert d.parameters["max_cool_rate_c_per_min"] == pytest.approx(0.5, rel=0.05)
+    assert d.parameters["max_heat_rate_c_per_min"] == pytest.approx(1.0, rel=0.05)
+    assert d.rms_after_c < 0.03
+
+
 def test_residual_analysis_white_periodic_and_where():
     rng = np.random.default_rng(0)
     prog = Programme([100.0, 100.0, 100.0], [-0.5, 0.0, 0.5], 20.0)
