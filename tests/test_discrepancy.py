@@ -225,22 +225,30 @@ def test_a_clean_log_with_rate_changes_between_samples_names_no_effect():
     assert d.effect == "none", (d.effect, d.parameters)
 
 
-def _rate_limited_log(cool_c_per_min: float, heat_c_per_min: float, air: bool) -> pd.DataFrame:
+def _rate_limited_log(
+    cool_c_per_min: float,
+    heat_c_per_min: float,
+    air: bool,
+    knots_min: tuple[float, ...] = (0, 60, 100, 136, 196, 246, 300),
+    knots_c: tuple[float, ...] = (20, -40, -40, 50, 50, 0, 0),
+    tau_s: float = 2400.0,
+    dt0_c: float = 3.0,
+) -> pd.DataFrame:
     """A 10-s log of a chamber that cannot follow its setpoint faster than the given
     rates (its air a 5-s lag of the setpoint, clipped to them) driving the default
     device; scipy's ODE solver, not the package's model."""
     from scipy.integrate import solve_ivp
 
-    knots_s = np.array([0, 60, 100, 136, 196, 246, 300]) * 60.0
-    knots_c = np.array([20, -40, -40, 50, 50, 0, 0.0])
+    knots_s = np.asarray(knots_min, dtype=float) * 60.0
     rc, rh = cool_c_per_min / 60.0, heat_c_per_min / 60.0
 
     def rhs(t, y):
         setpoint = np.interp(t, knots_s, knots_c)
-        return [np.clip((setpoint - y[0]) / 5.0, -rc, rh), (y[0] + 3.0 - y[1]) / 2400.0]
+        return [np.clip((setpoint - y[0]) / 5.0, -rc, rh), (y[0] + dt0_c - y[1]) / tau_s]
 
     t = np.arange(0.0, knots_s[-1] + 1e-9, 10.0)
-    sol = solve_ivp(rhs, (0.0, t[-1]), [20.0, 23.0], t_eval=t, max_step=5.0, rtol=1e-8)
+    start = [knots_c[0], knots_c[0] + dt0_c]
+    sol = solve_ivp(rhs, (0.0, t[-1]), start, t_eval=t, max_step=5.0, rtol=1e-8)
     rng = np.random.default_rng(3)
     frame = pd.DataFrame(
         {
@@ -264,6 +272,57 @@ def test_a_chamber_limited_both_ways_is_found_with_both_limits(air):
     assert d.effect == "chamber_rate_limit", (d.effect, d.parameters)
     assert d.parameters["max_cool_rate_c_per_min"] == pytest.approx(0.5, rel=0.05)
     assert d.parameters["max_heat_rate_c_per_min"] == pytest.approx(1.0, rel=0.05)
+    assert d.rms_after_c < 0.03
+
+
+def test_a_heating_limit_under_a_programme_that_ramps_both_ways_is_found():
+    """The red team's log (a random programme: ramps of -1..+2.1 degC/min and holds, 540
+    min; cooling limited to 0.5 and heating to 1.5; tau 2820 s, dT0 3.11 degC; no air
+    channel). Ranked with the base fit's device, the starts with the right limits lost and
+    the heating limit came out 'none' with 0.21 degC left (10x the noise)."""
+    frame = _rate_limited_log(
+        0.5,
+        1.5,
+        False,
+        knots_min=(
+            0.0,
+            58.29,
+            106.15,
+            223.68,
+            246.7,
+            260.83,
+            309.97,
+            319.31,
+            337.1,
+            414.5,
+            447.6,
+            476.67,
+            526.47,
+            540.0,
+        ),
+        knots_c=(
+            20.0,
+            -38.26,
+            -38.26,
+            11.01,
+            11.01,
+            40.59,
+            40.59,
+            57.48,
+            57.48,
+            -10.44,
+            -10.44,
+            25.41,
+            25.41,
+            18.19,
+        ),
+        tau_s=2820.5,
+        dt0_c=3.11,
+    )
+    d = diagnose_frame(frame, SETTINGS)
+    assert d.effect == "chamber_rate_limit", (d.effect, d.parameters)
+    assert d.parameters["max_cool_rate_c_per_min"] == pytest.approx(0.5, rel=0.05)
+    assert d.parameters["max_heat_rate_c_per_min"] == pytest.approx(1.5, rel=0.05)
     assert d.rms_after_c < 0.03
 
 
