@@ -1297,6 +1297,42 @@ class Diagnosis:
 # --------------------------------------------------------------------------------------
 # the workflow
 # --------------------------------------------------------------------------------------
+#: The chosen effect leaves more than this many times the sensor noise (and residuals
+#: that are not white): it does not explain the whole mismatch, and the diagnosis says so.
+GAP_NOISE_FACTOR = 3.0
+#: A fitted parameter within this share of its search range from an end is "at the edge".
+EDGE_SHARE = 1e-3
+
+
+def _doubts(fit: CandidateFit, data: _Data, after: ResidualReport, noise_c: float) -> list[str]:
+    """Warnings on a chosen effect whose fit is suspect: a parameter at the edge of its
+    search range (no interior optimum: the effect is standing in for something else,
+    e.g. temperatures in degF), or a gap left well above the sensor noise."""
+    out = []
+    lo, hi = _effect_bounds(EFFECTS[fit.effect], data)
+    names = _BASE_NAMES + EFFECTS[fit.effect].param_names
+    for name, a, b in zip(names, lo, hi, strict=True):
+        v = fit.values[name]
+        if name == "t0_c" or not math.isfinite(v) or v == NOT_BINDING_C_PER_MIN:
+            continue  # (a rate limit that never binds is reported as none, on purpose)
+        if min(v - a, b - v) <= EDGE_SHARE * (b - a):
+            out.append(
+                f"{fit.effect}: {name} = {v:.4g} is at the edge of its search range "
+                f"[{a:.4g}, {b:.4g}]: the fit found no optimum inside it, so the effect "
+                "is likely standing in for another one (or the log's units are wrong); "
+                "do not trust its parameters"
+            )
+    if math.isfinite(noise_c) and noise_c > 0 and not after.white:
+        if fit.rms_c > GAP_NOISE_FACTOR * noise_c:
+            out.append(
+                f"{fit.effect} leaves {fit.rms_c:.3f} degC, {fit.rms_c / noise_c:.1f}x the "
+                f"sensor noise ({noise_c:.3f} degC), with residuals that are not white: it "
+                "explains part of the mismatch only (a second effect, or one outside the "
+                "library)"
+            )
+    return out
+
+
 def _full_prediction(spec: ModelSpec, t0: float, programme: Programme, t: np.ndarray):
     return spec.predict(programme, t, t0_c=t0)
 
@@ -1437,6 +1473,8 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
         data.t_c,
         data.programme,
     )
+    if chosen != "none":
+        warnings.extend(_doubts(chosen_fit, data, res_after, sensor_noise_c(log.t_int_c)))
     if chosen == "none" and not res_before.white:
         warnings.append(
             "the base-model residuals are not white but no candidate explains them well "

@@ -326,6 +326,37 @@ def test_a_heating_limit_under_a_programme_that_ramps_both_ways_is_found():
     assert d.rms_after_c < 0.03
 
 
+def test_an_effect_that_stands_in_for_something_else_is_flagged():
+    """The device's temperature logged in degF, the setpoint in degC: no effect of the
+    library explains it, and the best one ends at the edge of its search range with
+    hundreds of times the noise left. Named without a word before; now both are said."""
+    from scipy.integrate import solve_ivp
+
+    knots_min = np.array([0, 60, 120, 200, 260, 320, 380.0])
+    knots_c = np.array([20, -10, -10, 40, 40, 20, 20.0])
+    t_min = np.arange(0.0, knots_min[-1] + 1e-9, 10.0 / 60.0)
+    sol = solve_ivp(
+        lambda t, y: [(np.interp(t, knots_min, knots_c) + 3.0 - y[0]) / 40.0],
+        (0.0, t_min[-1]),
+        [23.0],
+        t_eval=t_min,
+        max_step=0.1,
+        rtol=1e-9,
+    )
+    temp_c = sol.y[0] + 0.01 * np.random.default_rng(1).standard_normal(t_min.size)
+    frame = pd.DataFrame(
+        {
+            "time_s": t_min * 60.0,
+            "t_int_c": temp_c * 9.0 / 5.0 + 32.0,  # the mistake
+            "tk_set_c": np.interp(t_min, knots_min, knots_c),
+        }
+    )
+    d = diagnose_frame(frame, SETTINGS)
+    assert d.effect != "none"
+    assert any("edge of its search range" in w for w in d.warnings), d.warnings
+    assert any("x the sensor noise" in w for w in d.warnings), d.warnings
+
+
 def test_residual_analysis_white_periodic_and_where():
     rng = np.random.default_rng(0)
     prog = Programme([100.0, 100.0, 100.0], [-0.5, 0.0, 0.5], 20.0)
