@@ -111,6 +111,9 @@ def test_a_nonlinear_model_file_is_refused(tmp_path, capsys):
         (["--working", "-10", "0", "--chamber-min-c", "30"], ["chamber"]),
         (["--working", "-10", "0", "--model", "/nonexistent/model.json"], ["model file"]),
         (["--working", "-10", "0", "--effort-s", "-1"], ["--effort-s", ">= 0"]),
+        # a chamber that cannot cool (or heat) crashed the planner (ZeroDivisionError)
+        (["--working", "0", "10", "--rate-min-c-per-min", "0"], ["both cool and heat"]),
+        (["--working", "0", "10", "--rate-max-c-per-min", "0"], ["both cool and heat"]),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, words):

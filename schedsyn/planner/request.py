@@ -145,14 +145,22 @@ class ExperimentSpec:
 def check_request(spec: ExperimentSpec, limits: Limits) -> None:
     """Refuse, before any planning, a request that no programme can meet.
 
-    Every sweep passes the working edges by ``edge_margin_c``, so the device must be
-    allowed there: the working region plus the margin must lie inside the device limits.
+    The chamber must cool and heat. Every sweep passes the working edges by
+    ``edge_margin_c``, so the device must be allowed there: the working region plus the
+    margin must lie inside the device limits.
     (A chamber that cannot reach part of the region still gets the best partial plan,
     with notes saying why; see :func:`explain_shortfall`.)
     """
     m = spec.edge_margin_c
     lo, hi = spec.working_lo_c - m, spec.working_hi_c + m
     name = spec.name
+    if not limits.rate_min_c_per_min < 0.0 < limits.rate_max_c_per_min:
+        raise ParameterError(
+            f"{name}: the chamber must both cool and heat (every bin is passed in both "
+            "directions and the run returns to its start temperature), got rates "
+            f"{limits.rate_min_c_per_min:g} .. {limits.rate_max_c_per_min:g} °C/min; give "
+            "rate_min_c_per_min < 0 < rate_max_c_per_min"
+        )
     if lo < limits.device_min_c or hi > limits.device_max_c:
         raise ParameterError(
             f"{name}: the working region [{spec.working_lo_c:g}, {spec.working_hi_c:g}] °C "
