@@ -389,8 +389,12 @@ def test_bad_input_is_a_clear_error():
 TCLAB = Path(__file__).resolve().parent / "data" / "tclab"  # real logs, BSD-3 (README there)
 
 
-def test_real_tclab_sine_run_finds_a_second_lag():
-    """Real heater/thermistor board: the heater-to-sensor lag is the missing effect."""
+def test_real_tclab_sine_run_finds_a_low_pass_in_the_input_path():
+    """Real heater/thermistor board, 5-min sine: the missing effect smooths the heater
+    input. Since the rate-limit fit starts from every pair of limits (2026-11-26) a
+    symmetric slew limit of the pseudo setpoint (which moves in 1-s heater steps) fits
+    and predicts the held-out tail better than the heater-to-sensor lag that was found
+    before (held out 2.9 -> 0.53 degC against 1.26): both are low-pass elements."""
     import importlib.util
 
     spec = importlib.util.spec_from_file_location(
@@ -401,8 +405,13 @@ def test_real_tclab_sine_run_finds_a_second_lag():
     log, k = mod.tclab_log(TCLAB / "validation_experiment_env_2_sin_5_50_run_1.csv")
     d = diagnose(log, mod.SETTINGS)
     assert 0.5 < k < 1.5  # degC per % heater
-    assert d.effect == "second_time_constant" and "chamber_lag" in d.ambiguous_with
-    assert 5.0 < d.parameters["tau2_s"] < 60.0
+    if d.effect == "chamber_rate_limit":  # symmetric: a smoother, not a chamber's limits
+        cool = d.parameters["max_cool_rate_c_per_min"]
+        heat = d.parameters["max_heat_rate_c_per_min"]
+        assert abs(cool / heat - 1.0) < 0.1
+    else:
+        assert d.effect == "second_time_constant" and "chamber_lag" in d.ambiguous_with
+        assert 5.0 < d.parameters["tau2_s"] < 60.0
     assert d.rms_after_c < 0.5 * d.rms_before_c
     assert d.holdout_rms_after_c < 0.6 * d.holdout_rms_before_c
 
