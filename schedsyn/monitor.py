@@ -63,6 +63,9 @@ from .simulate import dense_times
 DENSE_MIN = 0.1
 #: An effect is material when it moves the predicted device temperature by more than this.
 MATERIAL_C = 0.2
+#: A predicted device temperature this far past a device limit calls for a re-plan, degC
+#: (the planner's own plans may touch a limit; the identified model's noise is smaller).
+DEVICE_LIMIT_TOL_C = 0.1
 
 
 # --------------------------------------------------------------------------------------
@@ -596,10 +599,21 @@ class MonitorReport:
         The sooner the better: a re-plan before the device's first turn can still reshape
         the first sweep (W3 on a device with tau 3000 s: complete re-planned from minute
         15, 97 % from minute 30; see :data:`schedsyn.closed_loop.EARLY_MIN`)."""
-        if self.predicted.complete or self.remaining_min <= 0.0:
+        if (self.predicted.complete and not self.leaves_device_limits) or self.remaining_min <= 0:
             return None
         m = float(math.floor(self.elapsed_min + 1e-9))
         return m if m > 0.0 else None
+
+    @property
+    def leaves_device_limits(self) -> bool:
+        """The identified model takes the device more than :data:`DEVICE_LIMIT_TOL_C`
+        outside its limits if the plan goes on unchanged: a re-plan is due even when the
+        coverage is on track (``replan`` refuses such a plan unchanged)."""
+        lim = self.plan.limits
+        return (
+            self.predicted_device_max_c > lim.device_max_c + DEVICE_LIMIT_TOL_C
+            or self.predicted_device_min_c < lim.device_min_c - DEVICE_LIMIT_TOL_C
+        )
 
     def to_frame(self) -> pd.DataFrame:
         """Per-bin status: planned, so far, in progress, predicted; and a one-word status."""
@@ -732,8 +746,13 @@ class MonitorReport:
         )
         m = self.replan_at_min
         if m is not None:
+            why = (
+                "predicted short of the target"
+                if not self.predicted.complete
+                else "predicted to take the device outside its limits"
+            )
             lines.append(
-                f"predicted short of the target: re-plan the rest now (schedsyn replan "
+                f"{why}: re-plan the rest now (schedsyn replan "
                 f"{shlex.quote(str(self.log_source))} {shlex.quote(str(p.path))} --at-min "
                 f"{m:g}); the sooner, the more of the run a new programme can shape"
             )

@@ -217,6 +217,23 @@ def test_a_run_predicted_short_says_how_to_re_plan_it_and_that_command_runs(
     assert meta["replan_at_min"] is None and "re-plan" not in cap.out
 
 
+def test_a_run_on_track_that_would_leave_the_device_limits_says_re_plan(plan_dir):
+    """Coverage on track but the identified device heading past its limit: monitor asks
+    for a re-plan (it only noted the excess, while replan refused the plan unchanged)."""
+    import dataclasses
+
+    report = monitor_run(log_from_frame(run_log(47.5)), read_plan_dir(plan_dir))
+    assert report.predicted.complete and report.replan_at_min is None
+    lim = report.plan.limits
+    hot = dataclasses.replace(report, predicted_device_max_c=lim.device_max_c + 0.5)
+    assert hot.leaves_device_limits and hot.replan_at_min == 47.0
+    assert "outside its limits: re-plan the rest now" in hot.summary()
+    cold = dataclasses.replace(report, predicted_device_min_c=lim.device_min_c - 0.5)
+    assert cold.replan_at_min == 47.0
+    touch = dataclasses.replace(report, predicted_device_max_c=lim.device_max_c + 0.05)
+    assert touch.replan_at_min is None
+
+
 @pytest.mark.parametrize(
     "change, words",
     [
