@@ -366,6 +366,9 @@ def test_a_bin_the_chamber_cannot_reach_is_named_in_the_error_with_the_floor_it_
     # the binding limit and the floor that would do: lo - edge margin - dT0 - 1 degC
     assert "cannot bring the device below 1.5 °C" in msg and "at most -4.25 °C" in msg
     assert "\n" not in msg  # one line for the CLI
+    # the cause leads (it came after what the search saw), and no advice that cannot help
+    assert msg.startswith("unreachable: no complete plan exists") and "The search:" in msg
+    assert "Lengthen the duration" not in msg
 
 
 def test_the_part_of_the_region_the_chamber_can_reach_is_planned(tmp_path):

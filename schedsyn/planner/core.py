@@ -61,6 +61,8 @@ EXCESS_TOL_C = 1e-6
 #: A step that changes the setpoint by less than this is merged into a neighbour when the
 #: plan stays as good (an operator types fewer, more meaningful steps), degC.
 MIN_STEP_CHANGE_C = 0.5
+#: What the refusal of a request that no programme covers any part of advises.
+NO_PLAN_ADVICE = "Lengthen the duration, narrow the region or lower the level count."
 
 
 @dataclass(slots=True)
@@ -207,8 +209,7 @@ def _fallback(
             f"{spec.name}: no programme covers any part of [{spec.working_lo_c:g}, "
             f"{spec.working_hi_c:g}] °C with {spec.levels_required} gradient levels "
             f"{spec.delta_c_per_min:g} °C/min apart within {limits.duration_max_min:g} min "
-            f"({reasons}); best reachable coverage is 0%. "
-            "Lengthen the duration, narrow the region or lower the level count.",
+            f"({reasons}); best reachable coverage is 0%. {NO_PLAN_ADVICE}",
             best_coverage=0.0,
         )
     return max(options, key=verified)
@@ -505,8 +506,13 @@ def _plan(
                 why = [n for n in (proven_note, *notes) if n]
                 if not why:
                     raise
+                # the cause first (the bound, the binding limit), then what the search saw
+                found = str(err).removeprefix(f"{spec.name}: ")
+                if any("unreachable" in w for w in why):  # not a matter of time or levels
+                    found = found.replace(f" {NO_PLAN_ADVICE}", "")
                 raise InfeasiblePlanError(
-                    f"{err} Why: {'; '.join(why)}.", best_coverage=err.best_coverage
+                    f"{spec.name}: {'; '.join(why)}. The search: {found}",
+                    best_coverage=err.best_coverage,
                 ) from err
             return with_table_meta(_finished(fewer, tic, effort))
         notes.append(chosen.note)

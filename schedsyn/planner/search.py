@@ -616,7 +616,7 @@ def greedy(
             where = "cooling" if d < 0 else "heating"
             return None, (
                 f"sweep {k + 1} of {len(directions)} ({where}, gradient band {band.rank}) "
-                f"does not fit within {ctx.responses.edges_min[max_seg]:g} min"
+                f"does not fit before minute {ctx.responses.edges_min[max_seg]:g}"
             )
         u_new, win = res
         u_fixed = np.concatenate(
@@ -719,8 +719,8 @@ def synthesise(
         if bands is None:
             search.reasons.append(
                 f"the gradients the chamber allows cannot hold the levels "
-                f"{sep:.3f} °C/min apart with the {type(candidate).__name__.lower()} "
-                "band design"
+                f"{sep:.3f} °C/min apart (delta and a safety gap) with the "
+                f"{type(candidate).__name__.lower()} band design"
                 + (
                     ""
                     if split is None
