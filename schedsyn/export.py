@@ -463,6 +463,10 @@ def quantise(
       temperature outside ``chamber_min .. chamber_max``, moved by grid steps to the
       nearest feasible value: ``Tk'_{k+1}`` in ``[Tk'_k + rate_min d_k, Tk'_k + rate_max d_k]``
       (on the grid). Rates are recomputed from the rounded temperatures.
+    * Where that leaves the last boundary off the source's end temperature (times rounded
+      shorter than the rate limits allow), the last step is lengthened by up to
+      :data:`END_EXTEND_MAX_STEPS` grid steps within ``duration_max_min``: the end
+      temperature is the operator's end condition.
     * Equal-rate neighbours are merged (one controller step), then any step longer than
       ``max_step_min`` is cut into equal whole-grid pieces (their inner temperatures
       rounded the same way).
@@ -488,10 +492,26 @@ def quantise(
         )
     dur = np.diff(ticks) * q
     tk = _round_path(temps, dur, limits, temp_step_c)
+    end_want = _grid_round(float(temps[-1]), temp_step_c)
+    extra = 0
+    while abs(tk[-1] - end_want) > 1e-9 and extra < END_EXTEND_MAX_STEPS:
+        # the last steps were shortened past what the rate limits allow: the end
+        # temperature (the operator's end condition) is kept, the last step lengthened
+        longer = dur.copy()
+        longer[-1] += q
+        if float(longer.sum()) > limits.duration_max_min + 1e-9:
+            break
+        dur, extra = longer, extra + 1
+        tk = _round_path(temps, dur, limits, temp_step_c)
     out = Programme(dur, np.diff(tk) / dur, float(tk[0])).merged(rate_tol_c_per_min=1e-9)
     if max_step_min is not None:
         out = _cut_long_steps(out, max_step_min, q, limits, temp_step_c)
     return out
+
+
+#: Controller time steps the last step may be lengthened by so that the exported
+#: programme ends at the source's end temperature (:func:`quantise`).
+END_EXTEND_MAX_STEPS = 5
 
 
 def _round_path(temps: np.ndarray, dur: np.ndarray, limits: Limits, step: float) -> np.ndarray:

@@ -27,6 +27,7 @@ from schedsyn.controllers import CODECS, SPECS
 from schedsyn.errors import ParameterError, StepTableError
 from schedsyn.export import (
     CONTROLLER_KEYS,
+    END_EXTEND_MAX_STEPS,
     CoverageCheck,
     ExportSettings,
     check_from_meta,
@@ -196,7 +197,12 @@ def test_quantise_stays_within_limits_and_half_a_step(durs, deltas, q_s):
     out = quantise(prog, q, lim)
     edges = np.concatenate(([0.0], np.cumsum(out.durations_min)))
     assert np.allclose(edges / q, np.round(edges / q), atol=1e-6)
-    assert abs(out.total_min - math.floor(prog.total_min / q + 0.5 + 1e-9) * q) < 1e-6
+    # the rounded length, or up to END_EXTEND_MAX_STEPS steps more to end where the
+    # source ends (its last steps rounded shorter than the rate limits allow)
+    extended = round((out.total_min - math.floor(prog.total_min / q + 0.5 + 1e-9) * q) / q)
+    assert 0 <= extended <= END_EXTEND_MAX_STEPS
+    if extended:
+        assert abs(out.boundary_temps_c[-1] - round(tk_src[-1], 1)) < 1e-9
     assert out.rates_c_per_min.min() >= lim.rate_min_c_per_min - 1e-9
     assert out.rates_c_per_min.max() <= lim.rate_max_c_per_min + 1e-9
     tk = out.boundary_temps_c
@@ -216,6 +222,21 @@ def test_quantise_stays_within_limits_and_half_a_step(durs, deltas, q_s):
         chain = max(chain, run)
     bound = 0.1 * max(1, chain) + 3.0 * q
     assert np.max(np.abs(prog.chamber_at(t) - out.chamber_at(t))) <= bound + 1e-9
+
+
+def test_a_last_ramp_rounded_shorter_than_the_rate_allows_is_lengthened_to_end_at_20():
+    """20 -> 33.8 degC at +3 over 4.6 min, back at -1 over 13.8 min: on whole minutes the
+    boundaries are 5 and 18 min, and 13 min at -1 ends at 20.8 degC, outside the end
+    condition (red team; exported without a word). The last step gets one more minute;
+    where the duration limit forbids it, the path is as before."""
+    prog = Programme(np.array([4.6, 13.8]), np.array([3.0, -1.0]), 20.0)
+    out = quantise(prog, 1.0, Limits())
+    assert out.boundary_temps_c[-1] == pytest.approx(20.0)
+    assert out.total_min == pytest.approx(19.0)
+    assert out.rates_c_per_min.min() >= -1.0 - 1e-9
+    tight = quantise(prog, 1.0, Limits(duration_max_min=18.4))
+    assert tight.total_min == pytest.approx(18.0)
+    assert tight.boundary_temps_c[-1] == pytest.approx(20.8)
 
 
 # ---------------------------------------------------------------------------------------
