@@ -278,3 +278,15 @@ def test_robust_plan_writes_the_price_of_robustness(
         robust["duration_min"] - price.set_index("plan").loc["nominal", "duration_min"]
     )
     assert "price of robustness" in capsys.readouterr().out
+
+
+def test_a_plan_that_only_breaks_its_step_limit_says_so_not_advise(tmp_path, capsys):
+    """Every bin covered, too many steps even with longer segments: the advice names the
+    step limit (--advise's knobs -- duration, floor, ceiling, rates, levels -- would not
+    help; it used to suggest them; red team)."""
+    out = tmp_path / "o"
+    argv = ["plan", "--working", "18", "22", "--levels", "3", "--max-steps", "6"]
+    assert main([*argv, "--out", str(out), "--quiet"]) == 1
+    text = capsys.readouterr().out
+    assert "breaks its step limits" in text and "max_steps 6" in text
+    assert "run again with --advise" not in text

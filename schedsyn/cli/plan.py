@@ -712,6 +712,18 @@ def run(args: argparse.Namespace) -> int:
                 spec, params, plan.limits, plan, args, advice_progress(args, spec), out.folder(".")
             )
             advice_json = {"advice": advice}
+        elif (
+            plan.coverage.complete
+            and plan.violations
+            and all("max_steps" in v or "min_step_min" in v for v in plan.violations)
+        ):  # only the step limits are broken: --advise's knobs would not help
+            advice_lines = [
+                f"  every bin is covered but the table breaks its step limits "
+                f"({plan.programme.n_segments} steps, max_steps {spec.max_steps}; the planner "
+                "also tried longer segments): raise --max-steps (or lower min_step_min in a "
+                "campaign file) to what the controller takes, or split the region "
+                "(schedsyn split)"
+            ]
         else:
             advice_lines = [
                 "  run again with --advise to search what would make it complete "
