@@ -22,6 +22,7 @@ decimal point or (European spreadsheets) a decimal comma are recognised.
 
 from __future__ import annotations
 
+import csv
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -193,6 +194,29 @@ def _numeric_column(frame: pd.DataFrame, col: str, source: str, first_row: int =
     return values
 
 
+def _check_unique_columns(names: Sequence[str], source: str) -> None:
+    """Every column name once: with two ``t_int_c`` columns which one is the reading?"""
+    seen: dict[str, int] = {}
+    for i, name in enumerate(names):
+        if name in seen and name:  # unnamed columns (trailing separators) are extra columns
+            raise LogFormatError(
+                f"{source}: duplicate column {name} (columns {seen[name] + 1} and {i + 1} of "
+                "the header); rename or remove one so that each column name appears once"
+            )
+        seen[name] = i
+
+
+def _header_names(head: str, separator: str) -> list[str]:
+    """Column names of the header line (the first non-blank line) as written in the file.
+
+    pandas renames a repeated name (``t_int_c``, ``t_int_c.1``), which would hide it.
+    """
+    for line in head.lstrip("\ufeff").splitlines():
+        if line.strip():
+            return [f.strip() for f in next(csv.reader([line], delimiter=separator))]
+    return []
+
+
 def _check_time(
     t: np.ndarray, source: str, first_row: int = 0, previous_s: float | None = None
 ) -> None:
@@ -287,9 +311,7 @@ class _Collector:
         self, columns: Sequence[object], source: str, keep_extra: bool, expected_rows: int = 0
     ) -> None:
         cols = [str(c).strip() for c in columns]
-        if len(set(cols)) != len(cols):
-            dup = sorted({c for c in cols if cols.count(c) > 1})
-            raise LogFormatError(f"{source}: column(s) {', '.join(dup)} appear more than once")
+        _check_unique_columns(cols, source)
         missing = [c for c in REQUIRED_COLUMNS if c not in cols]
         if missing:
             raise LogFormatError(
@@ -423,6 +445,7 @@ def read_log(
             dialect = detect_csv_dialect(head)
         except ValueError as exc:
             raise LogFormatError(f"{path}: {exc}") from None
+        _check_unique_columns(_header_names(head, dialect.separator), str(path))
         try:
             with pd.read_csv(
                 fh,
