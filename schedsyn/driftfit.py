@@ -626,12 +626,47 @@ def select_terms(
             "narrower region"
         )
     cv = cross_validate(samples, terms, coding, folds=folds, eiv=eiv)
-    cv_rms = cv.groupby("candidate", sort=False)["mse_dph2"].mean() ** 0.5
+    by = cv.groupby("candidate", sort=False)["mse_dph2"]
+    # a fold whose candidate cannot be solved (NaN) is left out of the mean and counted
+    cv_rms = by.mean() ** 0.5  # pandas' mean skips NaN
+    fitted = by.count()
     table["cv_rms_dph"] = [float(cv_rms.get(term_set_name(ts), math.nan)) for ts in terms]
-    best = int(np.nanargmin(table["bic"].to_numpy()))
+    table["cv_folds_fitted"] = [int(fitted.get(term_set_name(ts), 0)) for ts in terms]
+    table["cv_folds"] = int(cv["fold"].nunique()) if len(cv) else 0
+    # a candidate whose adjusted normal matrix on all the samples is singular cannot be
+    # fitted (fit_samples would refuse it): it is listed but not chosen
+    table["determined"] = [_determined(samples, coding, ts, eiv) for ts in terms]
+    if not table["determined"].any():
+        raise ParameterError(
+            "drift fit: the samples cannot determine any candidate's terms (normal matrix "
+            "singular); use a longer log or a wider region"
+        )
+    bic = table["bic"].to_numpy(dtype=float).copy()
+    bic[~table["determined"].to_numpy()] = np.nan
+    best = int(np.nanargmin(bic)) if np.isfinite(bic).any() else int(np.argmax(table["determined"]))
     table.insert(4, "delta_bic", table["bic"] - table["bic"].iloc[best])
     table["chosen"] = np.arange(len(table)) == best
     return str(table["candidate"].iloc[best]), table
+
+
+def _determined(samples: Samples, coding: Coding, terms: tuple[str, ...], eiv: bool) -> bool:
+    """Whether the (adjusted) normal equations of ``terms`` on all ``samples`` can be solved."""
+    pieces = _normal_pieces(samples, coding, terms, eiv)
+    try:
+        _solve(pieces.a_k.sum(axis=0), pieces.b_k.sum(axis=0), "drift fit")
+    except ParameterError:
+        return False
+    return True
+
+
+def _cv_text(row) -> str:
+    """``CV RMS ...`` of one candidate, saying how many folds it could be fitted on."""
+    if row.cv_folds_fitted == 0:
+        return "CV n/a: no fold can determine its terms"
+    text = f"CV RMS {row.cv_rms_dph:.4g}"
+    if row.cv_folds_fitted < row.cv_folds:
+        text += f" over {row.cv_folds_fitted} of {row.cv_folds} folds"
+    return text
 
 
 # -- from a log ------------------------------------------------------------------------------
@@ -759,6 +794,10 @@ class DriftFit:
     holdout : Holdout or None
     settings : FitSettings
     notes : tuple of str
+    rows_without_drift : (in_region, in_log)
+        Rows with no ``drift_dph`` reading (blank/NaN): those whose estimated T lies in
+        the region, and all of them. They are used for the T and g estimates (which run
+        over the whole log) but not fitted; the summary and ``coefficients.json`` say so.
     """
 
     source: str
@@ -774,6 +813,7 @@ class DriftFit:
     holdout: Holdout | None
     settings: FitSettings
     notes: tuple[str, ...] = field(default=())
+    rows_without_drift: tuple[int, int] = (0, 0)
 
     @property
     def terms(self) -> tuple[str, ...]:
@@ -868,6 +908,11 @@ class DriftFit:
             },
             "condition_number": m.condition_number,
             "n_samples": m.n,
+            "rows_without_drift_dph": {
+                "in_region": self.rows_without_drift[0],
+                "in_log": self.rows_without_drift[1],
+                "meaning": "blank/NaN drift_dph: used for the T and g estimates, not fitted",
+            },
             "residual_rms_dph": m.residual_rms_dph,
             "noise": {
                 "white_sigma_dph": m.white_sigma_dph,
@@ -890,6 +935,16 @@ class DriftFit:
             "notes": list(self.notes),
         }
 
+    def _without_drift_lines(self) -> list[str]:
+        in_region, in_log = self.rows_without_drift
+        if not in_log:
+            return []
+        return [
+            f"{in_region} rows in the region ({in_log} in the log) have no drift_dph reading "
+            "(blank/NaN): they were not fitted (their T and g estimates use them); fill them "
+            "in if the drift was recorded"
+        ]
+
     def summary_lines(self) -> list[str]:
         m, ref = self.model, self.reference
         lo, hi = self.region_c
@@ -897,6 +952,7 @@ class DriftFit:
             f"fit of {self.source} over {lo:g} .. {hi:g} °C: {m.n} samples, gradient from the "
             f"{self.estimator} Kalman smoother (noise std {self.gradient_error_std_c_per_min:.3g}"
             f" °C/min; uncorrected attenuation {self.attenuation:.2%})",
+            *self._without_drift_lines(),
             f"model {term_set_name(m.terms)} ({len(m.terms)} terms): residual RMS "
             f"{m.residual_rms_dph:.4g} °/h (T-only cubic {ref.residual_rms_dph:.4g} °/h); "
             f"noise white {m.white_sigma_dph:.3g} °/h + bias walk {m.walk_dph_per_rt_h:.3g} "
@@ -905,11 +961,21 @@ class DriftFit:
         sel = self.selection
         if len(sel) > 1:
             parts = [
-                f"{r.candidate} {r.delta_bic:+.1f} (CV RMS {r.cv_rms_dph:.4g})"
+                f"{r.candidate} {r.delta_bic:+.1f} ("
+                + (_cv_text(r) if r.determined else "terms not determined by these samples")
+                + ")"
                 + (" *" if r.chosen else "")
                 for r in sel.itertuples()
             ]
             lines.append("term selection, BIC - best: " + ", ".join(parts))
+            if not sel["determined"].all() or (sel["cv_folds_fitted"] < sel["cv_folds"]).any():
+                lines.append(
+                    "term selection: a term set is not determined where the normal matrix is "
+                    "singular or not positive definite after the errors-in-variables "
+                    "correction (the gradient varies too little apart from the temperature); "
+                    "it is not chosen, and cross-validation leaves out the folds where this "
+                    "happens"
+                )
         for t, c, se in zip(m.terms, m.coefficients_dph, m.std_errors, strict=True):
             lines.append(f"  {t:>4} = {c: .6g} ± {se:.2g} {unit_of(t)}")
         if self.holdout is not None:
@@ -951,7 +1017,9 @@ def _samples_from_log(
     region: tuple[float, float],
     settings: FitSettings,
     params: ThermalParams,
-) -> tuple[Samples, GradientEstimate, str]:
+) -> tuple[Samples, GradientEstimate, str, tuple[int, int]]:
+    """Regression samples in the region, the gradient estimate, its method and the rows
+    without a drift reading ``(in the region, in the log)``."""
     if log.drift_dph is None:
         raise LogFormatError(
             f"{log.source}: no drift_dph column; fitting needs the gyro's drift in °/h next to "
@@ -977,6 +1045,9 @@ def _samples_from_log(
             f"never enters the region {lo:g} .. {hi:g} °C; choose --region inside what the "
             "run covered"
         )
+    no_drift = ~np.isfinite(d)
+    in_region = np.isfinite(t) & np.isfinite(g) & (t >= lo) & (t <= hi)
+    without_drift = (int((no_drift & in_region).sum()), int(no_drift.sum()))
     _bins_check(t[inside], region, settings.min_points_per_bin, log.source)
     idx = np.flatnonzero(inside)
     s = Samples(
@@ -988,7 +1059,7 @@ def _samples_from_log(
         cov_tg[idx],
         var_g[idx],
     )
-    return s, est, method
+    return s, est, method, without_drift
 
 
 def _domain(s: Samples, region: tuple[float, float], t_step: float) -> pd.DataFrame:
@@ -1050,7 +1121,7 @@ def fit_drift(
     if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
         raise ParameterError(f"the region needs finite lo < hi, got {lo:g} .. {hi:g} °C")
     region = (lo, hi)
-    s, _est, method = _samples_from_log(log, region, settings, params)
+    s, _est, method, without_drift = _samples_from_log(log, region, settings, params)
     eiv = settings.eiv == "als"
     g_half = max(float(np.max(np.abs(s.g_c_per_min))), 0.05)
     coding = Coding(0.5 * (lo + hi), 0.5 * (hi - lo), g_half)
@@ -1089,6 +1160,7 @@ def fit_drift(
         holdout=None,
         settings=settings,
         notes=tuple(notes),
+        rows_without_drift=without_drift,
     )
     if holdout is not None:
         fit = dataclasses.replace(fit, holdout=evaluate_holdout(fit, holdout, params))

@@ -3,13 +3,17 @@ time-unit mistakes, isolated glitch readings, and what the drift fit leaves out.
 
 from __future__ import annotations
 
+import json
+import re
+
 import numpy as np
 import pandas as pd
 import pytest
 
 from schedsyn.cli import main
+from schedsyn.driftfit import FitSettings, fit_drift
 from schedsyn.errors import LogFormatError
-from schedsyn.logs import read_log
+from schedsyn.logs import log_from_frame, read_log
 
 
 def _good_frame(n: int = 400, seed: int = 7) -> pd.DataFrame:
@@ -61,3 +65,44 @@ def test_trailing_separators_are_not_duplicate_columns(tmp_path):
     lines = ["time_s,t_int_c,,"] + [f"{a:g},{b:g},," for a, b in f[["time_s", "t_int_c"]].values]
     path.write_text("\n".join(lines) + "\n")
     assert read_log(path).n_rows == 20
+
+
+# -- the drift fit: blank drift readings and undetermined term sets -------------------------
+def test_fit_says_how_many_rows_without_drift_it_did_not_fit(tmp_path, capsys):
+    f = _good_frame()
+    f.loc[::7, "drift_dph"] = np.nan  # 58 blank drift cells
+    path = tmp_path / "drift_blanks.csv"
+    f.to_csv(path, index=False)
+    out = tmp_path / "out"
+    args = ["fit", str(path), "--region", "21", "28", "--min-points-per-bin", "1"]
+    assert main([*args, "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    doc = json.loads((out / "coefficients.json").read_text())
+    without = doc["rows_without_drift_dph"]
+    assert without["in_log"] == 58
+    assert f"{without['in_region']} rows in the region (58 in the log) have no drift_dph" in text
+    assert "not fitted" in text
+    # every sample is accounted for: the fitted ones and the blank ones in the region
+    full = log_from_frame(_good_frame())
+    n_all = fit_drift(full, (21.0, 28.0), FitSettings(min_points_per_bin=1)).model.n
+    assert doc["n_samples"] + without["in_region"] == n_all
+
+
+def test_fit_never_prints_nan_for_a_term_set_the_run_cannot_determine(tmp_path, capsys):
+    # one slow monotone warm-up: the gradient follows the temperature, so the adjusted
+    # normal matrices of the g term sets are not positive definite in any fold
+    path = tmp_path / "ramp.csv"
+    _good_frame().to_csv(path, index=False)
+    out = tmp_path / "out"
+    args = ["fit", str(path), "--region", "21", "28", "--min-points-per-bin", "1"]
+    assert main([*args, "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert not re.search(r"\bnan\b", text, re.IGNORECASE), text
+    assert "g1 " in text and "terms not determined by these samples" in text
+    sel = {
+        r["candidate"]: r for r in json.loads((out / "coefficients.json").read_text())["selection"]
+    }
+    assert sel["t-only"]["determined"] and sel["t-only"]["chosen"]
+    assert sel["t-only"]["cv_folds_fitted"] == sel["t-only"]["cv_folds"] > 0
+    assert not sel["g1"]["determined"] and sel["g1"]["cv_folds_fitted"] == 0
+    assert sel["g1"]["cv_rms_dph"] is None  # strict JSON null, never NaN
