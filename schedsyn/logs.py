@@ -23,7 +23,10 @@ decimal point or (European spreadsheets) a decimal comma are recognised.
 from __future__ import annotations
 
 import csv
+import dataclasses
+import math
 import re
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,6 +49,31 @@ GAP_FACTOR = 3.0
 PLAUSIBLE_C = (-100.0, 150.0)
 #: All readings above this look like kelvin (the coldest chamber is ~ -75 degC = 198 K).
 KELVIN_FLOOR = 200.0
+# -- time-unit plausibility (a time_s column in minutes or milliseconds) --------------------
+# Real calibration logs sample every 0.05-60 s over runs of 1-48 h, and a device in a
+# chamber changes its internal temperature by < 1-2 °C/min. The fastest real logs the
+# tests hold, a TCLab bench heater of a few grams, reach 20 °C/min sustained. A run in
+# minutes shows 60x its real rates (30-70 °C/min for 0.5-1.2 °C/min), in milliseconds a
+# span 1000x too long.
+#: A log spanning more than this is refused (time_s in milliseconds, or another unit), s.
+MAX_LOG_SPAN_S = 30 * 86_400.0
+#: A median sampling step longer than this is refused (milliseconds, or another unit), s.
+MAX_MEDIAN_STEP_S = 900.0
+#: t_int_c changing faster than this, sustained, is refused (time_s in minutes), °C/min.
+MAX_DEVICE_RATE_C_PER_MIN = 30.0
+#: Faster than this, sustained, gets a warning in the log report: no chamber drives a
+#: device this fast (a bench heater can), °C/min.
+WARN_DEVICE_RATE_C_PER_MIN = 5.0
+#: The rate is taken between medians of consecutive blocks of samples, each spanning at
+#: least this long (and ``RATE_BLOCK_MIN_ROWS`` rows: one glitch reading does not move
+#: a median), s.
+RATE_WINDOW_S = 5.0
+RATE_BLOCK_MIN_ROWS = 5
+#: "Sustained": this many consecutive block-to-block rates beyond the limit, one sign.
+RATE_SUSTAINED_BLOCKS = 3
+#: Blocks whose median is taken at a time (bounds the memory of a long log).
+_RATE_CHUNK_BLOCKS = 65_536
+
 #: Rows parsed at a time by :func:`read_log` (a chunk costs a few tens of MB at most).
 READ_CHUNK_ROWS = 262_144
 #: Bytes of the file's head that decide its CSV dialect.
@@ -74,6 +102,9 @@ class LogReport:
         rows on either side of the gap, s.
     median_step_s : float
         Median sampling step, s.
+    warnings : tuple of str
+        Readings that are possible but suspicious (e.g. ``t_int_c`` changing faster than a
+        chamber drives a device); listed first by :meth:`lines`.
     """
 
     n_rows: int
@@ -81,6 +112,7 @@ class LogReport:
     nan_spans_s: tuple[tuple[float, float, int], ...]
     gaps_s: tuple[tuple[float, float], ...]
     median_step_s: float
+    warnings: tuple[str, ...] = ()
 
     @property
     def clean(self) -> bool:
@@ -89,7 +121,7 @@ class LogReport:
 
     def lines(self) -> list[str]:
         """Human-readable report, one finding per line (empty when clean)."""
-        out = []
+        out = [f"warning: {w}" for w in self.warnings]
         for col, n in self.nan_counts.items():
             if n:
                 out.append(f"{col}: {n} of {self.n_rows} rows are NaN (kept; not interpolated)")
@@ -272,6 +304,70 @@ def _check_temperature(v: np.ndarray, col: str, source: str) -> None:
         )
 
 
+def sustained_rate_c_per_min(
+    time_s: np.ndarray, t_int_c: np.ndarray, median_step_s: float
+) -> tuple[float, float, float]:
+    """The fastest sustained change of ``t_int_c``: ``(rate, start_s, end_s)``, °C/min.
+
+    Samples are grouped in blocks of ``max(RATE_BLOCK_MIN_ROWS, RATE_WINDOW_S / median
+    step)`` rows; the rate between consecutive blocks is the difference of their median
+    temperatures over the time between their middle rows. The result is the largest
+    ``|rate|`` that ``RATE_SUSTAINED_BLOCKS`` consecutive rates of one sign all reach
+    (an isolated glitch reading moves no block median; noise averages out), with the
+    times it spans; ``(0, nan, nan)`` for a log too short to tell.
+    """
+    n = int(np.asarray(time_s).size)
+    if not (median_step_s > 0 and math.isfinite(median_step_s)):
+        return 0.0, math.nan, math.nan
+    rows = max(RATE_BLOCK_MIN_ROWS, math.ceil(RATE_WINDOW_S / median_step_s))
+    n_blocks = n // rows
+    if n_blocks < RATE_SUSTAINED_BLOCKS + 1:
+        return 0.0, math.nan, math.nan
+    t_mid = np.asarray(time_s)[: n_blocks * rows].reshape(n_blocks, rows)[:, rows // 2]
+    temp = np.asarray(t_int_c)[: n_blocks * rows].reshape(n_blocks, rows)
+    med = np.empty(n_blocks)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a block of NaN readings: NaN
+        for a in range(0, n_blocks, _RATE_CHUNK_BLOCKS):
+            med[a : a + _RATE_CHUNK_BLOCKS] = np.nanmedian(temp[a : a + _RATE_CHUNK_BLOCKS], axis=1)
+    rate = np.diff(med) / np.diff(t_mid) * 60.0  # °C/min; NaN next to an empty block
+    k = RATE_SUSTAINED_BLOCKS
+    windows = np.lib.stride_tricks.sliding_window_view(rate, k)
+    one_sign = np.all(windows > 0, axis=1) | np.all(windows < 0, axis=1)
+    reached = np.where(one_sign, np.min(np.abs(windows), axis=1), 0.0)
+    i = int(np.argmax(reached))
+    return float(reached[i]), float(t_mid[i]), float(t_mid[i + k])
+
+
+def _check_time_unit(
+    time_s: np.ndarray, t_int_c: np.ndarray, median_step_s: float, source: str
+) -> tuple[str, ...]:
+    """Refuse a ``time_s`` column that cannot be in seconds; warnings for a suspicious one."""
+    span_s = float(time_s[-1] - time_s[0]) if time_s.size else 0.0
+    if span_s > MAX_LOG_SPAN_S or median_step_s > MAX_MEDIAN_STEP_S:
+        raise LogFormatError(
+            f"{source}: column time_s: the log spans {span_s / 86_400.0:.4g} days with a median "
+            f"step of {median_step_s:.4g} s (limits {MAX_LOG_SPAN_S / 86_400.0:g} days, "
+            f"{MAX_MEDIAN_STEP_S:g} s); time_s looks like milliseconds or another unit: "
+            "write seconds from the start (milliseconds / 1000)"
+        )
+    rate, a_s, b_s = sustained_rate_c_per_min(time_s, t_int_c, median_step_s)
+    if rate > MAX_DEVICE_RATE_C_PER_MIN:
+        raise LogFormatError(
+            f"{source}: column t_int_c changes by {rate:.3g} °C/min between {a_s:g} and "
+            f"{b_s:g} s, faster than any device follows a chamber (limit "
+            f"{MAX_DEVICE_RATE_C_PER_MIN:g} °C/min); time_s looks like minutes: write "
+            "seconds (minutes x 60)"
+        )
+    if rate > WARN_DEVICE_RATE_C_PER_MIN:
+        return (
+            f"t_int_c changes by {rate:.3g} °C/min between {a_s:g} and {b_s:g} s, faster "
+            f"than a chamber drives a device (> {WARN_DEVICE_RATE_C_PER_MIN:g} °C/min); if "
+            "time_s holds minutes, write seconds (minutes x 60)",
+        )
+    return ()
+
+
 def _nan_spans(time_s: np.ndarray, isnan: np.ndarray) -> tuple[tuple[float, float, int], ...]:
     if not isnan.any():
         return ()
@@ -368,6 +464,10 @@ class _Collector:
                 "gradient"
             )
         report = log_report(values["time_s"], {c: values[c] for c in self.known if c != "time_s"})
+        notes = _check_time_unit(
+            values["time_s"], values["t_int_c"], report.median_step_s, self.source
+        )
+        report = dataclasses.replace(report, warnings=notes)
         if len(self.extra_parts) > 1:
             extra = pd.concat(self.extra_parts, ignore_index=True)
         elif self.extra_parts:
@@ -502,6 +602,7 @@ def thin_log(log: MeasuredLog, max_rows: int) -> tuple[MeasuredLog, int]:
             cols[name] = v[::k].copy()
             cols[name].setflags(write=False)
     report = log_report(cols["time_s"], {c: v for c, v in cols.items() if c != "time_s"})
+    report = dataclasses.replace(report, warnings=log.report.warnings)
     thin = MeasuredLog(
         time_s=cols["time_s"],
         t_int_c=cols["t_int_c"],

@@ -13,7 +13,7 @@ import pytest
 from schedsyn.cli import main
 from schedsyn.driftfit import FitSettings, fit_drift
 from schedsyn.errors import LogFormatError
-from schedsyn.logs import log_from_frame, read_log
+from schedsyn.logs import log_from_frame, read_log, sustained_rate_c_per_min
 
 
 def _good_frame(n: int = 400, seed: int = 7) -> pd.DataFrame:
@@ -106,3 +106,52 @@ def test_fit_never_prints_nan_for_a_term_set_the_run_cannot_determine(tmp_path, 
     assert sel["t-only"]["cv_folds_fitted"] == sel["t-only"]["cv_folds"] > 0
     assert not sel["g1"]["determined"] and sel["g1"]["cv_folds_fitted"] == 0
     assert sel["g1"]["cv_rms_dph"] is None  # strict JSON null, never NaN
+
+
+# -- time_s in the wrong unit --------------------------------------------------------------
+SAMPLE_RUN = "data/sample_run_exp1.csv"  # 8.3 h at 10 s, |dT/dt| up to 1.2 °C/min
+
+
+def _sample_run(time_factor: float = 1.0) -> pd.DataFrame:
+    f = pd.read_csv(SAMPLE_RUN, usecols=["time_s", "t_int_c", "tk_set_c"])
+    return f.assign(time_s=f["time_s"] * time_factor)
+
+
+def test_a_real_run_in_seconds_passes_without_warnings():
+    log = log_from_frame(_sample_run())
+    assert log.report.warnings == ()
+    rate, _, _ = sustained_rate_c_per_min(log.time_s, log.t_int_c, log.report.median_step_s)
+    assert 0.5 < rate < 2.0  # the run's real sustained rate, °C/min
+
+
+def test_time_in_minutes_is_refused_naming_minutes():
+    with pytest.raises(LogFormatError, match=r"time_s looks like minutes: write seconds"):
+        log_from_frame(_sample_run(1 / 60), source="minutes.csv")
+
+
+@pytest.mark.parametrize("factor", [1000.0, 3600.0])
+def test_time_in_milliseconds_is_refused_naming_milliseconds(factor):
+    with pytest.raises(LogFormatError, match=r"time_s looks like milliseconds or another unit"):
+        log_from_frame(_sample_run(factor), source="ms.csv")
+
+
+def test_diagnose_names_the_unit_not_an_internal_parameter(tmp_path, capsys):
+    path = tmp_path / "ms.csv"
+    _sample_run(1000.0).to_csv(path, index=False)
+    assert main(["diagnose", str(path), "--out", str(tmp_path / "o"), "--no-plots"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "milliseconds" in err and "tau_s" not in err
+
+
+def test_a_fast_but_possible_rate_is_a_warning_and_a_glitch_is_nothing():
+    # a bench heater (TCLab) heats at ~20 °C/min: possible, but not a chamber's pace
+    t = np.arange(900.0)
+    temp = 20 + 40 * (1 - np.exp(-t / 120))  # 20 °C/min at the start
+    fast = log_from_frame(pd.DataFrame({"time_s": t, "t_int_c": temp}))
+    assert len(fast.report.warnings) == 1
+    assert "faster than a chamber drives a device" in fast.report.summary()
+    # one +100 °C reading among 10 s samples moves no block median
+    f = _sample_run()
+    f.loc[1200, "t_int_c"] += 100.0
+    f.loc[1200, "t_int_c"] = min(f.loc[1200, "t_int_c"], 149.0)
+    assert log_from_frame(f).report.warnings == ()

@@ -177,6 +177,12 @@ def stderr(message: str) -> None:
     print(units_text(message), file=sys.stderr)
 
 
+def log_warnings(log) -> None:
+    """The log's suspicious readings (``LogReport.warnings``) on stderr, one line each."""
+    for w in log.report.warnings:
+        stderr(f"warning: {log.source}: {w}")
+
+
 def add_coverage_options(p: argparse.ArgumentParser) -> None:
     """``--levels`` and ``--delta-c-per-min``, by default the step table's (else 6, 0.05)."""
     p.add_argument(

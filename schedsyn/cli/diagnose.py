@@ -95,6 +95,7 @@ def run(args: argparse.Namespace) -> int:
     names = TABLES + (() if args.no_plots else PLOTS)
     out = _common.output_dir(args.out, "out/diagnose", [args.log], names)
     full = read_log(args.log, keep_extra=False)
+    _common.log_warnings(full)
     n_rows = full.n_rows
     # a long log is diagnosed on every k-th row (bounded memory); the full one is freed
     log, stride = thin_log(full, DIAGNOSE_MAX_ROWS)

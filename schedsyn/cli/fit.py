@@ -72,6 +72,9 @@ def run(args: argparse.Namespace) -> int:
     )
     log = read_log(args.log)
     holdout = read_log(args.holdout) if args.holdout else None
+    for one in (log, holdout):
+        if one is not None:
+            _common.log_warnings(one)
     params = _common.thermal_params(args)
     fit = fit_drift(log, tuple(args.region), settings, params, holdout=holdout)
     out = _common.out_dir(args.out, "out/fit")
