@@ -10,9 +10,13 @@ The log format (CSV, one row per sample, units in every column name)::
 
 Any other column is kept in :attr:`MeasuredLog.extra` and ignored by the estimator.
 
-Nothing is dropped or interpolated: a NaN in ``t_int_c`` stays in the arrays (the
-estimator skips its measurement update) and is counted in :attr:`MeasuredLog.report`
-together with the time spans where the sampling step is much longer than usual.
+Nothing is interpolated: a NaN in ``t_int_c`` stays in the arrays (the estimator skips
+its measurement update) and is counted in :attr:`MeasuredLog.report` together with the
+time spans where the sampling step is much longer than usual. The one thing excluded is
+an isolated glitch reading of ``t_int_c`` (:func:`glitch_rows`): it becomes NaN and the
+report names it (``LogReport.glitches`` and a warning line). A ``time_s`` column that
+cannot be in seconds (minutes, milliseconds) is refused (:func:`sustained_rate_c_per_min`
+and the ``MAX_*`` limits).
 
 :func:`read_log` parses the file in chunks and keeps only float arrays of the known
 columns (8 bytes per value; a 200 MB log of 5.8 M rows and four columns takes ~190 MB),
@@ -74,6 +78,27 @@ RATE_SUSTAINED_BLOCKS = 3
 #: Blocks whose median is taken at a time (bounds the memory of a long log).
 _RATE_CHUNK_BLOCKS = 65_536
 
+# -- isolated glitch readings of t_int_c ---------------------------------------------------
+#: A reading is compared with the median of the window of this many finite readings
+#: centred on it (itself and two each side): one or two glitch readings in a row never
+#: move that median.
+GLITCH_WINDOW_ROWS = 5
+#: A reading further from its window's median than GLITCH_K robust standard deviations
+#: (1.4826 x the median absolute deviation of those residuals over the log) ...
+GLITCH_K = 10.0
+#: ... and than GLITCH_MIN_C (a noise-free or coarsely quantised log has a zero MAD), °C,
+GLITCH_MIN_C = 0.5
+#: ... and than this many quantisation steps of the readings is an isolated glitch: it is
+#: excluded (set to NaN, like a blank reading) and listed in the report.
+GLITCH_QUANT_STEPS = 4.0
+#: More glitches than this share of the readings is not a glitch but a broken column:
+#: the log is refused.
+GLITCH_MAX_SHARE = 0.01
+#: Readings whose residuals are computed at a time (bounds the memory of a long log).
+_GLITCH_CHUNK_ROWS = 262_144
+#: The MAD and the quantisation step are taken on an even stride of about this many.
+_GLITCH_SAMPLE_ROWS = 262_144
+
 #: Rows parsed at a time by :func:`read_log` (a chunk costs a few tens of MB at most).
 READ_CHUNK_ROWS = 262_144
 #: Bytes of the file's head that decide its CSV dialect.
@@ -104,7 +129,12 @@ class LogReport:
         Median sampling step, s.
     warnings : tuple of str
         Readings that are possible but suspicious (e.g. ``t_int_c`` changing faster than a
-        chamber drives a device); listed first by :meth:`lines`.
+        chamber drives a device), and the glitch readings excluded; listed first by
+        :meth:`lines`.
+    glitches : tuple of (row, time_s, value_c, off_c)
+        Isolated ``t_int_c`` glitch readings (:func:`glitch_rows`), excluded: 0-based row,
+        its time, the reading and how far it lay from its neighbours' median. They are NaN
+        in :attr:`MeasuredLog.t_int_c`; ``nan_counts`` counts the file's blank cells only.
     """
 
     n_rows: int
@@ -113,6 +143,7 @@ class LogReport:
     gaps_s: tuple[tuple[float, float], ...]
     median_step_s: float
     warnings: tuple[str, ...] = ()
+    glitches: tuple[tuple[int, float, float, float], ...] = ()
 
     @property
     def clean(self) -> bool:
@@ -368,6 +399,90 @@ def _check_time_unit(
     return ()
 
 
+def glitch_rows(values_c: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Isolated glitch readings: ``(rows, off_c, limit_c)``.
+
+    Each finite reading with two finite readings on either side is compared with the
+    median of the ``GLITCH_WINDOW_ROWS`` finite readings centred on it (the first and
+    last two are not judged: a ramp's end differs from a mirrored window); a reading off
+    by more than ``limit_c = max(GLITCH_K x 1.4826 x MAD of those residuals,
+    GLITCH_QUANT_STEPS x the quantisation step, GLITCH_MIN_C)`` is a glitch. A smooth
+    signal, ramps and turnarounds included, stays within the noise of its window's
+    median; a spike of one or two readings does not.
+    """
+    from .estimate import quantisation_step  # estimate imports this module
+
+    v = np.asarray(values_c, dtype=float)
+    finite = np.flatnonzero(np.isfinite(v))
+    n = finite.size
+    half = GLITCH_WINDOW_ROWS // 2
+    none = (np.zeros(0, dtype=np.int64), np.zeros(0), math.inf)
+    if n < GLITCH_WINDOW_ROWS:
+        return none
+    stride = max(1, math.ceil(n / _GLITCH_SAMPLE_ROWS))
+    sample: list[np.ndarray] = []
+    cand_rows: list[np.ndarray] = []
+    cand_off: list[np.ndarray] = []
+    for lo in range(0, n, _GLITCH_CHUNK_ROWS):
+        hi = min(lo + _GLITCH_CHUNK_ROWS, n)
+        # the chunk and its neighbours' readings, mirrored at the ends of the log
+        a, b = max(lo - half, 0), min(hi + half, n)
+        y = v[finite[a:b]]
+        y = np.pad(y, (half - (lo - a), half - (b - hi)), mode="reflect")
+        med = np.median(np.lib.stride_tricks.sliding_window_view(y, GLITCH_WINDOW_ROWS), axis=1)
+        r = v[finite[lo:hi]] - med
+        first = (-lo) % stride
+        sample.append(np.abs(r[first::stride]))
+        big = np.flatnonzero(np.abs(r) > GLITCH_MIN_C)
+        big = big[(lo + big >= half) & (lo + big < n - half)]
+        cand_rows.append(finite[lo + big])
+        cand_off.append(r[big])
+    mad_c = float(np.median(np.concatenate(sample)))
+    quant_c = quantisation_step(v[finite[::stride]])
+    limit_c = max(GLITCH_K * 1.4826 * mad_c, GLITCH_QUANT_STEPS * quant_c, GLITCH_MIN_C)
+    rows, off = np.concatenate(cand_rows), np.concatenate(cand_off)
+    keep = np.abs(off) > limit_c
+    return rows[keep], off[keep], limit_c
+
+
+def _exclude_glitches(
+    values: dict[str, np.ndarray], report: LogReport, source: str
+) -> tuple[np.ndarray, LogReport]:
+    """``t_int_c`` with its glitch readings set to NaN, and the report that lists them."""
+    temp = values["t_int_c"]
+    rows, off, limit_c = glitch_rows(temp)
+    if rows.size == 0:
+        return temp, report
+    n_finite = int(np.isfinite(temp).sum())
+    first = int(rows[0])
+    if rows.size > GLITCH_MAX_SHARE * n_finite:
+        raise LogFormatError(
+            f"{source}: column t_int_c: {rows.size} of {n_finite} readings lie more than "
+            f"{limit_c:.3g} °C off their neighbours' median (first: row {first + 1}, line "
+            f"{first + 2}, {temp[first]:g} °C): the column looks corrupted, not a few glitches; "
+            "check the sensor's wiring or the export"
+        )
+    t = values["time_s"]
+    glitches = tuple(
+        (int(i), float(t[i]), float(temp[i]), float(d)) for i, d in zip(rows, off, strict=True)
+    )
+    listed = ", ".join(
+        f"row {i + 1} (line {i + 2}, {ts:g} s: {val:g} °C, {d:+.3g} °C)"
+        for i, ts, val, d in glitches[:5]
+    )
+    more = f" and {len(glitches) - 5} more" if len(glitches) > 5 else ""
+    note = (
+        f"t_int_c: {len(glitches)} isolated glitch reading(s) more than {limit_c:.3g} °C off "
+        f"their neighbours' median were excluded (treated as missing): {listed}{more}; fix "
+        "or blank them in the log to silence this"
+    )
+    clean = temp.copy()
+    clean[rows] = np.nan
+    clean.setflags(write=False)
+    report = dataclasses.replace(report, warnings=(note, *report.warnings), glitches=glitches)
+    return clean, report
+
+
 def _nan_spans(time_s: np.ndarray, isnan: np.ndarray) -> tuple[tuple[float, float, int], ...]:
     if not isnan.any():
         return ()
@@ -468,6 +583,7 @@ class _Collector:
             values["time_s"], values["t_int_c"], report.median_step_s, self.source
         )
         report = dataclasses.replace(report, warnings=notes)
+        values["t_int_c"], report = _exclude_glitches(values, report, self.source)
         if len(self.extra_parts) > 1:
             extra = pd.concat(self.extra_parts, ignore_index=True)
         elif self.extra_parts:
@@ -602,7 +718,7 @@ def thin_log(log: MeasuredLog, max_rows: int) -> tuple[MeasuredLog, int]:
             cols[name] = v[::k].copy()
             cols[name].setflags(write=False)
     report = log_report(cols["time_s"], {c: v for c, v in cols.items() if c != "time_s"})
-    report = dataclasses.replace(report, warnings=log.report.warnings)
+    report = dataclasses.replace(report, warnings=log.report.warnings, glitches=log.report.glitches)
     thin = MeasuredLog(
         time_s=cols["time_s"],
         t_int_c=cols["t_int_c"],

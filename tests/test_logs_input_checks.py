@@ -13,7 +13,8 @@ import pytest
 from schedsyn.cli import main
 from schedsyn.driftfit import FitSettings, fit_drift
 from schedsyn.errors import LogFormatError
-from schedsyn.logs import log_from_frame, read_log, sustained_rate_c_per_min
+from schedsyn.estimate import estimate_gradient
+from schedsyn.logs import glitch_rows, log_from_frame, read_log, sustained_rate_c_per_min
 
 
 def _good_frame(n: int = 400, seed: int = 7) -> pd.DataFrame:
@@ -154,4 +155,53 @@ def test_a_fast_but_possible_rate_is_a_warning_and_a_glitch_is_nothing():
     f = _sample_run()
     f.loc[1200, "t_int_c"] += 100.0
     f.loc[1200, "t_int_c"] = min(f.loc[1200, "t_int_c"], 149.0)
-    assert log_from_frame(f).report.warnings == ()
+    assert not any("faster than" in w for w in log_from_frame(f).report.warnings)
+
+
+# -- isolated glitch readings --------------------------------------------------------------
+def test_one_glitch_reading_is_excluded_named_and_harmless():
+    clean = log_from_frame(_sample_run())
+    assert clean.report.glitches == ()
+    f = _sample_run()
+    f.loc[1200, "t_int_c"] += 100.0
+    log = log_from_frame(f, source="spike.csv")
+    ((row, t_s, value_c, off_c),) = log.report.glitches
+    assert (row, t_s) == (1200, f.loc[1200, "time_s"]) and off_c == pytest.approx(100, abs=1)
+    assert np.isnan(log.t_int_c[1200]) and log.nan_counts["t_int_c"] == clean.nan_counts["t_int_c"]
+    text = log.report.summary()
+    assert "1 isolated glitch reading(s)" in text and "row 1201 (line 1202" in text
+    # the estimate is that of the clean log (the glitch had made r ~3 °C², not ~4e-4)
+    a, b = estimate_gradient(clean), estimate_gradient(log)
+    assert b.r == pytest.approx(a.r, rel=0.05)
+    assert np.sqrt(np.mean((a.g_est_c_per_min - b.g_est_c_per_min) ** 2)) < 0.005
+
+
+def test_two_glitches_in_a_row_and_a_dip_are_found_but_ramps_are_not():
+    f = _sample_run()
+    temp = f["t_int_c"].to_numpy().copy()
+    temp[[500, 501]] += 40.0
+    temp[2000] -= 3.0
+    rows, off, limit_c = glitch_rows(temp)
+    assert list(rows) == [500, 501, 2000] and limit_c == pytest.approx(0.5)
+    # a noise-free quantised ramp with turnarounds: nothing
+    t = np.arange(3000) * 60.0
+    ramp = np.round(20 + 30 * np.sin(t / 4000) / 0.0625) * 0.0625
+    assert glitch_rows(ramp)[0].size == 0
+
+
+def test_a_column_full_of_glitches_is_refused():
+    f = _sample_run()
+    f.loc[100:3000:50, "t_int_c"] += 50.0  # 2 % of the rows
+    with pytest.raises(LogFormatError, match=r"the column looks corrupted, not a few glitches"):
+        log_from_frame(f)
+
+
+def test_fit_records_the_excluded_glitch_in_its_json(tmp_path):
+    f = _good_frame()
+    f.loc[200, "t_int_c"] += 60.0
+    path = tmp_path / "spike.csv"
+    f.to_csv(path, index=False)
+    out = tmp_path / "out"
+    assert main(["fit", str(path), "--region", "21", "28", "--out", str(out)]) == 0
+    doc = json.loads((out / "coefficients.json").read_text())
+    assert [g["row"] for g in doc["log_readings"]["excluded_glitches"]] == [201]

@@ -177,6 +177,19 @@ def stderr(message: str) -> None:
     print(units_text(message), file=sys.stderr)
 
 
+def log_record(log) -> dict:
+    """What the output JSON says about the log's readings: warnings and the glitch readings
+    excluded (``LogReport.glitches``; rows 1-based like the messages)."""
+    return {
+        "source": log.source,
+        "warnings": list(log.report.warnings),
+        "excluded_glitches": [
+            {"row": row + 1, "time_s": t_s, "t_int_c": value_c, "off_c": off_c}
+            for row, t_s, value_c, off_c in log.report.glitches
+        ],
+    }
+
+
 def log_warnings(log) -> None:
     """The log's suspicious readings (``LogReport.warnings``) on stderr, one line each."""
     for w in log.report.warnings:

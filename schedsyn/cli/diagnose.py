@@ -96,6 +96,7 @@ def run(args: argparse.Namespace) -> int:
     out = _common.output_dir(args.out, "out/diagnose", [args.log], names)
     full = read_log(args.log, keep_extra=False)
     _common.log_warnings(full)
+    readings = _common.log_record(full)
     n_rows = full.n_rows
     # a long log is diagnosed on every k-th row (bounded memory); the full one is freed
     log, stride = thin_log(full, DIAGNOSE_MAX_ROWS)
@@ -108,7 +109,8 @@ def run(args: argparse.Namespace) -> int:
     d = diagnose(log, settings)
     progress("writing the model, tables and plots")
     write_model(out.path("model.json"), d.model)
-    write_json_atomic(out.path("diagnosis.json"), d.to_json_dict())
+    doc = {**d.to_json_dict(), "log_readings": readings}
+    write_json_atomic(out.path("diagnosis.json"), doc)
     write_frame_atomic(out.path("candidates.csv"), d.to_frame())
     write_frame_atomic(out.path("residual_segments.csv"), d.residuals_before.segments)
     write_frame_atomic(out.path("residual_by_temperature.csv"), d.residuals_before.by_temperature)
@@ -126,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             print(note)
     if args.json:
-        print(json.dumps(strict_json(d.to_json_dict()), allow_nan=False))
+        print(json.dumps(strict_json(doc), allow_nan=False))
         _common.stderr(wrote)
     else:
         _common.say(

@@ -79,7 +79,9 @@ def run(args: argparse.Namespace) -> int:
     fit = fit_drift(log, tuple(args.region), settings, params, holdout=holdout)
     out = _common.out_dir(args.out, "out/fit")
     inputs = [args.log] + ([args.holdout] if args.holdout else [])
-    write_json_atomic(out / "coefficients.json", fit.to_json_dict(), inputs)
+    doc = fit.to_json_dict()
+    doc["log_readings"] = _common.log_record(log)
+    write_json_atomic(out / "coefficients.json", doc, inputs)
     write_frame_atomic(out / "compensation.csv", fit.compensation_frame(), inputs)
     write_frame_atomic(out / "residuals.csv", fit.residual_frame(), inputs)
     fitplots.save_figure(
