@@ -91,9 +91,13 @@ GLITCH_MIN_C = 0.5
 #: ... and than this many quantisation steps of the readings is an isolated glitch: it is
 #: excluded (set to NaN, like a blank reading) and listed in the report.
 GLITCH_QUANT_STEPS = 4.0
-#: More glitches than this share of the readings is not a glitch but a broken column:
-#: the log is refused.
+#: More glitches than this share of the readings (and than GLITCH_MAX_FEW) is not a
+#: glitch but a broken column: the log is refused.
 GLITCH_MAX_SHARE = 0.01
+GLITCH_MAX_FEW = 10
+#: A suspect reading is confirmed against a quadratic in time through the nearest two
+#: other readings on each side, looked for this many rows away at most.
+_GLITCH_REACH_ROWS = 8
 #: Readings whose residuals are computed at a time (bounds the memory of a long log).
 _GLITCH_CHUNK_ROWS = 262_144
 #: The MAD and the quantisation step are taken on an even stride of about this many.
@@ -399,7 +403,7 @@ def _check_time_unit(
     return ()
 
 
-def glitch_rows(values_c: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+def glitch_rows(time_s: np.ndarray, values_c: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """Isolated glitch readings: ``(rows, off_c, limit_c)``.
 
     Each finite reading with two finite readings on either side is compared with the
@@ -408,7 +412,12 @@ def glitch_rows(values_c: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     by more than ``limit_c = max(GLITCH_K x 1.4826 x MAD of those residuals,
     GLITCH_QUANT_STEPS x the quantisation step, GLITCH_MIN_C)`` is a glitch. A smooth
     signal, ramps and turnarounds included, stays within the noise of its window's
-    median; a spike of one or two readings does not.
+    median; a spike of one or two readings does not. A suspect is confirmed only when it
+    is also more than ``limit_c`` off a quadratic in time through the two nearest
+    non-suspect readings on each side: an irregularly sampled turnaround, which a median
+    of rows does not follow, is not a glitch. (A signal sampled too coarsely to follow,
+    a few readings per wiggle, can still be misjudged; real logs sample a device many
+    times per time constant.)
     """
     from .estimate import quantisation_step  # estimate imports this module
 
@@ -442,7 +451,30 @@ def glitch_rows(values_c: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     limit_c = max(GLITCH_K * 1.4826 * mad_c, GLITCH_QUANT_STEPS * quant_c, GLITCH_MIN_C)
     rows, off = np.concatenate(cand_rows), np.concatenate(cand_off)
     keep = np.abs(off) > limit_c
-    return rows[keep], off[keep], limit_c
+    rows, off = rows[keep], off[keep]
+    t = np.asarray(time_s, dtype=float)
+    pos = np.searchsorted(finite, rows)  # the suspects among the finite readings
+    suspect = np.zeros(n, dtype=bool)
+    suspect[pos] = True
+    confirmed = np.zeros(rows.size, dtype=bool)
+    for k, p in enumerate(pos):
+        near = [
+            j
+            for side in (
+                range(p - 1, max(p - 1 - _GLITCH_REACH_ROWS, -1), -1),
+                range(p + 1, min(p + 1 + _GLITCH_REACH_ROWS, n)),
+            )  # fmt: skip
+            for j in [j for j in side if not suspect[j]][:half]
+        ]
+        if len(near) < 2 * half:
+            continue  # not isolated: a run of suspects is not a glitch
+        idx = finite[near]
+        x = t[idx] - t[rows[k]]
+        x = x / np.max(np.abs(x))
+        design = np.column_stack([np.ones_like(x), x, x * x])
+        coef = np.linalg.lstsq(design, v[idx], rcond=None)[0]
+        confirmed[k] = abs(v[rows[k]] - coef[0]) > limit_c
+    return rows[confirmed], off[confirmed], limit_c
 
 
 def _exclude_glitches(
@@ -450,12 +482,12 @@ def _exclude_glitches(
 ) -> tuple[np.ndarray, LogReport]:
     """``t_int_c`` with its glitch readings set to NaN, and the report that lists them."""
     temp = values["t_int_c"]
-    rows, off, limit_c = glitch_rows(temp)
+    rows, off, limit_c = glitch_rows(values["time_s"], temp)
     if rows.size == 0:
         return temp, report
     n_finite = int(np.isfinite(temp).sum())
     first = int(rows[0])
-    if rows.size > GLITCH_MAX_SHARE * n_finite:
+    if rows.size > max(GLITCH_MAX_SHARE * n_finite, GLITCH_MAX_FEW):
         raise LogFormatError(
             f"{source}: column t_int_c: {rows.size} of {n_finite} readings lie more than "
             f"{limit_c:.3g} °C off their neighbours' median (first: row {first + 1}, line "
