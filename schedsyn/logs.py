@@ -234,6 +234,10 @@ class MeasuredLog:
 def _numeric_column(frame: pd.DataFrame, col: str, source: str, first_row: int = 0) -> np.ndarray:
     """Column as float; a value that is present but not a finite number is an error.
 
+    A blank cell and the missing-value markers (``NaN``, ``NA``, ``N/A``, ``#N/A``,
+    ``null``, ``None``: pandas' defaults, and ours in any case) are missing readings (NaN,
+    counted in the report), not errors.
+
     ``first_row`` is the 0-based row of the frame's first row in the whole log (chunks).
     """
     raw = frame[col]
@@ -247,6 +251,8 @@ def _numeric_column(frame: pd.DataFrame, col: str, source: str, first_row: int =
         i = int(np.argmax(bad))
         r = first_row + i
         value = raw.iloc[i]
+        # a number pandas parsed (inf, 1e400) as a plain float, not np.float64(inf)
+        shown = f"{float(value):g}" if isinstance(value, int | float | np.number) else repr(value)
         hint = ""
         if isinstance(value, str) and _DECIMAL_COMMA.match(value.strip()):
             hint = (
@@ -254,7 +260,7 @@ def _numeric_column(frame: pd.DataFrame, col: str, source: str, first_row: int =
                 "semicolon-separated CSV with decimal commas (both are read)"
             )
         raise LogFormatError(
-            f"{source}: row {r + 1} (line {r + 2}), column {col}: {value!r} is not a "
+            f"{source}: row {r + 1} (line {r + 2}), column {col}: {shown} is not a "
             f"finite number; fix or blank the value (a blank reading is kept as NaN){hint}"
         )
     values[blank] = np.nan

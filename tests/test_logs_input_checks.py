@@ -218,3 +218,35 @@ def test_one_glitch_in_a_short_log_is_excluded_not_refused():
     f = _good_frame(40)
     f.loc[20, "t_int_c"] += 30.0  # 2.5 % of 40 readings, but only one
     assert [g[0] for g in log_from_frame(f).report.glitches] == [20]
+
+
+# -- small things (red-team D10) -----------------------------------------------------------
+def test_an_infinite_value_is_shown_as_a_plain_number(tmp_path):
+    f = _good_frame(40).astype({"t_int_c": object})
+    f.loc[10, "t_int_c"] = "inf"
+    path = tmp_path / "inf.csv"
+    f.to_csv(path, index=False)
+    with pytest.raises(LogFormatError, match=r"column t_int_c: inf is not a finite number") as e:
+        read_log(path)
+    assert "np.float64" not in str(e.value)
+
+
+def test_estimate_refuses_a_region_given_high_to_low(tmp_path, capsys):
+    path = tmp_path / "log.csv"
+    _good_frame(40).to_csv(path, index=False)
+    out = tmp_path / "out"
+    assert main(["estimate", str(path), "--region", "30", "20", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "LO must be below HI" in err and "--region 20 30" in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("marker", ["NaN", "N/A", "NA", "null", "#N/A", ""])
+def test_missing_value_markers_are_missing_readings_and_reported(tmp_path, marker):
+    f = _good_frame(40).astype({"t_int_c": object})
+    f.loc[10, "t_int_c"] = marker
+    path = tmp_path / "log.csv"
+    f.to_csv(path, index=False)
+    log = read_log(path)
+    assert np.isnan(log.t_int_c[10]) and log.nan_counts["t_int_c"] == 1
+    assert "t_int_c: 1 of 40 rows are NaN" in log.report.summary()

@@ -12,6 +12,7 @@ import math
 from pathlib import Path
 
 from ..compare import resample_run
+from ..errors import ParameterError
 from ..estimate import GradientEstimate, estimate_gradient, estimate_gradient_model
 from ..io import write_atomic
 from ..logs import read_log
@@ -112,6 +113,11 @@ def write_gradient_csv(path: Path, est: GradientEstimate, inputs, progress=None)
 def run(args: argparse.Namespace) -> int:
     from .. import plots
 
+    if args.region is not None and not args.region[0] < args.region[1]:
+        raise ParameterError(
+            f"--region {args.region[0]:g} {args.region[1]:g}: LO must be below HI (°C); "
+            f"give the working region as --region {min(args.region):g} {max(args.region):g}"
+        )
     names = ("gradient.csv", "phase.png", "gradient.png")
     out = _common.output_dir(args.out, "out/estimate", [args.log], names)
     progress = None if args.quiet else StderrProgress("estimate")
