@@ -196,7 +196,7 @@ def test_a_column_full_of_glitches_is_refused():
         log_from_frame(f)
 
 
-def test_fit_records_the_excluded_glitch_in_its_json(tmp_path):
+def test_fit_records_the_excluded_glitch_in_its_json(tmp_path, capsys):
     f = _good_frame()
     f.loc[200, "t_int_c"] += 60.0
     path = tmp_path / "spike.csv"
@@ -205,6 +205,8 @@ def test_fit_records_the_excluded_glitch_in_its_json(tmp_path):
     assert main(["fit", str(path), "--region", "21", "28", "--out", str(out)]) == 0
     doc = json.loads((out / "coefficients.json").read_text())
     assert [g["row"] for g in doc["log_readings"]["excluded_glitches"]] == [201]
+    (warning,) = capsys.readouterr().err.strip().splitlines()
+    assert warning.startswith(f"warning: {path}: t_int_c: 1 isolated glitch reading(s)")
 
 
 def test_an_irregularly_sampled_turnaround_is_not_a_glitch():
