@@ -290,3 +290,20 @@ def test_a_plan_that_only_breaks_its_step_limit_says_so_not_advise(tmp_path, cap
     text = capsys.readouterr().out
     assert "breaks its step limits" in text and "max_steps 6" in text
     assert "run again with --advise" not in text
+
+
+def test_an_informative_plan_leaves_room_for_its_end_soak(tmp_path, capsys):
+    """The informative objective runs on to the time limit, so --end-soak never fitted
+    ('over the limit ... raise the duration limit', at any limit; red team). It is now
+    planned again within the limit less its soak: complete, soak included, in time."""
+    from schedsyn import read_steps
+
+    out = tmp_path / "o"
+    argv = ["plan", "--working", "18", "22", "--levels", "3", "--objective", "informative"]
+    argv += ["--duration-max-min", "240", "--end-soak", "--out", str(out), "--quiet"]
+    assert main(argv) == 0, capsys.readouterr().err
+    plan = json.loads((out / "plan.json").read_text())
+    assert plan["complete"] and plan["limits"]["duration_max_min"] == 240.0
+    steps = read_steps(out / "steps.csv")
+    assert steps.total_min <= 240.0 + 1e-9
+    assert steps.rates_c_per_min[-1] == 0.0 and steps.durations_min[-1] > 30.0  # the soak

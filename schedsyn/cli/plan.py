@@ -396,6 +396,32 @@ def end_soak_lines(plan: Plan, model=None) -> list[str]:
     return ["  " + _common.end_soak_text(plan.programme, t_end, soak, settled, plan.limits)]
 
 
+#: Re-plans an informative plan gets to leave room for its end soak (--end-soak).
+SOAK_ROOM_TRIES = 3
+
+
+def _informative_with_room_for_soak(plan: Plan, replan, model=None) -> Plan:
+    """An ``informative`` plan runs on to the time limit, so its end soak never fits:
+    it is planned again with the limit shortened by the soak it needs (``replan(limits)``,
+    up to :data:`SOAK_ROOM_TRIES` times, as the soak depends on where the plan ends).
+    The plan returned carries the request's own limits; when no room is found, the
+    first plan (``with_end_soak`` then says the soak does not fit)."""
+    limits = plan.limits
+    candidate = plan
+    for _ in range(SOAK_ROOM_TRIES):
+        soak, _, _ = end_state(candidate, model)
+        over = candidate.programme.total_min + soak - limits.duration_max_min
+        if over <= 1e-9:
+            return dataclasses.replace(candidate, limits=limits)
+        shorter = math.floor(candidate.limits.duration_max_min - over)
+        if shorter < 1:
+            break
+        candidate = replan(dataclasses.replace(limits, duration_max_min=float(shorter)))
+        if not candidate.complete:
+            break
+    return plan
+
+
 def with_end_soak(plan: Plan, model=None) -> Plan:
     """The plan with a hold appended at its end temperature until the device settles
     (``--end-soak``), re-checked: coverage, limits and completeness of the new table.
@@ -664,6 +690,21 @@ def run(args: argparse.Namespace) -> int:
                 progress=progress,
                 effort_s=_effort_s(args),
             )
+            if args.end_soak and spec.objective == "informative":
+                plan = _informative_with_room_for_soak(
+                    plan,
+                    lambda lim: plan_experiment(
+                        spec,
+                        params,
+                        lim,
+                        model=model,
+                        robust_tau_s=robust_tau,
+                        robust_dt0_c=robust_dt0,
+                        progress=progress,
+                        effort_s=_effort_s(args),
+                    ),
+                    model,
+                )
         except InfeasiblePlanError:
             if args.advise:  # nothing planned: still say what would make it plannable
                 said, _ = advise_plan(
