@@ -386,6 +386,10 @@ def test_the_part_of_the_region_the_chamber_can_reach_is_planned(tmp_path):
     assert k is not None and 2 <= k < 5
     (note,) = [n for n in plan.notes if n.startswith("PARTIAL")]
     assert any("a floor of at most -4.25 °C is needed" in n for n in plan.notes)
+    # the part's own graded note counts the part's bins and says so (it read as the
+    # region's: 'weakest bin 4' beside a region whose weakest bin had 0)
+    assert not any(n.startswith("GRADED") for n in plan.notes)
+    assert any(n.startswith("in the part planned, [3, 6] °C: GRADED:") for n in plan.notes)
     res = table_check(
         plan.programme.to_csv(tmp_path / "steps.csv"), (0.0, 6.0), 5, tau_s=600.0, dt0_c=3.0
     )

@@ -1033,6 +1033,14 @@ def _reported_for(
     never complete; ``head`` (an open parenthesis, closed here with the weakest bin and
     the share at the requested levels) after ``notes``, then ``part``'s own notes."""
     cov, cov01, _, _, _ = check_programme(part.programme, spec, limits, [params])
+    own = part.notes
+    lo, hi = part.spec.working_lo_c, part.spec.working_hi_c
+    if (lo, hi) != (spec.working_lo_c, spec.working_hi_c):
+        # the part's graded note counts its own bins, not the region's: say so
+        own = tuple(
+            f"in the part planned, [{lo:g}, {hi:g}] °C: {n}" if n.startswith("GRADED:") else n
+            for n in own
+        )
     return dataclasses.replace(
         part,
         spec=spec,
@@ -1045,7 +1053,7 @@ def _reported_for(
             *notes,
             f"{head}; weakest bin {cov.min_levels} levels, {cov.coverage:.0%} of the bins "
             f"at {spec.levels_required})",
-            *part.notes,
+            *own,
         ),
         duration_lower_bound_min=duration_lower_bound(spec, params, limits).lower_bound_min,
     )
