@@ -91,9 +91,9 @@ def _runs_in(temp: np.ndarray, lo: float, hi: float) -> list[tuple[int, int]]:
     return runs
 
 
-@pytest.fixture(scope="module")
-def pinned_sweeps():
-    """The first four sweeps of a pinned guided structure, placed as the greedy does."""
+def _pinned_structure():
+    """Context, sample limit, sweep directions and ordered bands of a pinned guided
+    structure on SPEC / LIMITS."""
     seg = SPEC.segment_min
     max_seg = int(LIMITS.duration_max_min // seg)
     responses = Responses([Scenario(PARAMS, FirstOrderLag(PARAMS))], max_seg, seg, LIMITS)
@@ -103,7 +103,14 @@ def pinned_sweeps():
     sep = SPEC.delta_c_per_min + BAND_SAFETY_C_PER_MIN
     bands = candidate_bands(Guided(0.9, 0.04, pinned=True), SPEC, [PARAMS], LIMITS, n_by_dir, sep)
     assert bands is not None
-    order = order_bands(directions, bands, PARAMS, LIMITS)
+    return ctx, max_seg, directions, order_bands(directions, bands, PARAMS, LIMITS)
+
+
+@pytest.fixture(scope="module")
+def pinned_sweeps():
+    """The first four sweeps of a pinned guided structure, placed as the greedy does."""
+    seg = SPEC.segment_min
+    ctx, max_seg, directions, order = _pinned_structure()
     u, windows = np.zeros(0), []
     for d, band in list(zip(directions, order, strict=True))[:4]:
         res = place_sweep(ctx, u, d, band, max_seg, pinned=True)
@@ -197,17 +204,8 @@ def test_a_pinned_sweep_that_fits_nowhere_scans_pin_scan_min_of_starts(monkeypat
     not rule out, then gives up (before, all of MAX_TRANSITION_MIN: 20-45 s per stuck
     sweep on w4-ceiling-65). The LP is made to find nothing; the starts asked are read
     off the windows it was given."""
-    seg = SPEC.segment_min
-    max_seg = int(LIMITS.duration_max_min // seg)
-    responses = Responses([Scenario(PARAMS, FirstOrderLag(PARAMS))], max_seg, seg, LIMITS)
-    ctx = Context(SPEC, LIMITS, responses, LpStats())
-    directions = sweep_directions(SPEC, first_directions(SPEC, LIMITS)[0])
-    n_by_dir = {d: directions.count(d) for d in (+1, -1)}
-    sep = SPEC.delta_c_per_min + BAND_SAFETY_C_PER_MIN
-    bands = candidate_bands(Guided(0.9, 0.04, pinned=True), SPEC, [PARAMS], LIMITS, n_by_dir, sep)
-    assert bands is not None
-    d = directions[0]
-    band = order_bands(directions, bands, PARAMS, LIMITS)[0]
+    ctx, max_seg, directions, order = _pinned_structure()
+    d, band = directions[0], order[0]
     starts: list[int] = []
     window = lp.SubLP.window
 

@@ -679,32 +679,23 @@ def run(args: argparse.Namespace) -> int:
 
     lines: list[str] = []
     if not several:
-        try:
-            plan = plan_experiment(
+
+        def plan_within(lim: Limits) -> Plan:
+            return plan_experiment(
                 spec,
                 params,
-                limits,
+                lim,
                 model=model,
                 robust_tau_s=robust_tau,
                 robust_dt0_c=robust_dt0,
                 progress=progress,
                 effort_s=_effort_s(args),
             )
+
+        try:
+            plan = plan_within(limits)
             if args.end_soak and spec.objective == "informative":
-                plan = _informative_with_room_for_soak(
-                    plan,
-                    lambda lim: plan_experiment(
-                        spec,
-                        params,
-                        lim,
-                        model=model,
-                        robust_tau_s=robust_tau,
-                        robust_dt0_c=robust_dt0,
-                        progress=progress,
-                        effort_s=_effort_s(args),
-                    ),
-                    model,
-                )
+                plan = _informative_with_room_for_soak(plan, plan_within, model)
         except InfeasiblePlanError:
             if args.advise:  # nothing planned: still say what would make it plannable
                 said, _ = advise_plan(

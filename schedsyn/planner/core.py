@@ -507,11 +507,11 @@ def _plan(
                 if not why:
                     raise
                 # the cause first (the bound, the binding limit), then what the search saw
-                found = str(err).removeprefix(f"{spec.name}: ")
+                saw = str(err).removeprefix(f"{spec.name}: ")
                 if any("unreachable" in w for w in why):  # not a matter of time or levels
-                    found = found.replace(f" {NO_PLAN_ADVICE}", "")
+                    saw = saw.replace(f" {NO_PLAN_ADVICE}", "")
                 raise InfeasiblePlanError(
-                    f"{spec.name}: {'; '.join(why)}. The search: {found}",
+                    f"{spec.name}: {'; '.join(why)}. The search: {saw}",
                     best_coverage=err.best_coverage,
                 ) from err
             return with_table_meta(_finished(fewer, tic, effort))
