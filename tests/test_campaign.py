@@ -292,3 +292,23 @@ def test_chamber_requirement_coverage_grows_as_the_floor_is_lowered():
     assert cov[1] >= cov[0]
     assert cov[0] < 1.0 and not frame["complete"].iloc[0]  # the -52 floor cannot reach -50
     assert frame["complete"].iloc[1] and cov[1] == 1.0  # -70 degC is floor enough
+
+
+def test_campaign_end_soak_leaves_room_in_an_informative_plan(tmp_path):
+    """objective = "informative" runs each plan on to the time limit, so --end-soak never
+    fitted and every table was written without its soak; now the plan is made again
+    within the limit less the soak (as `plan --end-soak` does)."""
+    cfg = tmp_path / "inf.toml"
+    cfg.write_text(
+        '[settings]\nobjective = "informative"\n\n[limits]\nduration_max_min = 240.0\n\n'
+        '[[experiment]]\nname = "small"\nworking_lo_c = 18.0\nworking_hi_c = 22.0\n'
+        "approx_lo_c = 16.0\napprox_hi_c = 24.0\nlevels_required = 3\n"
+    )
+    out = tmp_path / "out"
+    with contextlib.redirect_stdout(io.StringIO()) as said:
+        rc = main(["campaign", str(cfg), "--end-soak", "--out", str(out), "--quiet"])
+    assert rc == 0, said.getvalue()
+    assert "WITHOUT an end soak" not in said.getvalue()
+    steps = read_steps(out / "small" / "steps.csv")
+    assert steps.total_min <= 240.0 + 1e-9
+    assert steps.rates_c_per_min[-1] == 0.0 and steps.durations_min[-1] > 30.0  # the soak

@@ -88,10 +88,12 @@ def run(args: argparse.Namespace) -> int:
     from ..campaign import default_campaign, load_campaign, plan_campaign, stderr_progress
     from ..export import default_export_path
     from ..io import write_frame_atomic
+    from ..planner import plan_experiment
     from .plan import (
         advice_progress,
         advise_plan,
         end_soak_lines,
+        informative_with_room_for_soak,
         report_plan,
         with_end_soak,
         write_plan_outputs,
@@ -142,6 +144,17 @@ def run(args: argparse.Namespace) -> int:
             lines += more
             continue
         if args.end_soak:
+            if spec.objective == "informative":  # it runs to the limit: room for the soak
+                plan = informative_with_room_for_soak(
+                    plan,
+                    lambda lim, spec=spec: plan_experiment(
+                        spec,
+                        config.params,
+                        lim,
+                        robust_tau_s=config.robust_tau_s,
+                        robust_dt0_c=config.robust_dt0_c,
+                    ),
+                )
             try:
                 plan = plans[i] = with_end_soak(plan)
             except ParameterError as exc:  # the others go on; this one is reported

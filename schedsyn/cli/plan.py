@@ -400,7 +400,7 @@ def end_soak_lines(plan: Plan, model=None) -> list[str]:
 SOAK_ROOM_TRIES = 3
 
 
-def _informative_with_room_for_soak(plan: Plan, replan, model=None) -> Plan:
+def informative_with_room_for_soak(plan: Plan, replan, model=None) -> Plan:
     """An ``informative`` plan runs on to the time limit, so its end soak never fits:
     it is planned again with the limit shortened by the soak it needs (``replan(limits)``,
     up to :data:`SOAK_ROOM_TRIES` times, as the soak depends on where the plan ends).
@@ -695,7 +695,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             plan = plan_within(limits)
             if args.end_soak and spec.objective == "informative":
-                plan = _informative_with_room_for_soak(plan, plan_within, model)
+                plan = informative_with_room_for_soak(plan, plan_within, model)
         except InfeasiblePlanError:
             if args.advise:  # nothing planned: still say what would make it plannable
                 said, _ = advise_plan(
