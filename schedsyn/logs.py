@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .csvdialect import detect_csv_dialect
+from .csvdialect import SEP_HINT, detect_csv_dialect
 from .errors import LogFormatError, ParameterError
 
 REQUIRED_COLUMNS = ("time_s", "t_int_c")
@@ -699,6 +699,12 @@ def read_log(
             dialect = detect_csv_dialect(head)
         except ValueError as exc:
             raise LogFormatError(f"{path}: {exc}") from None
+        first = next((ln for ln in head.lstrip("\ufeff").splitlines() if ln.strip()), "")
+        if SEP_HINT.match(first):  # (rows and lines are named as if the header were line 1)
+            raise LogFormatError(
+                f"{path}: line 1 is a spreadsheet's {first.strip()!r} line, not the header; "
+                "delete that line (or save the log as plain CSV) and read it again"
+            )
         _check_unique_columns(_header_names(head, dialect.separator), str(path))
         try:
             with pd.read_csv(

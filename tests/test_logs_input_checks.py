@@ -252,3 +252,17 @@ def test_missing_value_markers_are_missing_readings_and_reported(tmp_path, marke
     log = read_log(path)
     assert np.isnan(log.t_int_c[10]) and log.nan_counts["t_int_c"] == 1
     assert "t_int_c: 1 of 40 rows are NaN" in log.report.summary()
+
+
+@pytest.mark.parametrize("hint", ["sep=,", '"sep=;"'])
+def test_a_spreadsheet_sep_line_is_named_with_the_fix(tmp_path, hint):
+    """Excel writes 'sep=,' above the header; it was read as the header and the log
+    refused for 'missing required column(s)', which sent the user looking for columns
+    that are there (red team)."""
+    sep = ";" if ";" in hint else ","
+    path = tmp_path / "sep.csv"
+    rows = [sep.join(("time_s", "t_int_c"))]
+    rows += [sep.join((f"{10 * i}", f"{20 + 0.01 * i:.2f}")) for i in range(30)]
+    path.write_text(hint + "\n" + "\n".join(rows) + "\n")
+    with pytest.raises(LogFormatError, match=r"line 1 is a spreadsheet's .*sep=.*delete"):
+        read_log(path)
