@@ -509,6 +509,8 @@ def quantise(
     return out
 
 
+#: Bins that lost levels named in an export's summary (the rest are counted).
+LOST_BINS_SHOWN = 8
 #: Controller time steps the last step may be lengthened by so that the exported
 #: programme ends at the source's end temperature (:func:`quantise`).
 END_EXTEND_MAX_STEPS = 5
@@ -763,6 +765,17 @@ class ControllerExport:
                     0,
                     f"*** the {self.spec.title} export covers LESS than its step table: "
                     "check the rounding notes below ***",
+                )
+                lo = s.grid.lower_c
+                fewer = np.flatnonzero(e.levels < s.levels)
+                shown = ", ".join(
+                    f"[{lo[k]:g}, {lo[k] + s.grid.bin_c:g}) {s.levels[k]} -> {e.levels[k]}"
+                    for k in fewer[:LOST_BINS_SHOWN]
+                )
+                more = fewer.size - LOST_BINS_SHOWN
+                lines.append(
+                    f"  bins with fewer levels exported ({fewer.size}): {shown}"
+                    + (f" and {more} more" if more > 0 else "")
                 )
         lines += [f"  note: {n}" for n in self.notes]
         return lines

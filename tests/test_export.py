@@ -517,6 +517,14 @@ def test_lost_coverage_is_reported_and_exits_1(monkeypatch, tmp_path):
     assert ex.coverage_lost
     assert ex.export_coverage.coverage < ex.source_coverage.coverage
     assert "LESS" in ex.summary()[0]
+    # the bins that lost levels are named with their counts (the banner alone named none)
+    fewer = np.flatnonzero(ex.export_coverage.levels < ex.source_coverage.levels)
+    (line,) = [x for x in ex.summary() if "bins with fewer levels exported" in x]
+    assert f"({fewer.size})" in line
+    k = int(fewer[0])
+    lo = ex.source_coverage.grid.lower_c[k]
+    src, exp = ex.source_coverage.levels[k], ex.export_coverage.levels[k]
+    assert f"[{lo:g}, {lo + 1:g}) {src} -> {exp}" in line
     out = tmp_path / "b.json"
     rc, text, _ = run_cli(
         [
