@@ -400,7 +400,8 @@ def place_sweep(
         if res is not None:
             found = (x, res)
             break
-        if step == 1 and not capped and stats.solves - stats.infeasible_by_bounds > solved:
+        reached = stats.solves - stats.infeasible_by_bounds > solved
+        if (every_sample or pinned) and not capped and reached:
             # the first start the rate limits alone do not rule out: the scan covers
             # PHASE_SCAN_SEGMENTS segments from here, pinned sweeps at least
             # PIN_SCAN_MIN (later starts wait longer at the same phases)
