@@ -41,7 +41,13 @@ model::
     B = sigma^2 X'X + K^2 sum_k dt_k S_k S_k',   S_k = sum_{i >= k} x_i
 
 (``X'[K^2 min(t_i, t_j)]X``, exact for a random walk started at the first sample, whose
-start level the constant term absorbs).
+start level the constant term absorbs). One run determines K poorly: its estimate is
+often near 0 when the walk is real, and standard errors at that K were up to 2x too small
+(mostly the constant: the walk's mean level over the run). ``K`` in ``B`` is therefore
+the largest walk the run cannot rule out, where the restricted ``-2 log L`` has risen by
+:data:`WALK_UPPER_DELTA_M2LL` above its best on the side of larger walks; the estimate is
+reported as well. With no walk at all this makes the standard errors up to ~2x
+conservative.
 
 **Term selection.** Candidates nested by their order in g (``t-only`` -- the reference,
 a cubic in T -- ``g1``, ``g2``, ``full``; :data:`schedsyn.terms.CANDIDATES`) are compared
@@ -64,7 +70,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import minimize_scalar
+from scipy.optimize import brentq, minimize_scalar
 
 from .errors import LogFormatError, ParameterError
 from .estimate import GradientEstimate, estimate_gradient, estimate_gradient_model
@@ -235,6 +241,9 @@ def _solve(a: np.ndarray, b: np.ndarray, what: str) -> np.ndarray:
 
 #: The noise model is fitted on at most this many samples (an even stride of longer logs).
 NOISE_MAX_ROWS = 2000
+#: The walk used for standard errors is where ``-2 log L`` has risen by this much above its
+#: minimum, on the side of larger walks (profile likelihood).
+WALK_UPPER_DELTA_M2LL = 1.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -250,6 +259,7 @@ class NoiseFit:
     minus2_log_likelihood: float
     n: int
     n_params: int
+    walk_upper_dph_per_rt_h: float = math.nan
 
     @property
     def bic(self) -> float:
@@ -259,10 +269,10 @@ class NoiseFit:
 
 def noise_model(
     time_s: np.ndarray, drift_dph: np.ndarray, x: np.ndarray, max_rows: int = NOISE_MAX_ROWS
-) -> tuple[float, float]:
-    """``(sigma_dph, walk_dph_per_rt_h)`` by REML (:func:`noise_fit`)."""
+) -> tuple[float, float, float]:
+    """``(sigma_dph, walk_dph_per_rt_h, walk_upper_dph_per_rt_h)`` by REML (:func:`noise_fit`)."""
     fit = noise_fit(time_s, drift_dph, x, reml=True, max_rows=max_rows)
-    return fit.sigma_dph, fit.walk_dph_per_rt_h
+    return fit.sigma_dph, fit.walk_dph_per_rt_h, fit.walk_upper_dph_per_rt_h
 
 
 def noise_fit(
@@ -364,7 +374,21 @@ def noise_fit(
         return NoiseFit(float(np.std(z[:, 0])), 0.0, math.nan, n, p)
     dof = n - p if reml else n
     m2ll = 2.0 * obj + dof * (math.log(2.0 * math.pi) + 1.0)
-    return NoiseFit(math.sqrt(s2), math.sqrt(math.exp(x_best) * s2), m2ll, n, p)
+    # the largest walk the run cannot rule out: where -2 log L has risen by
+    # WALK_UPPER_DELTA_M2LL above its minimum (profile likelihood, upper side)
+    target = obj + 0.5 * WALK_UPPER_DELTA_M2LL
+    hi_bound = math.log(10.0) * 6.0
+    upper = math.nan
+    lo_v, hi_v = x_best, x_best
+    while hi_v < hi_bound:
+        hi_v = min(hi_v + math.log(10.0), hi_bound)
+        if profile(hi_v)[0] >= target:
+            break
+        lo_v = hi_v
+    if profile(hi_v)[0] >= target:
+        v_up = brentq(lambda v: profile(v)[0] - target, lo_v, hi_v, xtol=0.02)
+        upper = math.sqrt(math.exp(v_up) * profile(v_up)[1])
+    return NoiseFit(math.sqrt(s2), math.sqrt(math.exp(x_best) * s2), m2ll, n, p, upper)
 
 
 def walk_covariance(time_s: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -391,6 +415,7 @@ class PolyFit:
     covariance: np.ndarray
     white_sigma_dph: float
     walk_dph_per_rt_h: float
+    walk_for_std_errors_dph_per_rt_h: float
     residual_rms_dph: float
     condition_number: float
     n: int
@@ -459,9 +484,12 @@ def fit_samples(
     a = pieces.a_k.sum(axis=0)
     coef = _solve(a, pieces.b_k.sum(axis=0), what)
     resid = samples.drift_dph - pieces.x @ coef
-    sigma, walk = noise_model(samples.time_s, samples.drift_dph, pieces.x)
+    sigma, walk, walk_upper = noise_model(samples.time_s, samples.drift_dph, pieces.x)
+    # the standard errors allow for the largest walk the run cannot rule out: a run's own
+    # estimate of K is often near 0 when the walk is real (module docstring)
+    walk_se = max(walk, walk_upper) if math.isfinite(walk_upper) else walk
     a_inv = np.linalg.inv(a)
-    middle = sigma**2 * (pieces.x.T @ pieces.x) + walk**2 * walk_covariance(
+    middle = sigma**2 * (pieces.x.T @ pieces.x) + walk_se**2 * walk_covariance(
         samples.time_s, pieces.x
     )
     cov = a_inv @ middle @ a_inv
@@ -479,6 +507,7 @@ def fit_samples(
         covariance=j @ cov @ j.T,
         white_sigma_dph=sigma,
         walk_dph_per_rt_h=walk,
+        walk_for_std_errors_dph_per_rt_h=walk_se,
         residual_rms_dph=float(np.sqrt(np.mean(resid**2))),
         condition_number=float(np.linalg.cond(pieces.x)),
         n=samples.n,
@@ -917,7 +946,12 @@ class DriftFit:
             "noise": {
                 "white_sigma_dph": m.white_sigma_dph,
                 "bias_walk_dph_per_rt_h": m.walk_dph_per_rt_h,
-                "standard_errors": "sandwich with a white + random-walk residual model",
+                "bias_walk_for_std_errors_dph_per_rt_h": m.walk_for_std_errors_dph_per_rt_h,
+                "standard_errors": (
+                    "sandwich with a white + random-walk residual model; the walk is the "
+                    "largest the run cannot rule out (restricted likelihood within "
+                    f"{WALK_UPPER_DELTA_M2LL:g} of its best in -2 log L)"
+                ),
             },
             "gradient_estimator": self.estimator,
             "errors_in_variables": {
@@ -956,7 +990,8 @@ class DriftFit:
             f"model {term_set_name(m.terms)} ({len(m.terms)} terms): residual RMS "
             f"{m.residual_rms_dph:.4g} °/h (T-only cubic {ref.residual_rms_dph:.4g} °/h); "
             f"noise white {m.white_sigma_dph:.3g} °/h + bias walk {m.walk_dph_per_rt_h:.3g} "
-            f"°/h/√h; condition number {m.condition_number:.3g}",
+            f"°/h/√h (standard errors allow up to {m.walk_for_std_errors_dph_per_rt_h:.3g}, "
+            f"the most the run cannot rule out); condition number {m.condition_number:.3g}",
         ]
         sel = self.selection
         if len(sel) > 1:
