@@ -20,7 +20,10 @@ and the drift fitted over the approximation region that both runs reached
     fitted on the plan's run, held out on the baseline's run (a different trajectory,
     independent noise), over its samples inside the fit's domain: against the noise-free
     truth at the true (T, g), and as measured residual RMS (noise included); on gyros
-    without them: how often term selection picks the T-only model.
+    without them: how often term selection picks the T-only model;
+(c) the honesty of the stated uncertainty: the share of the grid where the selected
+    model's error (plan's run) is within twice the standard deviation the fit states,
+    and the RMS of error / standard deviation (1 when the stated one is right).
 
     python scripts/bench_fit.py --plans out/campaign [--gyros 20] [--regions W1 W2]
         [--workers 2] [--out out/bench_fit] [--seed 0] [--no-walk]
@@ -140,6 +143,12 @@ def run_case(case: Case) -> dict:
             err = model.predict(t_grid, g_grid) - truth
             row[f"{tag}_{mname}_rms_dph"] = _rms(err)
             row[f"{tag}_{mname}_shape_rms_dph"] = _rms(err - err.mean())
+        # honesty of the stated uncertainty: the share of the grid where the selected
+        # model's error is within twice its standard deviation (target about 95 %)
+        err = fit.model.predict(t_grid, g_grid) - truth
+        sd = fit.model.predict_std(t_grid, g_grid)
+        row[f"{tag}_selected_within_2sd_share"] = float(np.mean(np.abs(err) <= 2.0 * sd))
+        row[f"{tag}_selected_rms_z"] = _rms(err / np.maximum(sd, 1e-12))
     # (b) held out on the baseline's run: inside the plan fit's domain
     full_p = fit_samples(fit_p.samples, "full", fit_p.model.coding)
     est = schedsyn.estimate_gradient_model(log_base)
@@ -196,6 +205,8 @@ def summarise(cases: pd.DataFrame, designs: dict) -> pd.DataFrame:
                 "holdout_tonly_over_full_ge_2_share": float((ho >= 2).mean()),
                 "holdout_measured_tonly_over_full_median": ho_m.median(),
                 "tonly_selected_share_no_gradient": float((n["plan_selected"] == "t-only").mean()),
+                "plan_selected_within_2sd_share_mean": c["plan_selected_within_2sd_share"].mean(),
+                "plan_selected_rms_z": float(np.sqrt(np.mean(c["plan_selected_rms_z"] ** 2))),
                 "tonly_selected_share_gradient": float((g["plan_selected"] == "t-only").mean()),
             }
         )
@@ -215,6 +226,8 @@ def markdown(summary: pd.DataFrame) -> str:
         "holdout_tonly_over_full_median": "(b) T-only / full held out (target >= 2)",
         "holdout_measured_tonly_over_full_median": "(b) same, measured residuals",
         "tonly_selected_share_no_gradient": "(b) T-only chosen, no g terms (target >= 90 %)",
+        "plan_selected_within_2sd_share_mean": "error within ±2σ (plan, selected)",
+        "plan_selected_rms_z": "RMS error/σ (plan, selected)",
     }
     s = summary[list(cols)].rename(columns=cols)
     lines = ["| " + " | ".join(s.columns) + " |", "|" + "---|" * len(s.columns)]
@@ -222,7 +235,7 @@ def markdown(summary: pd.DataFrame) -> str:
         cells = []
         for k, v in r.items():
             if isinstance(v, float):
-                cells.append(f"{v:.0%}" if "chosen" in k else f"{v:.3g}")
+                cells.append(f"{v:.0%}" if ("chosen" in k or "±2σ" in k) else f"{v:.3g}")
             else:
                 cells.append(str(v))
         lines.append("| " + " | ".join(cells) + " |")
