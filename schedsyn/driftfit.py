@@ -282,6 +282,7 @@ def noise_fit(
     *,
     reml: bool = True,
     max_rows: int = NOISE_MAX_ROWS,
+    upper: bool = True,
 ) -> NoiseFit:
     """White noise plus a bias random walk under a regression, by (RE)ML.
 
@@ -380,12 +381,12 @@ def noise_fit(
     hi_bound = math.log(10.0) * 6.0
     upper = math.nan
     lo_v, hi_v = x_best, x_best
-    while hi_v < hi_bound:
+    while upper and hi_v < hi_bound:
         hi_v = min(hi_v + math.log(10.0), hi_bound)
         if profile(hi_v)[0] >= target:
             break
         lo_v = hi_v
-    if profile(hi_v)[0] >= target:
+    if upper and profile(hi_v)[0] >= target:
         v_up = brentq(lambda v: profile(v)[0] - target, lo_v, hi_v, xtol=0.02)
         upper = math.sqrt(math.exp(v_up) * profile(v_up)[1])
     return NoiseFit(math.sqrt(s2), math.sqrt(math.exp(x_best) * s2), m2ll, n, p, upper)
@@ -637,7 +638,9 @@ def select_terms(
     x, y = coding.code(samples.t_c, samples.g_c_per_min)
     rows = []
     for name, ts in zip(candidates, terms, strict=True):
-        nf = noise_fit(samples.time_s, samples.drift_dph, monomials(x, y, ts), reml=False)
+        nf = noise_fit(
+            samples.time_s, samples.drift_dph, monomials(x, y, ts), reml=False, upper=False
+        )
         rows.append(
             {
                 "candidate": name,
