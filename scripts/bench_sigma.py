@@ -17,9 +17,9 @@ degC, quantised to 0.01 or 0.0625 degC (or not); sampling 1-60 s, regular, jitte
 Each estimator's error ``e = g_est - g_true`` over the rows of three windows: ``start``
 (the first 15 min of the log), ``change`` (within 15 min after a rate change, outside the
 start window) and ``elsewhere``; and, overlapping them, ``core`` (within 2.5 min of a
-change on either side, where the smoother's bias at a kink is largest). Per window: coverage of +-2 sigma (share of |e| <= 2
-sigma, about 95 % when sigma is honest), RMS of ``z = e / sigma`` (1 when honest), the
-largest |z|, the RMS error and the median sigma.
+change on either side, where the smoother's bias at a kink is largest). Per window:
+coverage of +-2 sigma (share of |e| <= 2 sigma, about 95 % when sigma is honest), RMS of
+``z = e / sigma`` (1 when honest), the largest |z|, the RMS error and the median sigma.
 
 Run: python scripts/bench_sigma.py [--cases 40] [--seed 0] [--save out/sigma.npz]
      python scripts/bench_sigma.py --compare OLD.npz NEW.npz
