@@ -91,6 +91,26 @@ MIN_STEADY_ROWS = 32
 #: settled (the remaining rows of the stretch take that value).
 SMOOTHED_RTOL = 1e-12
 
+#: Kinks (order-3 kinematic model only). At a chamber rate change the gradient's rate
+#: ``a = dg/dt`` jumps by ``dU/tau``; white jerk of one ML-fitted density ``q`` cannot
+#: follow that, and the smoother rounds the kink with a bias its sigma does not include.
+#: The smoother's time scale is ``L = (r h / q)^(1/6)`` (h: median step); a first pass
+#: measures the smoothed ``a``'s change ``D(t) = a(t + W) - a(t - W)`` over
+#: ``W = KINK_WINDOW_IN_L * L`` on each side...
+KINK_WINDOW_IN_L = 3.0
+#: ... a kink is a local peak of ``|D|`` above this many ``sqrt(2 W q)`` (the spread of a
+#: random-walk ``a`` over ``2 W`` at density ``q``; far from rate changes ``|D|`` stays
+#: below ~1.5 of it on the benchmark's logs, and a false kink only adds variance)...
+KINK_THRESHOLD_NULL_STD = 1.5
+#: ... and the second pass lets ``a`` jump there: extra white jerk of total variance
+#: ``D^2`` ((degC/min^2)^2) spread over ``+- KINK_SPREAD_IN_L * L`` around the peak (the
+#: kink's time is known to about the smoother's scale).
+KINK_SPREAD_IN_L = 1.0
+#: Passes with kinks at most: each fits q again by ML (smaller without the kinks to cover,
+#: so the smoother is longer and smaller kinks matter) and searches the new smoothed ``a``
+#: for kinks not yet found (a third pass changes the benchmark's coverage by < 1 %).
+KINK_ROUNDS = 2
+
 #: ``progress(stage, done, total)``; stages "noise levels" (evaluations, total 0: open),
 #: "filter" and "smoother" (rows).
 Progress = Callable[[str, int, int], None]
@@ -773,6 +793,9 @@ class _Setup:
     chamber_c: np.ndarray | None = None
     u_merged: np.ndarray | None = None
     order: int = 3
+    #: per row, extra jerk density over the step into it, (degC/min^3)^2/min (order 3;
+    #: None: none): the jumps of the gradient's rate at kinks (:func:`kink_q_extra`)
+    q_extra: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -817,6 +840,8 @@ class _Setup:
 
     def rows(self, lo: int, hi: int, q: float) -> _Rows:
         h_rows, same, u = self.steps(lo, hi)
+        if self.q_extra is not None:
+            return self._extra_rows(lo, hi, q, h_rows, same, u)
         h, idx = np.unique(h_rows, return_inverse=True)  # the distinct steps
         if self.model is not None:
             a, b, q11, q12, q22 = lag_transition(h, self.model, q)
@@ -827,6 +852,18 @@ class _Setup:
         else:
             f, qq = jerk_transition(h, q)
         return _Rows(self.y[lo:hi], same, u, f, qq, idx.reshape(-1), self.dim)
+
+    def _extra_rows(self, lo, hi, q, h_rows, same, u) -> _Rows:
+        """:meth:`rows` of the order-3 kinematic model with ``q_extra``: jerk density
+        ``q + q_extra`` per step, over the distinct (step, extra) pairs; a row whose extra
+        differs from the row before is not ``same``."""
+        assert self.q_extra is not None and self.model is None and self.order == 3
+        extra = self.q_extra[lo:hi]
+        prev = self.q_extra[lo - 1 : hi - 1] if lo > 0 else np.concatenate(([0.0], extra[:-1]))
+        same = same & (extra == prev)
+        pairs, idx = np.unique(np.vstack([h_rows, extra]), axis=1, return_inverse=True)
+        f, qq = jerk_transition(pairs[0], 1.0)
+        return _Rows(self.y[lo:hi], same, u, f, qq * (q + pairs[1]), idx.reshape(-1), self.dim)
 
     def stride(self, step: int) -> _Setup:
         """Every ``step``-th row, with exact transitions over the merged steps."""
@@ -849,20 +886,32 @@ class _Setup:
                 last = coarse * step - lo  # its last fine row, local
                 w = uf * np.exp(cum[last] - cum[rows - lo])
                 u += np.bincount(coarse, weights=w, minlength=idx.size)[: idx.size]
-        return _Setup(self.time_s[idx], self.y[idx], self.model, None, u, self.order)
+        extra = None
+        if self.q_extra is not None:
+            # the coarse step's extra jerk: the fine steps' mean, weighted by their length
+            fine = np.arange(1, int(idx[-1]) + 1)
+            h = np.diff(self.time_s[: int(idx[-1]) + 1]) / 60.0
+            coarse = (fine + step - 1) // step
+            num = np.bincount(coarse, weights=self.q_extra[fine] * h, minlength=idx.size)
+            den = np.bincount(coarse, weights=h, minlength=idx.size)
+            extra = np.divide(num, den, out=np.zeros(den.size), where=den > 0)[: idx.size]
+        return _Setup(self.time_s[idx], self.y[idx], self.model, None, u, self.order, extra)
 
 
 def _chunks(n: int) -> list[tuple[int, int]]:
     return [(lo, min(lo + CHUNK_ROWS, n)) for lo in range(0, n, CHUNK_ROWS)]
 
 
-def _likelihood(setup: _Setup, q: float, r: float, unit: _Rows | None = None) -> float:
+def _likelihood(
+    setup: _Setup, q: float, r: float, unit: tuple[_Rows, np.ndarray] | None = None
+) -> float:
     """``-2 log L`` of the innovations (the filter only, chunk by chunk). ``unit``: the
-    setup's rows at ``q = 1`` when it is one chunk (every model's ``Q`` is ``q`` times a
-    matrix of the steps alone, so the noise search builds the transitions once)."""
+    setup's rows at ``q = 0`` and their ``Q`` per unit ``q``, when it is one chunk (every
+    model's ``Q`` is linear in ``q``: ``q`` times a matrix of the steps alone, plus the
+    kinks' extra jerk; so the noise search builds the transitions once)."""
     carry = setup.prior()
     if unit is not None:
-        rows = dataclasses.replace(unit, q=q * unit.q)
+        rows = dataclasses.replace(unit[0], q=unit[0].q + q * unit[1])
         return _forward(carry, rows, r, offset=0, store=False, fast=True).m2ll
     m2ll = 0.0
     for lo, hi in _chunks(setup.n):
@@ -919,6 +968,107 @@ def _smooth(setup: _Setup, q: float, r: float, keep: np.ndarray | None, emit, pr
     return m2ll
 
 
+def smoother_scale_min(time_min: np.ndarray, q: float, r: float) -> float:
+    """Time scale of the order-3 kinematic smoother, min: ``(r h / q)^(1/6)`` with ``h``
+    the median step (the steady smoother's bandwidth: ``r h`` is the readings' noise
+    density, ``q`` the jerk's)."""
+    h = float(np.median(np.diff(time_min))) if time_min.size > 1 else 1.0
+    return float((r * h / q) ** (1.0 / 6.0))
+
+
+def detect_kinks(
+    time_min: np.ndarray, a_c_per_min2: np.ndarray, q: float, r: float
+) -> list[tuple[float, float]]:
+    """Kinks of the gradient found in a first pass's smoothed rate ``a`` (order 3).
+
+    ``D(t) = a(t + W) - a(t - W)`` (``W = KINK_WINDOW_IN_L * L``, :func:`smoother_scale_min`;
+    ``a`` held at the log's ends); peaks of ``|D|`` above ``KINK_THRESHOLD_NULL_STD *
+    sqrt(2 W q)``, the largest first, at least ``2 W`` apart. Returns ``(time_min,
+    jump_c_per_min2)`` per kink: its time and ``D`` there (the jump of ``a``).
+    """
+    t = np.asarray(time_min, dtype=float)
+    a = np.asarray(a_c_per_min2, dtype=float)
+    w = KINK_WINDOW_IN_L * smoother_scale_min(t, q, r)
+    limit = KINK_THRESHOLD_NULL_STD * math.sqrt(2.0 * w * q)
+    cand_rows, cand_d = [], []
+    for lo, hi in _chunks(t.size):  # chunked: no extra full-length arrays
+        tc = t[lo:hi]
+        d = np.interp(tc + w, t, a) - np.interp(tc - w, t, a)
+        big = np.flatnonzero(np.abs(d) > limit)
+        cand_rows.append(big + lo)
+        cand_d.append(d[big])
+    rows, jumps = np.concatenate(cand_rows), np.concatenate(cand_d)
+    t_cand = t[rows]
+    taken = np.zeros(rows.size, dtype=bool)
+    kinks = []
+    for j in np.argsort(-np.abs(jumps), kind="stable"):
+        if taken[j]:
+            continue
+        tk = float(t_cand[j])
+        kinks.append((tk, float(jumps[j])))
+        taken[np.searchsorted(t_cand, tk - 2.0 * w) : np.searchsorted(t_cand, tk + 2.0 * w)] = True
+    return kinks
+
+
+def kink_q_extra(
+    time_min: np.ndarray, kinks: list[tuple[float, float]], q: float, r: float
+) -> np.ndarray:
+    """Per row, the extra jerk density over the step into it, (degC/min^3)^2/min: at each
+    kink ``jump^2 / (2 S)`` on the steps that cover ``+- S`` around it, ``S =
+    KINK_SPREAD_IN_L * L`` (white jerk of total variance ``jump^2`` spread over ``2 S``:
+    ``a`` may jump by about ``jump`` anywhere in there); 0 elsewhere."""
+    t = np.asarray(time_min, dtype=float)
+    spread = KINK_SPREAD_IN_L * smoother_scale_min(t, q, r)
+    extra = np.zeros(t.size)
+    for tk, jump in kinks:
+        lo, hi = np.searchsorted(t, tk - spread, side="right"), np.searchsorted(t, tk + spread)
+        extra[lo : hi + 1] += jump * jump / (2.0 * spread)
+    return extra
+
+
+def _kink_passes(
+    setup: _Setup, noise: NoiseLevels, refit: bool, rate, emit, progress
+) -> tuple[list[tuple[float, float]], float | None]:
+    """Smooth again with the gradient's rate free to jump at the kinks (order 3).
+
+    ``rate``: the first pass's smoothed ``a`` on every row (overwritten by each pass);
+    ``emit`` gets every row of each pass. Kinks are found in ``rate``
+    (:func:`detect_kinks`) and given their jump's variance (:func:`kink_q_extra`); ``q``
+    is fitted again by ML when it was fitted (``refit``; ``r`` kept), and the new smoothed
+    ``a`` searched for kinks at least ``2 W`` from those found, up to ``KINK_ROUNDS``
+    passes. Returns the kinks of the last pass and its ``q`` (None: no kink, no pass).
+    """
+    time_min = setup.time_s / 60.0
+    q_now = noise.q
+    kinks = detect_kinks(time_min, rate, q_now, noise.r)
+    if not kinks:
+        return [], None
+    relay = None if progress is None else _relay(progress, "kinks: ")
+    for round_ in range(KINK_ROUNDS):
+        second = dataclasses.replace(setup, q_extra=kink_q_extra(time_min, kinks, q_now, noise.r))
+        if refit:
+            q_now = _fit_noise(second, None, noise.r, noise.quant_c, relay).q
+        _smooth(second, q_now, noise.r, None, emit, relay)
+        if round_ == KINK_ROUNDS - 1:
+            break
+        w = KINK_WINDOW_IN_L * smoother_scale_min(time_min, q_now, noise.r)
+        found = np.array([k[0] for k in kinks])
+        more = [
+            k
+            for k in detect_kinks(time_min, rate, q_now, noise.r)
+            if np.min(np.abs(found - k[0])) >= 2.0 * w
+        ]
+        if not more:
+            break
+        kinks = sorted(kinks + more)
+    return kinks, q_now
+
+
+def _relay(progress: Progress, prefix: str) -> Progress:
+    """``progress`` with ``prefix`` before each stage name."""
+    return lambda stage, done, total: progress(prefix + stage, done, total)
+
+
 def _kept(keep: np.ndarray | None, lo: int, hi: int) -> np.ndarray | slice:
     """Local indices (within rows ``lo..hi-1``) of the kept rows; a slice when all are."""
     if keep is None:
@@ -964,7 +1114,10 @@ def _fit_noise(
     coarse = setup.stride(step)
     if int(np.isfinite(coarse.y).sum()) < max(20, N_DIFFUSE + 3):
         coarse = setup
-    unit = coarse.rows(0, coarse.n, 1.0) if coarse.n <= CHUNK_ROWS else None
+    unit = None
+    if coarse.n <= CHUNK_ROWS:
+        at_zero, at_one = coarse.rows(0, coarse.n, 0.0), coarse.rows(0, coarse.n, 1.0)
+        unit = (at_zero, at_one.q - at_zero.q)
     # starting point: white noise dominates second differences, var(d2 y) ~ 6 r
     var_d2, n_d2 = _second_difference_var(setup.y)
     r_start = max(var_d2 / 6.0, 1e-8) if n_d2 > 1 else 1e-4
@@ -1051,6 +1204,15 @@ class GradientEstimate:
         The decimation: one row every ``every_s`` seconds (None: every log row).
     order : int or None
         The kinematic model's order (2 or 3; None for the model-based variant).
+    kink_times_min, kink_jumps_c_per_min2 : tuple of float
+        Order 3: the kinks found (times from the log's time zero, min) and the jump of the
+        gradient's rate ``dg/dt`` at each, degC/min^2; the states, ``t_std_c`` and
+        ``g_std_c_per_min`` come from a pass in which that rate may jump there (see
+        :func:`detect_kinks`). Empty: no kink, the states are the stationary model's.
+    q_kinks : float or None
+        The jerk density of that pass, (degC/min^3)^2/min (fitted again by ML when ``q``
+        was fitted); ``noise``, the innovations and the likelihood stay the stationary
+        model's. None when no kink was found.
     """
 
     time_s: np.ndarray
@@ -1066,6 +1228,9 @@ class GradientEstimate:
     params: ThermalParams | None = None
     every_s: float | None = None
     order: int | None = None
+    kink_times_min: tuple[float, ...] = ()
+    kink_jumps_c_per_min2: tuple[float, ...] = ()
+    q_kinks: float | None = None
 
     @property
     def q(self) -> float:
@@ -1114,6 +1279,9 @@ class GradientEstimate:
             params=self.params,
             every_s=self.every_s,
             order=self.order,
+            kink_times_min=self.kink_times_min,
+            kink_jumps_c_per_min2=self.kink_jumps_c_per_min2,
+            q_kinks=self.q_kinks,
         )
 
     def to_frame(self) -> pd.DataFrame:
@@ -1136,12 +1304,18 @@ class GradientEstimate:
         every = "" if self.every_s is None else f"; one row every {self.every_s:g} s"
         name = self.method if self.order is None else f"{self.method} (order {self.order})"
         q_unit = "(°C/min³)²/min" if self.order == 3 else "(°C/min²)²/min"
+        kinks = ""
+        if self.q_kinks is not None:
+            kinks = (
+                f"; {len(self.kink_times_min)} kink(s) of the gradient (rate changes), "
+                f"smoothed with q = {self.q_kinks:.3g} and the rate free to jump there"
+            )
         return (
             f"{name} Kalman smoother: q = {self.q:.3g} {q_unit}, "
             f"r = {self.r:.3g} °C² (σ {math.sqrt(self.r):.3g} °C; quantisation "
             f"{self.noise.quant_c:g} °C; fitted by ML: {fitted}); median gradient std "
             f"{np.nanmedian(self.g_std_c_per_min):.3g} °C/min; normalised innovations "
-            f"std {np.std(z):.2f} (1 if consistent){every}"
+            f"std {np.std(z):.2f} (1 if consistent){kinks}{every}"
         )
 
 
@@ -1195,8 +1369,10 @@ def _estimate(
     noise = _fit_noise(setup, q, r, _resolve_quant(log, quant_c), progress)
     n_out = setup.n if keep is None else keep.size
     cols = {n: np.empty(n_out) for n in ("t", "t_std", "g", "g_std", "innov", "innov_std")}
+    kinked = setup.model is None and setup.dim == 3
+    rate = np.empty(setup.n) if kinked else None  # first pass: smoothed a on every row
 
-    def emit(rows, sm, innov, svar):
+    def emit(rows, sm, innov, svar, states=True):
         # rows: global rows (a slice when every row is kept); i: their output positions
         i = rows if keep is None else np.searchsorted(keep, rows)
         # sm rows: x1, x2, x3, p11, p12, p13, p22, p23, p33
@@ -1205,10 +1381,31 @@ def _estimate(
         cols["t_std"][i] = np.sqrt(np.maximum(sm[3], 0.0))
         cols["g"][i] = g
         cols["g_std"][i] = np.sqrt(np.maximum(g_var, 0.0))
-        cols["innov"][i] = innov
-        cols["innov_std"][i] = np.sqrt(svar)
+        if states:
+            cols["innov"][i] = innov
+            cols["innov_std"][i] = np.sqrt(svar)
 
-    m2ll = _smooth(setup, noise.q, noise.r, keep, emit, progress)
+    def emit_all(rows, sm, innov, svar, states=True):
+        # every row (keep=None): a on all of them, the output on the kept ones
+        assert rate is not None and isinstance(rows, slice)
+        rate[rows] = sm[2]
+        sel = _kept(keep, rows.start, rows.stop)
+        emit(_global(sel, rows.start), sm[:, sel], innov[sel], svar[sel], states)
+
+    kinks: list[tuple[float, float]] = []
+    q_kinks = None
+    if not kinked:
+        m2ll = _smooth(setup, noise.q, noise.r, keep, emit, progress)
+    else:
+        # the innovations and -2 log L stay the first pass's (the stationary model at the
+        # fitted q, r); the passes with the jerk free to jump at the kinks give the states
+        m2ll = _smooth(setup, noise.q, noise.r, None, emit_all, progress)
+        assert rate is not None
+
+        def emit_states(rows, sm, innov, svar):
+            emit_all(rows, sm, innov, svar, states=False)
+
+        kinks, q_kinks = _kink_passes(setup, noise, q is None, rate, emit_states, progress)
     return GradientEstimate(
         time_s=log.time_s if keep is None else log.time_s[keep],
         t_est_c=cols["t"],
@@ -1223,6 +1420,9 @@ def _estimate(
         params=params,
         every_s=None if every_s is None else float(every_s),
         order=setup.order if setup.model is None else None,
+        kink_times_min=tuple(k[0] for k in kinks),
+        kink_jumps_c_per_min2=tuple(k[1] for k in kinks),
+        q_kinks=q_kinks,
     )
 
 

@@ -217,7 +217,9 @@ def test_model_based_beats_kinematic_with_right_model(synth10):
 
 
 def test_model_based_with_wrong_model_falls_back_on_the_correction(synth10):
-    """tau 25 % too small: the correction d takes up the error, estimate stays usable."""
+    """tau 25 % too small: the correction d takes up the error, estimate stays usable (within
+    the 0.01 degC/min acceptance with margin; it was 1.5x the kinematic error, which has
+    since halved with the kinks modelled)."""
     log = log_from_frame(synth10)
     truth = synth10["g_true_c_per_min"].to_numpy()
     right = estimate_gradient_model(log)
@@ -225,12 +227,14 @@ def test_model_based_with_wrong_model_falls_back_on_the_correction(synth10):
     kin = estimate_gradient(log)
     assert wrong.q > 100 * right.q  # the fit notices the mismatch
     assert wrong.log_likelihood < right.log_likelihood
-    assert _rms(wrong.g_est_c_per_min - truth) < 1.5 * _rms(kin.g_est_c_per_min - truth)
+    assert _rms(wrong.g_est_c_per_min - truth) < 0.005
+    assert _rms(wrong.g_est_c_per_min - truth) < 2.5 * _rms(kin.g_est_c_per_min - truth)
 
 
 @pytest.mark.parametrize(("order", "nan_growth"), [(2, 1.1), (3, 1.01)])
 def test_nan_rows_and_gaps_keep_every_row(baseline, order, nan_growth):
-    """(Order 3's gradient is smooth, so two minutes without readings widen its band less.)"""
+    """(Order 3's gradient is smooth, so two minutes without readings widen its band less;
+    with its long smoother, most at the span's edges: the slope across it is known.)"""
     df = synth_log(baseline, sample_s=10.0, seed=5)
     df.loc[1000:1011, "t_int_c"] = np.nan  # two minutes without readings
     df = df.drop(index=range(2000, 2090)).reset_index(drop=True)  # 15 min gap
@@ -242,7 +246,7 @@ def test_nan_rows_and_gaps_keep_every_row(baseline, order, nan_growth):
     assert np.isnan(est.innovation_c[1000:1012]).all()
     # uncertainty grows inside the NaN span and across the gap
     std = est.g_std_c_per_min
-    assert std[1006] > nan_growth * std[970]
+    assert np.max(std[996:1016]) > nan_growth * std[970]
     i_gap = int(np.searchsorted(log.time_s, log.gaps[0][0]))
     assert std[i_gap] > 1.5 * np.median(std)
     truth = df["g_true_c_per_min"].to_numpy()
