@@ -130,3 +130,60 @@ def test_kinematic_sigma_on_a_real_programme():
     z2 = np.concatenate(z[2])
     assert 0.3 <= np.std(z2) <= 0.7
     assert np.mean(np.abs(z2) <= 2.0) >= 0.99
+
+
+def kinked_lag_log(seed, sample_s, noise_c, quant_c=0.01, n_segments=12):
+    """A random programme (segments 10-60 min, rates in [-1, 3] degC/min) through the
+    exact first-order lag, in closed form per segment (``Tk = Tk0 + U s``: ``T = Tp + (T0 -
+    Tp0) e^(-s/tau)``, ``Tp = Tk + dT0 - U tau``), not schedsyn's simulator. The gradient
+    has a kink (its rate jumps by dU/tau) at every rate change. Returns (log frame, true g,
+    times in min, rate change times in min)."""
+    rng = np.random.default_rng(seed)
+    durs = rng.uniform(10.0, 60.0, n_segments)
+    heat = rng.random(n_segments) < 0.5
+    rates = np.where(heat, rng.uniform(0.2, 3.0, n_segments), -rng.uniform(0.2, 1.0, n_segments))
+    tau_min, dt0_c = rng.uniform(25.0, 60.0), rng.uniform(0.0, 5.0)
+    t = np.arange(0.0, durs.sum(), sample_s / 60.0)
+    temp, g = np.empty(t.size), np.empty(t.size)
+    tk, dev, start = 20.0, 20.0 + dt0_c, 0.0
+    for d, u in zip(durs, rates, strict=True):
+        if not -50.0 <= tk + u * d <= 70.0:  # turn back towards the middle
+            u = -u / 3.0 if u > 0 else -3.0 * u
+        sel = (t >= start) & (t < start + d)
+        off = dev - (tk + dt0_c - u * tau_min)
+        decay = np.exp(-(t[sel] - start) / tau_min)
+        temp[sel] = tk + u * (t[sel] - start) + dt0_c - u * tau_min + off * decay
+        g[sel] = u - off * decay / tau_min
+        dev = tk + u * d + dt0_c - u * tau_min + off * np.exp(-d / tau_min)
+        tk, start = tk + u * d, start + d
+    y = quant_c * np.round((temp + noise_c * rng.standard_normal(t.size)) / quant_c)
+    return pd.DataFrame({"time_s": 60.0 * t, "t_int_c": y}), g, t, np.cumsum(durs)[:-1]
+
+
+def test_kinematic_sigma_holds_at_rate_changes():
+    """At a rate change the gradient bends (its rate jumps by dU/tau); one stationary jerk
+    density cannot follow that, and the order-3 smoother used to round the kink with a bias
+    its sigma left out: within 2.5 min of a change 82 % of the errors were inside 2 sigma
+    (RMS z 1.9). The kinks are now found and the rate may jump there; the band must hold
+    at the changes without being loose elsewhere."""
+    z = {"core": [], "start": [], "else": []}
+    err = []
+    for seed, (sample_s, noise_c) in enumerate(
+        [(10.0, 0.02), (30.0, 0.01), (5.0, 0.03), (20.0, 0.01)]
+    ):
+        frame, g, t, changes = kinked_lag_log(seed, sample_s, noise_c)
+        est = estimate_gradient(log_from_frame(frame))
+        zz = (est.g_est_c_per_min - g) / est.g_std_c_per_min
+        core = np.min(np.abs(t[:, None] - changes[None, :]), axis=1) <= 2.5
+        start = t < 15.0
+        z["core"].append(zz[core & ~start])
+        z["start"].append(zz[start])
+        z["else"].append(zz[~core & ~start])
+        err.append(est.g_est_c_per_min - g)
+    within = {k: float(np.mean(np.abs(np.concatenate(v)) <= 2.0)) for k, v in z.items()}
+    rms_z = {k: float(np.sqrt(np.mean(np.square(np.concatenate(v))))) for k, v in z.items()}
+    assert within["core"] >= 0.93, within
+    assert rms_z["core"] <= 1.2, rms_z
+    assert within["start"] >= 0.93 and within["else"] >= 0.95, within
+    assert rms_z["else"] >= 0.6, rms_z  # not bought with a loose band elsewhere
+    assert np.sqrt(np.mean(np.square(np.concatenate(err)))) < 0.0025  # was 0.0035
