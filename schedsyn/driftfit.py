@@ -377,19 +377,18 @@ def noise_fit(
     m2ll = 2.0 * obj + dof * (math.log(2.0 * math.pi) + 1.0)
     # the largest walk the run cannot rule out: where -2 log L has risen by
     # WALK_UPPER_DELTA_M2LL above its minimum (profile likelihood, upper side)
-    target = obj + 0.5 * WALK_UPPER_DELTA_M2LL
-    hi_bound = math.log(10.0) * 6.0
-    upper = math.nan
-    lo_v, hi_v = x_best, x_best
-    while upper and hi_v < hi_bound:
-        hi_v = min(hi_v + math.log(10.0), hi_bound)
-        if profile(hi_v)[0] >= target:
-            break
-        lo_v = hi_v
-    if upper and profile(hi_v)[0] >= target:
-        v_up = brentq(lambda v: profile(v)[0] - target, lo_v, hi_v, xtol=0.02)
-        upper = math.sqrt(math.exp(v_up) * profile(v_up)[1])
-    return NoiseFit(math.sqrt(s2), math.sqrt(math.exp(x_best) * s2), m2ll, n, p, upper)
+    walk_upper = math.nan
+    if upper:
+        target = obj + 0.5 * WALK_UPPER_DELTA_M2LL
+        hi_bound = math.log(10.0) * 6.0
+        lo_v, hi_v, above = x_best, x_best, False
+        while not above and hi_v < hi_bound:  # bracket it, a decade at a time
+            lo_v, hi_v = hi_v, min(hi_v + math.log(10.0), hi_bound)
+            above = profile(hi_v)[0] >= target
+        if above:
+            v_up = brentq(lambda v: profile(v)[0] - target, lo_v, hi_v, xtol=0.02)
+            walk_upper = math.sqrt(math.exp(v_up) * profile(v_up)[1])
+    return NoiseFit(math.sqrt(s2), math.sqrt(math.exp(x_best) * s2), m2ll, n, p, walk_upper)
 
 
 def walk_covariance(time_s: np.ndarray, x: np.ndarray) -> np.ndarray:
