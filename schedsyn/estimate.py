@@ -110,6 +110,8 @@ KINK_SPREAD_IN_L = 1.0
 #: so the smoother is longer and smaller kinks matter) and searches the new smoothed ``a``
 #: for kinks not yet found (a third pass changes the benchmark's coverage by < 1 %).
 KINK_ROUNDS = 2
+#: The smoother's time scale takes the median step of at most this many steps.
+SCALE_SAMPLE_STEPS = 100_000
 
 #: ``progress(stage, done, total)``; stages "noise levels" (evaluations, total 0: open),
 #: "filter" and "smoother" (rows).
@@ -889,12 +891,15 @@ class _Setup:
         extra = None
         if self.q_extra is not None:
             # the coarse step's extra jerk: the fine steps' mean, weighted by their length
-            fine = np.arange(1, int(idx[-1]) + 1)
-            h = np.diff(self.time_s[: int(idx[-1]) + 1]) / 60.0
-            coarse = (fine + step - 1) // step
-            num = np.bincount(coarse, weights=self.q_extra[fine] * h, minlength=idx.size)
-            den = np.bincount(coarse, weights=h, minlength=idx.size)
-            extra = np.divide(num, den, out=np.zeros(den.size), where=den > 0)[: idx.size]
+            # (fine step k ends at row k and belongs to coarse step ceil(k / step)); only
+            # the rows near kinks carry any, so no full-length temporaries are made
+            fine = np.flatnonzero(self.q_extra[1 : int(idx[-1]) + 1]) + 1
+            h = (self.time_s[fine] - self.time_s[fine - 1]) / 60.0
+            num = np.bincount(
+                (fine + step - 1) // step, weights=self.q_extra[fine] * h, minlength=idx.size
+            )[: idx.size]
+            den = np.diff(self.time_s[idx], prepend=self.time_s[0]) / 60.0  # coarse steps
+            extra = np.divide(num, den, out=np.zeros(idx.size), where=den > 0)
         return _Setup(self.time_s[idx], self.y[idx], self.model, None, u, self.order, extra)
 
 
@@ -972,7 +977,13 @@ def smoother_scale_min(time_min: np.ndarray, q: float, r: float) -> float:
     """Time scale of the order-3 kinematic smoother, min: ``(r h / q)^(1/6)`` with ``h``
     the median step (the steady smoother's bandwidth: ``r h`` is the readings' noise
     density, ``q`` the jerk's)."""
-    h = float(np.median(np.diff(time_min))) if time_min.size > 1 else 1.0
+    # the median step over at most SCALE_SAMPLE_STEPS evenly spaced steps (no
+    # full-length temporaries on a long log)
+    n = time_min.size
+    if n < 2:
+        return float((r / q) ** (1.0 / 6.0))
+    k = np.unique(np.linspace(0, n - 2, min(n - 1, SCALE_SAMPLE_STEPS)).astype(np.int64))
+    h = float(np.median(time_min[k + 1] - time_min[k]))
     return float((r * h / q) ** (1.0 / 6.0))
 
 
