@@ -112,6 +112,9 @@ KINK_SPREAD_IN_L = 1.0
 KINK_ROUNDS = 2
 #: The smoother's time scale takes the median step of at most this many steps.
 SCALE_SAMPLE_STEPS = 100_000
+#: The smoothed rate is kept for the kink search at about this many samples per smoother
+#: time scale at least (every row unless the log is sampled far faster than that).
+RATE_SAMPLES_PER_SCALE = 200.0
 
 #: ``progress(stage, done, total)``; stages "noise levels" (evaluations, total 0: open),
 #: "filter" and "smoother" (rows).
@@ -973,33 +976,48 @@ def _smooth(setup: _Setup, q: float, r: float, keep: np.ndarray | None, emit, pr
     return m2ll
 
 
-def smoother_scale_min(time_min: np.ndarray, q: float, r: float) -> float:
+def smoother_scale_min(time_s: np.ndarray, q: float, r: float) -> float:
     """Time scale of the order-3 kinematic smoother, min: ``(r h / q)^(1/6)`` with ``h``
-    the median step (the steady smoother's bandwidth: ``r h`` is the readings' noise
-    density, ``q`` the jerk's)."""
-    # the median step over at most SCALE_SAMPLE_STEPS evenly spaced steps (no
-    # full-length temporaries on a long log)
-    n = time_min.size
+    the median step, min (the steady smoother's bandwidth: ``r h`` is the readings' noise
+    density, ``q`` the jerk's). The median is taken over at most
+    :data:`SCALE_SAMPLE_STEPS` evenly spaced steps (no full-length temporaries)."""
+    n = time_s.size
     if n < 2:
         return float((r / q) ** (1.0 / 6.0))
     k = np.unique(np.linspace(0, n - 2, min(n - 1, SCALE_SAMPLE_STEPS)).astype(np.int64))
-    h = float(np.median(time_min[k + 1] - time_min[k]))
-    return float((r * h / q) ** (1.0 / 6.0))
+    h_min = float(np.median(time_s[k + 1] - time_s[k])) / 60.0
+    return float((r * h_min / q) ** (1.0 / 6.0))
+
+
+def rate_stride(time_s: np.ndarray, q: float, r: float) -> int:
+    """Rows between the samples of the smoothed rate ``a`` kept for :func:`detect_kinks`:
+    about :data:`RATE_SAMPLES_PER_SCALE` per smoother time scale (1 on usual logs; on a
+    log sampled every few ms, thousands: ``a`` is smooth on that scale)."""
+    n = time_s.size
+    if n < 2:
+        return 1
+    step_min = (float(time_s[-1]) - float(time_s[0])) / 60.0 / (n - 1)
+    if not step_min > 0:
+        return 1
+    scale = smoother_scale_min(time_s, q, r)
+    return max(1, int(scale / RATE_SAMPLES_PER_SCALE / step_min))
 
 
 def detect_kinks(
-    time_min: np.ndarray, a_c_per_min2: np.ndarray, q: float, r: float
+    time_min: np.ndarray, a_c_per_min2: np.ndarray, q: float, scale_min: float
 ) -> list[tuple[float, float]]:
-    """Kinks of the gradient found in a first pass's smoothed rate ``a`` (order 3).
+    """Kinks of the gradient found in a pass's smoothed rate ``a`` (order 3).
 
-    ``D(t) = a(t + W) - a(t - W)`` (``W = KINK_WINDOW_IN_L * L``, :func:`smoother_scale_min`;
-    ``a`` held at the log's ends); peaks of ``|D|`` above ``KINK_THRESHOLD_NULL_STD *
+    ``time_min``, ``a_c_per_min2``: the rate's samples (every row, or every
+    :func:`rate_stride`-th); ``scale_min``: the smoother's time scale ``L``
+    (:func:`smoother_scale_min`). ``D(t) = a(t + W) - a(t - W)`` (``W = KINK_WINDOW_IN_L *
+    L``; ``a`` held at the log's ends); peaks of ``|D|`` above ``KINK_THRESHOLD_NULL_STD *
     sqrt(2 W q)``, the largest first, at least ``2 W`` apart. Returns ``(time_min,
     jump_c_per_min2)`` per kink: its time and ``D`` there (the jump of ``a``).
     """
     t = np.asarray(time_min, dtype=float)
     a = np.asarray(a_c_per_min2, dtype=float)
-    w = KINK_WINDOW_IN_L * smoother_scale_min(t, q, r)
+    w = KINK_WINDOW_IN_L * scale_min
     limit = KINK_THRESHOLD_NULL_STD * math.sqrt(2.0 * w * q)
     cand_rows, cand_d = [], []
     for lo, hi in _chunks(t.size):  # chunked: no extra full-length arrays
@@ -1022,51 +1040,54 @@ def detect_kinks(
 
 
 def kink_q_extra(
-    time_min: np.ndarray, kinks: list[tuple[float, float]], q: float, r: float
+    time_s: np.ndarray, kinks: list[tuple[float, float]], scale_min: float
 ) -> np.ndarray:
     """Per row, the extra jerk density over the step into it, (degC/min^3)^2/min: at each
     kink ``jump^2 / (2 S)`` on the steps that cover ``+- S`` around it, ``S =
-    KINK_SPREAD_IN_L * L`` (white jerk of total variance ``jump^2`` spread over ``2 S``:
-    ``a`` may jump by about ``jump`` anywhere in there); 0 elsewhere."""
-    t = np.asarray(time_min, dtype=float)
-    spread = KINK_SPREAD_IN_L * smoother_scale_min(t, q, r)
+    KINK_SPREAD_IN_L * L`` (``L = scale_min``; white jerk of total variance ``jump^2``
+    spread over ``2 S``: ``a`` may jump by about ``jump`` anywhere in there); 0 elsewhere."""
+    t = np.asarray(time_s, dtype=float)
+    spread = KINK_SPREAD_IN_L * scale_min
     extra = np.zeros(t.size)
     for tk, jump in kinks:
-        lo, hi = np.searchsorted(t, tk - spread, side="right"), np.searchsorted(t, tk + spread)
+        lo = np.searchsorted(t, (tk - spread) * 60.0, side="right")
+        hi = np.searchsorted(t, (tk + spread) * 60.0)
         extra[lo : hi + 1] += jump * jump / (2.0 * spread)
     return extra
 
 
 def _kink_passes(
-    setup: _Setup, noise: NoiseLevels, refit: bool, rate, emit, progress
+    setup: _Setup, noise: NoiseLevels, refit: bool, rate, every: int, emit, progress
 ) -> tuple[list[tuple[float, float]], float | None]:
     """Smooth again with the gradient's rate free to jump at the kinks (order 3).
 
-    ``rate``: the first pass's smoothed ``a`` on every row (overwritten by each pass);
-    ``emit`` gets every row of each pass. Kinks are found in ``rate``
+    ``rate``: the first pass's smoothed ``a`` on every ``every``-th row (overwritten by
+    each pass); ``emit`` gets every row of each pass. Kinks are found in ``rate``
     (:func:`detect_kinks`) and given their jump's variance (:func:`kink_q_extra`); ``q``
     is fitted again by ML when it was fitted (``refit``; ``r`` kept), and the new smoothed
     ``a`` searched for kinks at least ``2 W`` from those found, up to ``KINK_ROUNDS``
     passes. Returns the kinks of the last pass and its ``q`` (None: no kink, no pass).
     """
-    time_min = setup.time_s / 60.0
+    rate_t_min = setup.time_s[::every] / 60.0
     q_now = noise.q
-    kinks = detect_kinks(time_min, rate, q_now, noise.r)
+    scale = smoother_scale_min(setup.time_s, q_now, noise.r)
+    kinks = detect_kinks(rate_t_min, rate, q_now, scale)
     if not kinks:
         return [], None
     relay = None if progress is None else _relay(progress, "kinks: ")
     for round_ in range(KINK_ROUNDS):
-        second = dataclasses.replace(setup, q_extra=kink_q_extra(time_min, kinks, q_now, noise.r))
+        second = dataclasses.replace(setup, q_extra=kink_q_extra(setup.time_s, kinks, scale))
         if refit:
             q_now = _fit_noise(second, None, noise.r, noise.quant_c, relay).q
         _smooth(second, q_now, noise.r, None, emit, relay)
         if round_ == KINK_ROUNDS - 1:
             break
-        w = KINK_WINDOW_IN_L * smoother_scale_min(time_min, q_now, noise.r)
+        scale = smoother_scale_min(setup.time_s, q_now, noise.r)
+        w = KINK_WINDOW_IN_L * scale
         found = np.array([k[0] for k in kinks])
         more = [
             k
-            for k in detect_kinks(time_min, rate, q_now, noise.r)
+            for k in detect_kinks(rate_t_min, rate, q_now, scale)
             if np.min(np.abs(found - k[0])) >= 2.0 * w
         ]
         if not more:
@@ -1381,7 +1402,9 @@ def _estimate(
     n_out = setup.n if keep is None else keep.size
     cols = {n: np.empty(n_out) for n in ("t", "t_std", "g", "g_std", "innov", "innov_std")}
     kinked = setup.model is None and setup.dim == 3
-    rate = np.empty(setup.n) if kinked else None  # first pass: smoothed a on every row
+    # first pass: the smoothed a on every rate_every-th row (every row on usual logs)
+    rate_every = rate_stride(setup.time_s, noise.q, noise.r) if kinked else 1
+    rate = np.empty(-(-setup.n // rate_every)) if kinked else None
 
     def emit(rows, sm, innov, svar, states=True):
         # rows: global rows (a slice when every row is kept); i: their output positions
@@ -1399,7 +1422,10 @@ def _estimate(
     def emit_all(rows, sm, innov, svar, states=True):
         # every row (keep=None): a on all of them, the output on the kept ones
         assert rate is not None and isinstance(rows, slice)
-        rate[rows] = sm[2]
+        first = -(-rows.start // rate_every) * rate_every  # the chunk's first kept row
+        rate[first // rate_every : -(-rows.stop // rate_every)] = sm[2][
+            first - rows.start :: rate_every
+        ]
         sel = _kept(keep, rows.start, rows.stop)
         emit(_global(sel, rows.start), sm[:, sel], innov[sel], svar[sel], states)
 
@@ -1416,7 +1442,9 @@ def _estimate(
         def emit_states(rows, sm, innov, svar):
             emit_all(rows, sm, innov, svar, states=False)
 
-        kinks, q_kinks = _kink_passes(setup, noise, q is None, rate, emit_states, progress)
+        kinks, q_kinks = _kink_passes(
+            setup, noise, q is None, rate, rate_every, emit_states, progress
+        )
     return GradientEstimate(
         time_s=log.time_s if keep is None else log.time_s[keep],
         t_est_c=cols["t"],
