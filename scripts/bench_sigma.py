@@ -21,7 +21,11 @@ change on either side, where the smoother's bias at a kink is largest). Per wind
 coverage of +-2 sigma (share of |e| <= 2 sigma, about 95 % when sigma is honest), RMS of
 ``z = e / sigma`` (1 when honest), the largest |z|, the RMS error and the median sigma.
 
+Estimators: kinematic order 3 and 2, and the model-based one with the right model and with
+a wrong one (tau 15 % long, dT0 1 degC low, as users often have).
+
 Run: python scripts/bench_sigma.py [--cases 40] [--seed 0] [--save out/sigma.npz]
+     [--estimators "model-based,model-based (wrong model)"]
      python scripts/bench_sigma.py --compare OLD.npz NEW.npz
 ``--save`` keeps every row's (window, error, sigma) per estimator; ``--compare`` prints the
 coverage of both, the median sigma ratio new/old per window and the RMS errors.
@@ -48,7 +52,10 @@ WINDOWS = ("start", "change", "elsewhere")
 #: The smoother's bias is largest within a few minutes of a kink, on both sides; that core
 #: is reported too (its rows also count in one of the three windows).
 KINK_CORE_MIN = 2.5
-ESTIMATORS = ("kinematic order 3", "kinematic order 2", "model-based")
+ESTIMATORS = ("kinematic order 3", "kinematic order 2", "model-based", "model-based (wrong model)")
+#: The wrong model users often have: tau 15 % long, dT0 1 degC low.
+WRONG_TAU_FACTOR = 1.15
+WRONG_DT0_OFFSET_C = -1.0
 
 
 # -- truth ----------------------------------------------------------------------------------
@@ -200,22 +207,30 @@ def cases(n_random, seed):
 
 
 # -- evaluation -----------------------------------------------------------------------------
-def run(n_random, seed):
+def _estimate(name, log_kin, log_mod, params, wrong):
     from schedsyn.estimate import estimate_gradient, estimate_gradient_model
+
+    if name == "kinematic order 3":
+        return estimate_gradient(log_kin)
+    if name == "kinematic order 2":
+        return estimate_gradient(log_kin, order=2)
+    return estimate_gradient_model(log_mod, params if name == "model-based" else wrong)
+
+
+def run(n_random, seed, estimators=ESTIMATORS):
     from schedsyn.logs import log_from_frame
     from schedsyn.params import ThermalParams
 
-    rows = {e: {"window": [], "err": [], "std": [], "case": []} for e in ESTIMATORS}
+    rows = {e: {"window": [], "err": [], "std": [], "case": []} for e in estimators}
     metas = []
     for ci, (frame, g, window, meta) in enumerate(cases(n_random, seed)):
         log_kin = log_from_frame(frame[["time_s", "t_int_c"]], source=meta["name"])
         log_mod = log_from_frame(frame, source=meta["name"])
         params = ThermalParams(tau_s=meta["tau_s"], dt0_c=meta["dt0_c"])
-        ests = {
-            "kinematic order 3": estimate_gradient(log_kin),
-            "kinematic order 2": estimate_gradient(log_kin, order=2),
-            "model-based": estimate_gradient_model(log_mod, params),
-        }
+        wrong = ThermalParams(
+            tau_s=meta["tau_s"] * WRONG_TAU_FACTOR, dt0_c=meta["dt0_c"] + WRONG_DT0_OFFSET_C
+        )
+        ests = {name: _estimate(name, log_kin, log_mod, params, wrong) for name in estimators}
         for name, est in ests.items():
             r = rows[name]
             r["window"].append(window)
@@ -312,6 +327,11 @@ def main():
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--save", default=None)
     ap.add_argument("--compare", nargs=2, default=None, metavar=("OLD", "NEW"))
+    ap.add_argument(
+        "--estimators",
+        default=",".join(ESTIMATORS),
+        help="comma-separated subset of: " + ", ".join(ESTIMATORS) + " (default: all)",
+    )
     args = ap.parse_args()
     pd.set_option("display.width", 200)
     pd.set_option("display.max_columns", 20)
@@ -319,10 +339,14 @@ def main():
         print(compare(*args.compare).to_string(index=False, float_format="%.4g"))
         return
     print(f"closed-form lag vs solve_ivp: max difference {check_truth_against_ode():.2e}")
-    data, metas = run(args.cases, args.seed)
+    estimators = tuple(e.strip() for e in args.estimators.split(","))
+    unknown = sorted(set(estimators) - set(ESTIMATORS))
+    if unknown:
+        ap.error(f"unknown estimator(s): {unknown}")
+    data, metas = run(args.cases, args.seed, estimators)
     print(f"{len(metas)} logs, {sum(m['rows'] for m in metas)} rows")
     print(table(data).to_string(index=False, float_format="%.4g"))
-    for name in ESTIMATORS:
+    for name in estimators:
         print(f"worst per-log coverage, {name}: {per_case_worst(data, name)}")
     if args.save:
         Path(args.save).parent.mkdir(parents=True, exist_ok=True)
