@@ -141,6 +141,16 @@ def setpoint_programme(time_s: np.ndarray, tk_set_c: np.ndarray, tol_c: float = 
     between two lines' samples (a jump of the setpoint), keep the sampled corners. Time
     zero is the first sample.
     """
+    tb, yb = setpoint_corners(time_s, tk_set_c, tol_c)
+    d = np.diff(tb)
+    return Programme(d, np.diff(yb) / d, float(yb[0]))
+
+
+def setpoint_corners(
+    time_s: np.ndarray, tk_set_c: np.ndarray, tol_c: float = 0.05
+) -> tuple[np.ndarray, np.ndarray]:
+    """Corner times (min from the first sample) and values (degC) of the piecewise-linear
+    setpoint of :func:`setpoint_programme`, the log's ends included."""
     t = (np.asarray(time_s, dtype=float) - float(time_s[0])) / 60.0
     y = np.asarray(tk_set_c, dtype=float)
     keep = np.zeros(t.size, dtype=bool)
@@ -158,9 +168,7 @@ def setpoint_programme(time_s: np.ndarray, tk_set_c: np.ndarray, tol_c: float = 
             stack.append((i, i + k))
             stack.append((i + k, j))
             keep[i + k] = True
-    tb, yb = _refit_corners(t, y, np.flatnonzero(keep))
-    d = np.diff(tb)
-    return Programme(d, np.diff(yb) / d, float(yb[0]))
+    return _refit_corners(t, y, np.flatnonzero(keep))
 
 
 def _refit_corners(t: np.ndarray, y: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
