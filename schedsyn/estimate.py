@@ -19,7 +19,10 @@ what the model misses::
 
     dT/dt = (Tk(t) + dT0 - T)/tau + d,   dd/dt = w(t),   g = (Tk + dT0 - T)/tau + d
 
-with ``Tk`` linear between samples. The model (:class:`schedsyn.model.FirstOrderLag`)
+with ``Tk`` linear between samples, except at the corners of a logged setpoint
+(``tk_set_c``) that fall between two samples: there the step's input is the model's exact
+response to the two ramps meeting at the corner (:func:`setpoint_corners_between_samples`,
+:func:`corner_inputs`). The model (:class:`schedsyn.model.FirstOrderLag`)
 gives its step response ``S(h) = 1 - e``, ``e = exp(-h/tau)``, and its unit-ramp
 response ``R(h) = h - tau S(h)``; exactly::
 
@@ -55,6 +58,7 @@ import pandas as pd
 from scipy.optimize import minimize
 from scipy.signal import lfilter
 
+from .discrepancy import setpoint_corners
 from .errors import LogFormatError, ParameterError
 from .logs import MeasuredLog
 from .model import FirstOrderLag
@@ -115,6 +119,19 @@ SCALE_SAMPLE_STEPS = 100_000
 #: The smoothed rate is kept for the kink search at about this many samples per smoother
 #: time scale at least (every row unless the log is sampled far faster than that).
 RATE_SAMPLES_PER_SCALE = 200.0
+
+#: Setpoint corners (model-based, chamber ``tk_set_c``): the setpoint is taken as
+#: piecewise linear, its corners found as by the diagnosis
+#: (:func:`schedsyn.discrepancy.setpoint_corners`: Douglas-Peucker at this tolerance, so
+#: a setpoint logged to 0.1 degC is not a staircase, then least-squares lines per segment
+#: meeting where they cross). A corner between two samples changes the step's input:
+#: linear interpolation across it misses ``dU h a (1 - a) / 2`` degC min of chamber
+#: (``a``: the corner's place in the step), the device ``dU h^2 a (1 - a) / (2 tau)``
+#: degC, a ~1e-2 degC offset of T after a 3 degC/min change in a 60 s step that only the
+#: readings can undo (~tau later).
+SETPOINT_CORNER_TOL_C = 0.05
+#: A corner closer than this to a sample is on it (the linear input is exact), s.
+SETPOINT_CORNER_ON_SAMPLE_S = 1e-6
 
 #: ``progress(stage, done, total)``; stages "noise levels" (evaluations, total 0: open),
 #: "filter" and "smoother" (rows).
@@ -182,6 +199,91 @@ def lag_input(
     free_t, _ = model.free(h, np.asarray(tk_start_c, dtype=float), 0.0)
     slope = (np.asarray(tk_end_c, dtype=float) - tk_start_c) / h
     return free_t + model.gain * slope * model.ramp(h)
+
+
+def setpoint_corners_between_samples(
+    time_s: np.ndarray, tk_set_c: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Corners of a piecewise-linear setpoint strictly between two samples.
+
+    Returns ``(row, time_s, value_c)`` per corner: the row whose step (from the row
+    before) holds it, its time (s, the log's clock) and the setpoint there (degC); see
+    :data:`SETPOINT_CORNER_TOL_C`. Corners on a sample are left out (linear interpolation
+    is exact there), and so are the log's ends.
+    """
+    t = np.asarray(time_s, dtype=float)
+    empty = (np.zeros(0, dtype=np.intp), np.zeros(0), np.zeros(0))
+    if t.size < 3:
+        return empty
+    tb_min, yb_c = _join_one_step_segments(
+        (t - float(t[0])) / 60.0, *setpoint_corners(t, tk_set_c, SETPOINT_CORNER_TOL_C)
+    )
+    tc_s = float(t[0]) + 60.0 * tb_min[1:-1]
+    vc_c = yb_c[1:-1]
+    row = np.searchsorted(t, tc_s)
+    ok = (row > 0) & (row < t.size)
+    row, tc_s, vc_c = row[ok], tc_s[ok], vc_c[ok]
+    tol = SETPOINT_CORNER_ON_SAMPLE_S
+    inside = (tc_s > t[row - 1] + tol) & (tc_s < t[row] - tol)
+    return row[inside], tc_s[inside], vc_c[inside]
+
+
+def _join_one_step_segments(
+    t_min: np.ndarray, tb_min: np.ndarray, yb_c: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Corners ``(tb, yb)`` with each segment one sample step long replaced by the
+    crossing of its neighbours' lines, when they cross inside it.
+
+    Douglas-Peucker often brackets a rate change between two samples with breakpoints on
+    both (the sample after the corner is off the first line by more than the tolerance);
+    the segment between them has no inner sample to refit, so the diagnosis keeps both.
+    The straight neighbours still fix the corner: where their lines cross.
+    """
+    tb, yb = list(tb_min.tolist()), list(yb_c.tolist())
+    m = 1
+    while m + 2 < len(tb):
+        lo, hi = tb[m], tb[m + 1]
+        between = np.searchsorted(t_min, hi) - np.searchsorted(t_min, lo, side="right")
+        s1 = (yb[m] - yb[m - 1]) / (tb[m] - tb[m - 1])
+        s2 = (yb[m + 2] - yb[m + 1]) / (tb[m + 2] - tb[m + 1])
+        if between == 0 and s1 != s2:
+            # y1 + s1 (t - t1) = y2 + s2 (t - t2)
+            tc = (yb[m + 1] - yb[m] + s1 * tb[m] - s2 * tb[m + 1]) / (s1 - s2)
+            if lo < tc < hi:
+                yc = yb[m] + s1 * (tc - tb[m])
+                tb[m : m + 2], yb[m : m + 2] = [tc], [yc]
+        m += 1
+    return np.array(tb), np.array(yb)
+
+
+def corner_inputs(
+    time_s: np.ndarray,
+    tk_c: np.ndarray,
+    corners: tuple[np.ndarray, np.ndarray, np.ndarray],
+    model: FirstOrderLag,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(rows, u)``: the exact chamber input of each step holding corners.
+
+    ``corners`` as from :func:`setpoint_corners_between_samples`; over a step the chamber
+    runs linearly through the nodes (the samples at its ends, the corners inside) and the
+    inputs of the pieces compose as ``u = e_2 u_1 + u_2`` (``T' = e T + u`` per piece).
+    """
+    row, tc_s, vc_c = corners
+    rows = np.unique(row)
+    u = np.empty(rows.size)
+    for i, k in enumerate(rows.tolist()):
+        sel = row == k
+        t_min = np.concatenate(([time_s[k - 1]], tc_s[sel], [time_s[k]])) / 60.0
+        v_c = np.concatenate(([tk_c[k - 1]], vc_c[sel], [tk_c[k]]))
+        h = np.diff(t_min)
+        e = 1.0 - model.step(h)
+        acc = 0.0
+        for e_j, u_j in zip(
+            e.tolist(), lag_input(h, v_c[:-1], v_c[1:], model).tolist(), strict=True
+        ):
+            acc = e_j * acc + u_j
+        u[i] = acc
+    return rows, u
 
 
 # -- one step of the filter and of the smoother ------------------------------------------
@@ -801,6 +903,9 @@ class _Setup:
     #: per row, extra jerk density over the step into it, (degC/min^3)^2/min (order 3;
     #: None: none): the jumps of the gradient's rate at kinks (:func:`kink_q_extra`)
     q_extra: np.ndarray | None = None
+    #: model-based: the rows whose step holds a setpoint corner and their exact input
+    #: (:func:`corner_inputs`), replacing the linear one; None: Tk linear throughout
+    corner_u: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def n(self) -> int:
@@ -841,6 +946,10 @@ class _Setup:
             u[first:] = lag_input(
                 h[first:], tk[lo - 1 + first : hi - 1], tk[lo + first : hi], self.model
             )
+            if self.corner_u is not None:
+                rows, uc = self.corner_u
+                a, b = np.searchsorted(rows, lo), np.searchsorted(rows, hi)
+                u[rows[a:b] - lo] = uc[a:b]
         return h, same, u
 
     def rows(self, lo: int, hi: int, q: float) -> _Rows:
@@ -1555,7 +1664,11 @@ def estimate_gradient_model(
             f"{rows[0] + 1}); the model needs the chamber temperature on every row"
         )
     model = FirstOrderLag(params)
-    setup = _Setup(log.time_s, np.asarray(log.t_int_c, dtype=float), model, tk)
+    corner_u = None
+    if chamber == "tk_set_c":  # the programme: piecewise linear, corners between samples
+        corners = setpoint_corners_between_samples(log.time_s, tk)
+        corner_u = corner_inputs(log.time_s, tk, corners, model) if corners[0].size else None
+    setup = _Setup(log.time_s, np.asarray(log.t_int_c, dtype=float), model, tk, corner_u=corner_u)
     tau = params.tau_min
 
     def grad(rows, x1, x2, p11, p12, p22):

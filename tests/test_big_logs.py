@@ -68,6 +68,11 @@ def test_chunked_smoother_equals_the_plain_recursions(messy_log, monkeypatch):
     a, b, q11, q12, q22 = lag_transition(h, model, 1e-6)
     tk = messy_log.tk_set_c
     u = np.concatenate(([0.0], lag_input(h[1:], tk[:-1], tk[1:], model)))
+    # the steps holding a setpoint corner: the exact input of the two ramps
+    corners = est_mod.setpoint_corners_between_samples(messy_log.time_s, tk)
+    assert corners[0].size > 0  # the messy log's rate changes fall between samples
+    rows, u_corner = est_mod.corner_inputs(messy_log.time_s, tk, corners, model)
+    u[rows] = u_corner
     y = messy_log.t_int_c
     x0 = (y[np.isfinite(y)][0], 0.0)
     p0 = (est_mod.PRIOR_T_STD_C**2, 0.0, est_mod.PRIOR_G_STD_C_PER_MIN**2)
