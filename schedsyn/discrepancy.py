@@ -138,8 +138,10 @@ def setpoint_programme(time_s: np.ndarray, tk_set_c: np.ndarray, tol_c: float = 
     hold after it a slow ramp within ``tol_c`` of the hold (0.02-0.05 °C over hours, on
     10-s logs), which the diagnosis then read as an effect of the device. Segments with
     fewer than :data:`SETPOINT_REFIT_MIN_SAMPLES` inside, and crossings outside the gap
-    between two lines' samples (a jump of the setpoint), keep the sampled corners. Time
-    zero is the first sample.
+    between two lines' samples (a jump of the setpoint), keep the sampled corners; a
+    segment one sample step long between two refitted ones (a rate change between two
+    samples that Douglas-Peucker bracketed) becomes the point where its neighbours cross,
+    when that lies inside the step. Time zero is the first sample.
     """
     tb, yb = setpoint_corners(time_s, tk_set_c, tol_c)
     d = np.diff(tb)
@@ -168,7 +170,36 @@ def setpoint_corners(
             stack.append((i, i + k))
             stack.append((i + k, j))
             keep[i + k] = True
-    return _refit_corners(t, y, np.flatnonzero(keep))
+    return _join_one_step_segments(t, *_refit_corners(t, y, np.flatnonzero(keep)))
+
+
+def _join_one_step_segments(
+    t_min: np.ndarray, tb_min: np.ndarray, yb_c: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Corners ``(tb, yb)`` with each segment one sample step long replaced by the
+    crossing of its neighbours' lines, when they cross inside it.
+
+    Douglas-Peucker often brackets a rate change between two samples with breakpoints on
+    both (the sample after the corner is off the first line by more than the tolerance);
+    the segment between them has no inner sample to refit, so :func:`_refit_corners`
+    keeps both, and the setpoint cuts the corner over that step. The straight neighbours
+    still fix the corner: where their lines cross.
+    """
+    tb, yb = list(tb_min.tolist()), list(yb_c.tolist())
+    m = 1
+    while m + 2 < len(tb):
+        lo, hi = tb[m], tb[m + 1]
+        between = np.searchsorted(t_min, hi) - np.searchsorted(t_min, lo, side="right")
+        s1 = (yb[m] - yb[m - 1]) / (tb[m] - tb[m - 1])
+        s2 = (yb[m + 2] - yb[m + 1]) / (tb[m + 2] - tb[m + 1])
+        if between == 0 and s1 != s2:
+            # y1 + s1 (t - t1) = y2 + s2 (t - t2)
+            tc = (yb[m + 1] - yb[m] + s1 * tb[m] - s2 * tb[m + 1]) / (s1 - s2)
+            if lo < tc < hi:
+                yc = yb[m] + s1 * (tc - tb[m])
+                tb[m : m + 2], yb[m : m + 2] = [tc], [yc]
+        m += 1
+    return np.array(tb), np.array(yb)
 
 
 def _refit_corners(t: np.ndarray, y: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

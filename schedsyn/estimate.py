@@ -215,9 +215,7 @@ def setpoint_corners_between_samples(
     empty = (np.zeros(0, dtype=np.intp), np.zeros(0), np.zeros(0))
     if t.size < 3:
         return empty
-    tb_min, yb_c = _join_one_step_segments(
-        (t - float(t[0])) / 60.0, *setpoint_corners(t, tk_set_c, SETPOINT_CORNER_TOL_C)
-    )
+    tb_min, yb_c = setpoint_corners(t, tk_set_c, SETPOINT_CORNER_TOL_C)
     tc_s = float(t[0]) + 60.0 * tb_min[1:-1]
     vc_c = yb_c[1:-1]
     row = np.searchsorted(t, tc_s)
@@ -226,34 +224,6 @@ def setpoint_corners_between_samples(
     tol = SETPOINT_CORNER_ON_SAMPLE_S
     inside = (tc_s > t[row - 1] + tol) & (tc_s < t[row] - tol)
     return row[inside], tc_s[inside], vc_c[inside]
-
-
-def _join_one_step_segments(
-    t_min: np.ndarray, tb_min: np.ndarray, yb_c: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Corners ``(tb, yb)`` with each segment one sample step long replaced by the
-    crossing of its neighbours' lines, when they cross inside it.
-
-    Douglas-Peucker often brackets a rate change between two samples with breakpoints on
-    both (the sample after the corner is off the first line by more than the tolerance);
-    the segment between them has no inner sample to refit, so the diagnosis keeps both.
-    The straight neighbours still fix the corner: where their lines cross.
-    """
-    tb, yb = list(tb_min.tolist()), list(yb_c.tolist())
-    m = 1
-    while m + 2 < len(tb):
-        lo, hi = tb[m], tb[m + 1]
-        between = np.searchsorted(t_min, hi) - np.searchsorted(t_min, lo, side="right")
-        s1 = (yb[m] - yb[m - 1]) / (tb[m] - tb[m - 1])
-        s2 = (yb[m + 2] - yb[m + 1]) / (tb[m + 2] - tb[m + 1])
-        if between == 0 and s1 != s2:
-            # y1 + s1 (t - t1) = y2 + s2 (t - t2)
-            tc = (yb[m + 1] - yb[m] + s1 * tb[m] - s2 * tb[m + 1]) / (s1 - s2)
-            if lo < tc < hi:
-                yc = yb[m] + s1 * (tc - tb[m])
-                tb[m : m + 2], yb[m : m + 2] = [tc], [yc]
-        m += 1
-    return np.array(tb), np.array(yb)
 
 
 def corner_inputs(
