@@ -107,6 +107,16 @@ def test_a_nonlinear_model_file_is_refused(tmp_path, capsys):
         (["--working", "-10", "0", "--segment-min", "2.5"], ["segment_min"]),
         (["--working", "-10", "0", "--robust-tau-s", "2600-2200"], ["--robust-tau-s", "LO:HI"]),
         (["--working", "-10", "0", "--robust-dt0-c", "4:2"], ["--robust-dt0-c", "LO must"]),
+        # a box beside the nominal device (tau in minutes) was planned and called complete
+        # while the plan covered nothing at the nominal model
+        (
+            ["--working", "-10", "0", "--robust-tau-s", "40:45", "--robust-dt0-c", "2:4"],
+            ["does not contain the nominal tau 2400 s", "tau is in seconds", "2400:2700"],
+        ),
+        (
+            ["--working", "-10", "0", "--robust-tau-s", "2200:2600", "--robust-dt0-c", "4:5"],
+            ["--robust-dt0-c", "does not contain the nominal dT0 3 °C"],
+        ),
         (["--working", "-10", "0", "--tau-s", "-5"], ["tau_s"]),
         (["--working", "-10", "0", "--chamber-min-c", "30"], ["chamber"]),
         (["--working", "-10", "0", "--model", "/nonexistent/model.json"], ["model file"]),

@@ -334,6 +334,7 @@ def plan_experiment(
         raise ParameterError(
             f"effort_s must be a positive number of seconds or None (no limit), got {effort_s!r}"
         )
+    _check_nominal_in_box(ThermalParams() if params is None else params, robust_tau_s, robust_dt0_c)
     return _plan(
         spec,
         ThermalParams() if params is None else params,
@@ -348,6 +349,39 @@ def plan_experiment(
         effort=_Effort(lp_nonzeros_solved(), effort_s, stop),
         search_stop=stop,
     )
+
+
+#: A device time constant below this is not a gyro in a chamber: the robust box was
+#: likely given in minutes (the refusal says so).
+TAU_MINUTES_HINT_S = 120.0
+
+
+def _check_nominal_in_box(
+    params: ThermalParams,
+    tau_s: tuple[float, float] | None,
+    dt0_c: tuple[float, float] | None,
+) -> None:
+    """Refuse a robust box that does not hold the nominal device: the box is the
+    uncertainty about that device, and a plan for a box beside it was called complete
+    while it covered nothing at the nominal model (tau given in minutes: 40:45)."""
+    for name, rng, value, unit, option in (
+        ("tau", tau_s, params.tau_s, "s", "--robust-tau-s / [robust] tau_s"),
+        ("dT0", dt0_c, params.dt0_c, "°C", "--robust-dt0-c / [robust] dt0_c"),
+    ):
+        if rng is None:
+            continue
+        lo, hi = float(rng[0]), float(rng[1])
+        if lo - 1e-9 <= value <= hi + 1e-9:
+            continue
+        hint = ""
+        if name == "tau" and hi < TAU_MINUTES_HINT_S:
+            hint = f" (tau is in seconds: {lo:g}..{hi:g} min would be {60 * lo:g}:{60 * hi:g})"
+        raise ParameterError(
+            f"the robust box {option} {lo:g}..{hi:g} {unit} does not contain the nominal "
+            f"{name} {value:g} {unit}{hint}; give a box around the device you plan for, or "
+            f"set the nominal inside it (--{'tau-s' if name == 'tau' else 'dt0-c'} or [model] "
+            f"{'tau_s' if name == 'tau' else 'dt0_c'})"
+        )
 
 
 def _no_complete_plan(bound_min: float, limits: Limits) -> str:
