@@ -275,6 +275,9 @@ def test_robust_plan_writes_the_price_of_robustness(
     price = pd.read_csv(out / "price.csv")
     assert price["plan"].tolist() == ["nominal", "robust"]
     robust = price.set_index("plan").loc["robust"]
+    # each row says where its coverage was measured, and both give the nominal point's
+    assert price["coverage_basis"].tolist() == ["nominal", "worst design scenario"]
+    assert robust["coverage_nominal"] == pytest.approx(plan["coverage_nominal"])
     assert robust["duration_min"] == pytest.approx(plan["duration_min"])
     assert bool(robust["complete_over_box"]) and plan["robust_box_check"]["holds"]
     # the robust row's box figures from separate code: the exported table integrated by

@@ -186,9 +186,10 @@ def robustness_price(
 
     Both plans are checked on the same dense grid over the box (:func:`verify_robust`,
     at least 9 x 7 points); one row per plan with its duration, steps, coverage at
-    delta and at 0.1 degC/min (worst design scenario), and over the box the worst
-    coverage, the fewest levels and the share of grid points fully covered. The extra
-    duration of the robust plan is in ``extra_min``.
+    delta and at 0.1 degC/min (``coverage_basis``: the robust plan's worst design
+    scenario, the nominal plan's nominal point), ``coverage_nominal`` (both at the nominal
+    point), and over the box the worst coverage, the fewest levels and the share of grid
+    points fully covered. The extra duration of the robust plan is in ``extra_min``.
     """
     rows = []
     for name, plan in (("nominal", nominal), ("robust", robust)):
@@ -211,6 +212,16 @@ def robustness_price(
                 "steps": plan.steps,
                 "coverage": plan.coverage.coverage,
                 "coverage_delta_0p1": plan.coverage_0p1.coverage,
+                # what the two columns above are: a robust plan's coverage is its worst
+                # design scenario's, a nominal plan's the nominal point's
+                "coverage_basis": (
+                    "worst design scenario" if plan.coverage_nominal is not None else "nominal"
+                ),
+                "coverage_nominal": (
+                    plan.coverage.coverage
+                    if plan.coverage_nominal is None
+                    else plan.coverage_nominal.coverage
+                ),
                 "box_worst_coverage": box["worst"]["coverage"],
                 "box_min_levels": box["min_levels"],
                 "box_full_share": box["full_share"],
