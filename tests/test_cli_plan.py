@@ -270,7 +270,7 @@ def test_robust_plan_writes_the_price_of_robustness(
     plan = json.loads((out / "plan.json").read_text())
     # this box fits: complete, exit code 0
     assert rc == 0 and plan["complete"], plan["notes"]
-    assert plan["robust_box_check"]["grid_points"] == 63
+    assert plan["robust_box_check"]["grid_points"] == 25 * 19
     assert len(plan["robust_scenarios"]) == 7
     price = pd.read_csv(out / "price.csv")
     assert price["plan"].tolist() == ["nominal", "robust"]
