@@ -299,8 +299,11 @@ def noise_fit(
     ``-1/2 [n log sigma^2 + sum_k log f_k]`` with ``sigma^2 = RSS/n``, is maximised over
     ``log lambda`` (bounded scalar search). REML, unlike a fit to the residuals, does not
     lose the part of the random walk the polynomial absorbs; the plain likelihood
-    compares different term sets (:func:`select_terms_bic`). Logs longer than
-    ``max_rows`` samples are strided.
+    compares different term sets (:func:`select_terms`). Logs longer than
+    ``max_rows`` samples are strided. With ``upper`` the result also gives
+    ``walk_upper_dph_per_rt_h``: the K where the criterion's ``-2 log L`` has risen by
+    :data:`WALK_UPPER_DELTA_M2LL` above its best, on the side of larger walks (NaN when
+    that is not reached below ``lambda = 1e6`` per hour).
     """
     n_all = int(np.asarray(drift_dph).size)
     step = max(1, int(math.ceil(n_all / max_rows)))
@@ -385,7 +388,7 @@ def noise_fit(
         while not above and hi_v < hi_bound:  # bracket it, a decade at a time
             lo_v, hi_v = hi_v, min(hi_v + math.log(10.0), hi_bound)
             above = profile(hi_v)[0] >= target
-        if above:
+        if above and math.isfinite(profile(hi_v)[0]):
             v_up = brentq(lambda v: profile(v)[0] - target, lo_v, hi_v, xtol=0.02)
             walk_upper = math.sqrt(math.exp(v_up) * profile(v_up)[1])
     return NoiseFit(math.sqrt(s2), math.sqrt(math.exp(x_best) * s2), m2ll, n, p, walk_upper)
