@@ -117,6 +117,15 @@ def test_a_nonlinear_model_file_is_refused(tmp_path, capsys):
             ["--working", "-10", "0", "--robust-tau-s", "2200:2600", "--robust-dt0-c", "4:5"],
             ["--robust-dt0-c", "does not contain the nominal dT0 3 °C"],
         ),
+        # the box's ends, not its centre (which the user never typed), are named
+        (
+            ["--working", "-10", "0", "--robust-tau-s", "2200:2600", "--robust-dt0-c", "2:4e3"],
+            ["--robust-dt0-c", "2..4000", "got 4000"],
+        ),
+        (
+            ["--working", "-10", "0", "--robust-tau-s=-2600:-2200", "--robust-dt0-c", "2:4"],
+            ["--robust-tau-s", "-2600..-2200", "tau_s"],
+        ),
         (["--working", "-10", "0", "--tau-s", "-5"], ["tau_s"]),
         (["--working", "-10", "0", "--chamber-min-c", "30"], ["chamber"]),
         (["--working", "-10", "0", "--model", "/nonexistent/model.json"], ["model file"]),

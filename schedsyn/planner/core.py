@@ -371,10 +371,15 @@ def _check_nominal_in_box(
         if rng is None:
             continue
         lo, hi = float(rng[0]), float(rng[1])
+        for end in (lo, hi):  # each end is a device: its own limits, named by the option
+            try:
+                dataclasses.replace(params, **{"tau_s" if name == "tau" else "dt0_c": end})
+            except ParameterError as exc:
+                raise ParameterError(f"the robust box {option} {lo:g}..{hi:g}: {exc}") from None
         if lo - 1e-9 <= value <= hi + 1e-9:
             continue
         hint = ""
-        if name == "tau" and hi < TAU_MINUTES_HINT_S:
+        if name == "tau" and 0.0 < hi < TAU_MINUTES_HINT_S:
             hint = f" (tau is in seconds: {lo:g}..{hi:g} min would be {60 * lo:g}:{60 * hi:g})"
         raise ParameterError(
             f"the robust box {option} {lo:g}..{hi:g} {unit} does not contain the nominal "
