@@ -124,7 +124,7 @@ def test_a_nonlinear_model_file_is_refused(tmp_path, capsys):
         ),
         (
             ["--working", "-10", "0", "--robust-tau-s=-2600:-2200", "--robust-dt0-c", "2:4"],
-            ["--robust-tau-s", "-2600..-2200", "tau_s"],
+            ["--robust-tau-s", "-2600..-2200", "tau_s must be > 0"],
         ),
         (["--working", "-10", "0", "--tau-s", "-5"], ["tau_s"]),
         (["--working", "-10", "0", "--chamber-min-c", "30"], ["chamber"]),
