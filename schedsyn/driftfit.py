@@ -384,11 +384,11 @@ def noise_fit(
     if upper:
         target = obj + 0.5 * WALK_UPPER_DELTA_M2LL
         hi_bound = math.log(10.0) * 6.0
-        lo_v, hi_v, above = x_best, x_best, False
-        while not above and hi_v < hi_bound:  # bracket it, a decade at a time
+        lo_v, hi_v, at_hi = x_best, x_best, obj
+        while at_hi < target and hi_v < hi_bound:  # bracket it, a decade at a time
             lo_v, hi_v = hi_v, min(hi_v + math.log(10.0), hi_bound)
-            above = profile(hi_v)[0] >= target
-        if above and math.isfinite(profile(hi_v)[0]):
+            at_hi = profile(hi_v)[0]
+        if target <= at_hi < math.inf:
             v_up = brentq(lambda v: profile(v)[0] - target, lo_v, hi_v, xtol=0.02)
             walk_upper = math.sqrt(math.exp(v_up) * profile(v_up)[1])
     return NoiseFit(math.sqrt(s2), math.sqrt(math.exp(x_best) * s2), m2ll, n, p, walk_upper)
