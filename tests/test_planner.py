@@ -283,6 +283,7 @@ def test_a_nominal_plan_that_holds_on_the_box_spares_the_inner_searches(monkeypa
     assert plan.robust_fallback == "nominal point"
     assert not any(n.startswith("FALLBACK") for n in plan.notes), plan.notes
     assert any("holds at all 475 points" in n for n in plan.notes), plan.notes
+    assert not any("one parameter only" in n for n in plan.notes), plan.notes
     taus, dt0s = np.meshgrid(
         np.linspace(*box["robust_tau_s"], 9), np.linspace(*box["robust_dt0_c"], 7), indexing="ij"
     )
@@ -290,6 +291,21 @@ def test_a_nominal_plan_that_holds_on_the_box_spares_the_inner_searches(monkeypa
     _, temp, grad = ode_trajectories(knots_t, knots_tk, taus.ravel(), dt0s.ravel())
     for i in range(taus.size):
         assert (levels_per_bin(temp[i], grad[i], -10.0, 0.0, 0.05) >= 2).all(), i
+
+
+def test_a_box_over_tau_only_says_dt0_is_taken_as_exactly_nominal():
+    """A box given for tau alone plans for dT0 exactly at its nominal value: legitimate,
+    but a user who meant a box over both (and left out one option) must be told, not left
+    with a plan whose "holds" claim silently covers a zero-width dT0 range (red team)."""
+    spec = ExperimentSpec("H", -10.0, 0.0, -20.0, 10.0, levels_required=2)
+    params = ThermalParams(tau_s=2400.0, dt0_c=2.5)
+    plan = plan_experiment(
+        spec, params, Limits(duration_max_min=120.0), robust_tau_s=(2100.0, 2700.0)
+    )
+    notes = [n for n in plan.notes if "one parameter only" in n]
+    assert len(notes) == 1, plan.notes
+    assert "dT0 is taken as exactly its nominal 2.5 degC" in notes[0]
+    assert "--robust-dt0-c" in notes[0]
 
 
 def test_too_wide_a_robust_box_says_which_part_is_covered(tmp_path):

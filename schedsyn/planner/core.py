@@ -599,6 +599,17 @@ def _plan(
             # the search for the whole box failed, yet the fallback's programme holds on it
             notes = [n for n in notes if not n.startswith("FALLBACK")]
             notes.append(held_note(fallback, box_check))
+        # a box over one parameter leaves the other at its nominal value: say so, so
+        # that a user who meant both (and forgot one option) is not left to guess
+        for rng, name, value, option in (
+            (robust_tau_s, "tau", f"{params.tau_s:g} s", "--robust-tau-s / robust_tau_s"),
+            (robust_dt0_c, "dT0", f"{params.dt0_c:g} degC", "--robust-dt0-c / robust_dt0_c"),
+        ):
+            if rng is None:
+                notes.append(
+                    f"robust box over one parameter only: {name} is taken as exactly its "
+                    f"nominal {value} (give {option} LO:HI to plan for its uncertainty too)"
+                )
     if stats.failed:
         notes.append(
             f"{stats.failed} of {stats.solves} LP solves failed numerically in both solvers "
