@@ -564,6 +564,17 @@ class SweepResult:
             "n_points": best_n,
         }
 
+    def device_excess_c(self, device_min_c: float, device_max_c: float) -> np.ndarray:
+        """``(n_tau, n_dt0)``: how far the internal temperature goes past the device
+        limits at each grid point, degC (0 where it stays within them).
+
+        A plan keeps the device within its limits at the nominal point only; off it the
+        same programme can overshoot (a larger dT0 or a shorter tau follows the chamber
+        further).
+        """
+        over = np.maximum(self.t_max_c - device_max_c, device_min_c - self.t_min_c)
+        return np.maximum(over, 0.0)
+
     def worst(self) -> dict[str, float]:
         """The grid point with the lowest coverage (then fewest levels) at the first delta."""
         cov, lev = self.coverage_grid.ravel(), self.min_levels_grid.ravel()

@@ -485,3 +485,36 @@ def test_replan_adapter_builds_the_paper_spec(monkeypatch):
     )
     assert spec.levels_required == 6 and spec.delta_c_per_min == 0.05
     assert seen["params"] == ThermalParams(tau_s=2100.0, dt0_c=1.0)
+
+
+def test_cli_flags_grid_points_past_the_device_limits(tmp_path, capsys):
+    """A programme that keeps the nominal device within 62 degC can take it past the limit
+    elsewhere in the grid (a larger dT0); sweep must say where and by how much, not only
+    report coverage (red team: 63.9 degC > 62 went unmentioned). The excess per point is
+    re-made by scipy's ODE integration of the typed table (tests/independent.py)."""
+    from independent import chamber_knots, ode_trajectories
+
+    from schedsyn import Programme
+
+    # 20 -> 57 degC at 1 degC/min, hold 300 min (T -> 57 + dT0), back to 20 at -1 degC/min
+    prog = Programme(np.array([37.0, 300.0, 37.0]), np.array([1.0, 0.0, -1.0]), start_c=20.0)
+    steps = prog.to_csv(tmp_path / "hot.csv")
+    out = tmp_path / "sw"
+    args = ["sweep", str(steps), "--region", "40", "50", "--tau-s", "1800:3000:3"]
+    rc = main([*args, "--dt0-c", "0:8:5", "--out", str(out), "--workers", "1", "--no-progress"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    frame = pd.read_csv(out / "sweep.csv")
+    knots_t, knots_tk = chamber_knots(steps)
+    _, temp, _ = ode_trajectories(knots_t, knots_tk, frame["tau_s"].to_numpy(), frame["dt0_c"])
+    want = np.maximum(temp.max(axis=1) - 62.0, 0.0)
+    np.testing.assert_allclose(frame["device_excess_c"], want, atol=0.02)
+    assert (want > 0.05).sum() == 6  # dT0 6 and 8 at every tau (57 + dT0 - 62 > 0)
+    worst = int(np.argmax(want))
+    assert "WARNING: the device goes past its limits [-52, 62] °C at 6 of 15 grid points" in text
+    assert f"dT0 {frame['dt0_c'][worst]:g} °C: {temp[worst].max():.1f} °C > 62" in text
+    # within the limits everywhere: said so, no warning
+    rc = main([*args, "--dt0-c", "0:4:3", "--out", str(tmp_path / "ok"), "--no-progress"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "held at every grid point" in text and "WARNING" not in text

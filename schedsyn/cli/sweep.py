@@ -13,6 +13,8 @@ import argparse
 import importlib.util
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..errors import ParameterError, SchedsynError
 from ..io import write_frame_atomic
 from ..params import Limits, ThermalParams
@@ -243,6 +245,8 @@ def run(args: argparse.Namespace) -> int:
     )
     at_nominal = sweep_fixed(programme, (lo, hi), [nominal.tau_s], [nominal.dt0_c], **kw)
     frame = result.to_frame()
+    excess = result.device_excess_c(limits.device_min_c, limits.device_max_c)
+    frame["device_excess_c"] = excess.ravel()
     write_frame_atomic(out.path("sweep.csv"), frame)
     d0 = result.deltas_c_per_min[0]
     panels = [
@@ -275,6 +279,7 @@ def run(args: argparse.Namespace) -> int:
             f"largest fully covered box: tau {t0:g} .. {t1:g} s x dT0 {c0:g} .. {c1:g} °C "
             f"({box['n_points']} grid points)"
         )
+    lines.append(_device_line(result, excess, limits))
     for j, d in enumerate(result.deltas_c_per_min[1:], start=1):
         cov = result.coverage[:, :, j]
         lines.append(
@@ -284,3 +289,28 @@ def run(args: argparse.Namespace) -> int:
     lines.append(f"wrote {out.target}/sweep.csv, sweep.png")
     _common.say(*lines)
     return 0
+
+
+#: past the device limits by more than this counts (the planner's own tolerance is
+#: finer; this keeps rounding of the step table's 0.1 degC from being reported)
+DEVICE_EXCESS_TOL_C = 0.05
+
+
+def _device_line(result, excess: np.ndarray, limits: Limits) -> str:
+    """One line on the device limits over the grid: held everywhere, or where not."""
+    lo, hi = limits.device_min_c, limits.device_max_c
+    bad = excess > DEVICE_EXCESS_TOL_C
+    if not bad.any():
+        return (
+            f"device limits [{lo:g}, {hi:g}] °C (device_min_c, device_max_c): held at every "
+            "grid point"
+        )
+    i, j = np.unravel_index(int(np.argmax(excess)), excess.shape)
+    t_lo, t_hi = result.t_min_c[i, j], result.t_max_c[i, j]
+    past = f"{t_hi:.1f} °C > {hi:g}" if t_hi - hi >= lo - t_lo else f"{t_lo:.1f} °C < {lo:g}"
+    return (
+        f"WARNING: the device goes past its limits [{lo:g}, {hi:g}] °C at {int(bad.sum())} "
+        f"of {bad.size} grid points (device_excess_c in sweep.csv); worst at tau "
+        f"{result.tau_s_values[i]:g} s, dT0 {result.dt0_c_values[j]:g} °C: {past} "
+        f"(by {excess[i, j]:.1f} °C)"
+    )
