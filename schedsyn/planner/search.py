@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..model import LinearThermalModel
+from ..model import FirstOrderLag, LinearThermalModel
 from ..params import Limits, ThermalParams
 from .bands import (
     BAND_SAFETY_C_PER_MIN,
@@ -281,6 +281,89 @@ class Structure:
     u: np.ndarray
 
 
+#: Slack of :func:`band_out_of_reach`, degC/min: a band is ruled out only when its lower
+#: speed exceeds the chamber's reach by more than this (numerical and rounding room).
+REACH_TOL_C_PER_MIN = 0.002
+
+
+def _first_order_cap(ctx: Context, d: int) -> Callable[[np.ndarray], np.ndarray] | None:
+    """The fastest ``d g`` the chamber limits allow at ``T`` (degC/min, a function of T),
+    or None where no such cap is exact (robust scenarios, an augmented model)."""
+    if ctx.robust:
+        return None
+    scenario = ctx.responses.scenarios[0]
+    if not isinstance(scenario.model, FirstOrderLag):
+        return None
+    p, lim = scenario.params, ctx.limits
+    if d > 0:
+        return lambda t: (lim.chamber_max_c + p.dt0_c - t) / p.tau_min
+    return lambda t: (t - lim.chamber_min_c - p.dt0_c) / p.tau_min
+
+
+def band_out_of_reach(
+    ctx: Context, d: int, band: Band, held_c: tuple[float, float] | None = None
+) -> bool:
+    """Whether no sweep can hold ``band`` pointwise, whatever the chamber does: a
+    necessary condition checked before :func:`place_sweep` scans its starts.
+
+    For the first-order lag ``g = (Tk + dT0 - T) / tau`` holds at every instant, whatever
+    the device's earlier history, and the chamber stays within its limits, so a heating
+    pass at ``T`` is no faster than ``(Tk_max + dT0 - T) / tau`` and a cooling one no
+    faster than ``(T - Tk_min - dT0) / tau``. A window (not pinned) holds ``d g >= lo(T)``
+    at every sample from beyond one extended edge to beyond the other, so some sample lies
+    within one sample's travel of every temperature in between; where the band's lower
+    speed there exceeds the cap even a travel's width on the favourable side, every
+    start fails, and the scan (hundreds of LPs where a chamber floor or ceiling is close)
+    is spared. Only for one first-order model (robust scenarios stray from the band by a
+    slack; an augmented model has no such cap). ``held_c``: the temperatures held
+    pointwise when they are not the whole band (a pinned window: its inner bins).
+    """
+    cap_at = _first_order_cap(ctx, d)
+    if cap_at is None:
+        return False
+    lo_c, hi_c = (band.knots_c[0], band.knots_c[-1]) if held_c is None else held_c
+    inner = [k for k in band.knots_c if lo_c < k < hi_c]
+    temps = np.union1d(np.linspace(lo_c, hi_c, 65), inner)
+    # the most favourable temperature within one sample's travel (the cap grows away
+    # from the limit the chamber presses against) and the least lower speed there
+    travel_c = SAMPLE_MIN * float(np.max(band.hi_c_per_min))
+    far = temps - d * travel_c
+    lo = np.minimum(band.bounds(temps)[0], band.bounds(far)[0])
+    return bool(np.any(lo > cap_at(far) + REACH_TOL_C_PER_MIN))
+
+
+#: Slack of :func:`pins_out_of_reach`, min.
+REACH_TOL_MIN = 0.2
+
+
+def pins_out_of_reach(
+    ctx: Context, d: int, band: Band, spans_min: tuple[float, float, float, float]
+) -> bool:
+    """Whether no pinned sweep in ``band`` can keep its pins, whatever the chamber does.
+
+    Its inner bins are held pointwise (:func:`band_out_of_reach`); each edge bin must be
+    crossed within the most minutes its pins allow (``spans_min[1]`` entry,
+    ``spans_min[3]`` exit, from :func:`pinned_timings`), and no crossing is faster than
+    the chamber's cap allows at every temperature on the way: ``integral dT / cap(T)``.
+    """
+    cap_at = _first_order_cap(ctx, d)
+    if cap_at is None:
+        return False
+    lo, hi, w = ctx.spec.working_lo_c, ctx.spec.working_hi_c, ctx.spec.grid.bin_c
+    if band_out_of_reach(ctx, d, band, (lo + w, hi - w)):
+        return True
+    e_in, e_out = (hi, lo) if d < 0 else (lo, hi)
+    for edge, most_min in ((e_in, spans_min[1]), (e_out - d * w, spans_min[3])):
+        temps = np.linspace(min(edge, edge + d * w), max(edge, edge + d * w), 65)
+        cap = cap_at(temps)
+        if np.any(cap <= 0.0):
+            return True
+        fastest_min = float(np.trapezoid(1.0 / cap, temps))
+        if fastest_min > most_min + REACH_TOL_MIN:
+            return True
+    return False
+
+
 def place_sweep(
     ctx: Context,
     u_fixed: np.ndarray,
@@ -313,11 +396,13 @@ def place_sweep(
     None when the band leaves no room for the pins.
     """
     spec, r = ctx.spec, ctx.responses
+    if not pinned and band_out_of_reach(ctx, d, band):
+        return None
     seg = spec.segment_min
     s_start = r.sample_of(u_fixed.size)
     s_max = r.sample_of(max_seg)
     pin_plan = pinned_timings(spec, band, slow) if pinned else None
-    if pinned and pin_plan is None:
+    if pinned and (pin_plan is None or pins_out_of_reach(ctx, d, band, pin_plan[1])):
         return None
     # piece durations (samples) in travel order, from the band's top speed down; pinned:
     # the samples of the knot crossings after the window start
