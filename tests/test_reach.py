@@ -131,3 +131,31 @@ def test_a_ruled_out_sweep_fails_the_full_scan_too(ruled_out):
             before = ctx.stats.solves
             assert search.place_sweep(*args) is None
             assert ctx.stats.solves - before > 20  # the full scan ran
+
+
+def test_a_pinned_edge_bin_cannot_be_crossed_faster_than_at_the_chamber_floor():
+    """Pinned windows hold their edge bins by crossing times: the exit bin [-48, -47] of
+    a cooling sweep must be crossed within its pins' most minutes. The fastest crossing
+    there is the device's with the chamber at its floor all along (scipy); pins allowing
+    10 % less than that are ruled out, 10 % more are left to the search."""
+    limits = Limits(chamber_min_c=-52.0)
+    ctx = _ctx(NEAR_FLOOR, limits)
+    _, temp, _ = ode_trajectories(
+        np.array([0.0, 600.0]),
+        np.array([-52.0, -52.0]),
+        PARAMS.tau_s,
+        PARAMS.dt0_c,
+        t0_c=-44.0,
+        dt_min=0.01,
+    )
+    entered = np.flatnonzero(temp[0] < -47.0)[0]
+    left = np.flatnonzero(temp[0] < -48.0)[0]
+    fastest_min = 0.01 * (left - entered)
+    band = _flat(-1, 0.01, (-48.25, -44.75))  # slow enough for the inner bins
+    roomy = 1000.0  # the entry bin [-46, -45] is not what is tested
+    assert search.pins_out_of_reach(ctx, -1, band, (0.0, roomy, 0.0, 0.9 * fastest_min))
+    assert not search.pins_out_of_reach(ctx, -1, band, (0.0, roomy, 0.0, 1.1 * fastest_min))
+    # and the entry bin alike: the cooling sweep enters at the top, [-46, -45]
+    entry_min = 0.01 * (np.flatnonzero(temp[0] < -46.0)[0] - np.flatnonzero(temp[0] < -45.0)[0])
+    assert search.pins_out_of_reach(ctx, -1, band, (0.0, 0.9 * entry_min, 0.0, roomy))
+    assert not search.pins_out_of_reach(ctx, -1, band, (0.0, 1.1 * entry_min, 0.0, roomy))
