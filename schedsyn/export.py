@@ -654,6 +654,11 @@ class ControllerExport:
         (sampled every 0.1 min).
     notes : tuple of str
         What the operator must know (chaining, parts, end mode).
+    limit_breaks : tuple of str
+        Limits the exported programme breaks although its step table meets them (the end
+        temperature when the rounded last step cannot reach it within the time limit; the
+        device range, re-simulated, when the rounding takes it past a device limit or
+        further past it than the table does). Reported like lost coverage.
     """
 
     spec: ControllerSpec
@@ -667,6 +672,7 @@ class ControllerExport:
     max_boundary_shift_s: float
     max_chamber_deviation_c: float
     notes: tuple[str, ...]
+    limit_breaks: tuple[str, ...] = ()
 
     @property
     def exported(self) -> Programme:
@@ -685,6 +691,12 @@ class ControllerExport:
         if s is None or e is None:
             return False
         return bool(e.coverage < s.coverage - 1e-12 or np.any(e.levels < s.levels))
+
+    @property
+    def faithful(self) -> bool:
+        """The export covers what its table covers and meets every limit the table meets
+        (the exit code of ``schedsyn export`` is 0 exactly then)."""
+        return not (self.coverage_lost or self.limit_breaks)
 
     def to_frame(self) -> pd.DataFrame:
         """One row per exported step: programme number, step within it, times and
@@ -737,6 +749,7 @@ class ControllerExport:
             "source_min_levels": None if s is None else s.min_levels,
             "export_min_levels": None if e is None else e.min_levels,
             "coverage_lost": self.coverage_lost,
+            "limit_breaks": list(self.limit_breaks),
             "notes": list(self.notes),
         }
 
@@ -777,6 +790,13 @@ class ControllerExport:
                     f"  bins with fewer levels exported ({fewer.size}): {shown}"
                     + (f" and {more} more" if more > 0 else "")
                 )
+        if self.limit_breaks:
+            lines.insert(
+                0,
+                f"*** the {self.spec.title} export breaks limits its step table meets: "
+                "the rounding to the controller's grid could not keep them ***",
+            )
+            lines += [f"  limit broken by the export: {b}" for b in self.limit_breaks]
         lines += [f"  note: {n}" for n in self.notes]
         return lines
 
@@ -803,6 +823,42 @@ def _path_deviation_c(source: Programme, exported: Programme) -> float:
     )
     t = np.union1d(t, edges)
     return float(np.max(np.abs(source.chamber_at(t) - exported.chamber_at(t))))
+
+
+#: Device temperature, degC, by which the exported programme may take the device further
+#: past a device limit than its step table does before that is reported.
+DEVICE_LIMIT_TOL_C = 1e-3
+
+
+def _limit_breaks(
+    source: Programme, exported: Programme, limits: Limits, check: CoverageCheck | None
+) -> tuple[str, ...]:
+    """Limits ``exported`` breaks that ``source`` meets (chamber side: rates, range, start,
+    end, duration; with a ``check``: the simulated device range, where the export goes
+    further past a device limit than the source)."""
+    before = set(source.violations(limits))
+    out = [v for v in exported.violations(limits) if v not in before]
+    if check is not None:
+
+        def device_range(p: Programme) -> tuple[float, float]:
+            t = simulate(p, check.params, dt_min=check.dt_min, t0_c=check.t0_c).t_c
+            return float(np.min(t)), float(np.max(t))
+
+        s_lo, s_hi = device_range(source)
+        e_lo, e_hi = device_range(exported)
+        over_hi = max(s_hi - limits.device_max_c, 0.0)
+        if e_hi - limits.device_max_c > over_hi + DEVICE_LIMIT_TOL_C:
+            out.append(
+                f"the device reaches {e_hi:.3f} °C, above its limit {limits.device_max_c:g} °C "
+                f"(the step table: {s_hi:.3f} °C)"
+            )
+        under_lo = max(limits.device_min_c - s_lo, 0.0)
+        if limits.device_min_c - e_lo > under_lo + DEVICE_LIMIT_TOL_C:
+            out.append(
+                f"the device reaches {e_lo:.3f} °C, below its limit {limits.device_min_c:g} °C "
+                f"(the step table: {s_lo:.3f} °C)"
+            )
+    return tuple(out)
 
 
 def export_programme(
@@ -886,6 +942,7 @@ def export_programme(
         _rounding_shift_s(programme, spec.time_step_min),
         _path_deviation_c(programme, exported),
         tuple(notes),
+        _limit_breaks(programme, exported, limits, check),
     )
     # write the check into the file's header too
     head["check"] = {

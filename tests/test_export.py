@@ -631,3 +631,94 @@ def test_cli_csv_export_is_a_step_table_that_reads_back(tmp_path):
     assert np.array_equal(table.programme.durations_min, src.programme.durations_min)
     assert np.allclose(table.programme.boundary_temps_c, src.programme.boundary_temps_c)
     assert table.meta["controller"] == "csv"
+
+
+# ---------------------------------------------------------------------------------------
+# limits the rounding cannot keep (red team, export)
+# ---------------------------------------------------------------------------------------
+def _espec_path(text: str) -> tuple[np.ndarray, np.ndarray]:
+    """Boundary times (min) and setpoints (degC) of a P-300 export, read from its JSON
+    here (programmes in order, step times h:mm, every step ramping to its setpoint)."""
+    times, temps = [0.0], []
+    for entry in json.loads(text)["programmes"]:
+        prog = entry["program"]
+        if not temps:
+            temps.append(float(prog["tempDetail"]["setpoint"]))
+        for step in prog["steps"]:
+            times.append(times[-1] + 60 * step["time"]["hour"] + step["time"]["minute"])
+            temps.append(float(step["temperature"]["setpoint"]))
+    return np.array(times), np.array(temps)
+
+
+def _ode_device_range_c(times: np.ndarray, temps: np.ndarray, params: ThermalParams):
+    tau = params.tau_s / 60.0
+    sol = solve_ivp(
+        lambda x, y: [(np.interp(x, times, temps) + params.dt0_c - y[0]) / tau],
+        (0.0, float(times[-1])),
+        [20.0],
+        t_eval=np.linspace(0.0, float(times[-1]), 4001),
+        max_step=0.05,
+        rtol=1e-10,
+        atol=1e-10,
+    )
+    return float(sol.y[0].min()), float(sol.y[0].max())
+
+
+def test_an_export_that_cannot_end_at_the_end_temperature_says_so_and_exits_1(tmp_path):
+    """28.5 min to -8.5 degC, a hold to 530.5 min, +3 degC/min back to 20 degC at 540 min
+    (the time limit). On whole minutes the last ramp starts at 531 min and reaches only
+    18.5 degC in 9 min; a tenth minute would pass 540 min. The P-300 file ended at
+    18.5 degC with exit code 0 and only a note (red team); the 1-s F4T grid keeps 20."""
+    prog = Programme(np.array([28.5, 502.0, 9.5]), np.array([-1.0, 0.0, 3.0]), 20.0)
+    lim = Limits()
+    assert prog.violations(lim) == []
+    ex = export_programme(prog, ExportSettings("espec-p300"), limits=lim)
+    times, temps = _espec_path(ex.text)
+    assert times[-1] <= lim.duration_max_min
+    assert abs(temps[-1] - lim.end_c) > lim.end_tol_c  # the file really misses the end
+    assert not ex.faithful and ex.limit_breaks
+    assert f"{temps[-1]:.2f} °C" in ex.limit_breaks[0]
+    assert ex.summary()[0].startswith("*** the ESPEC P-300 export breaks limits")
+    assert json.loads(ex.text)["schedsyn"]["check"]["limit_breaks"] == list(ex.limit_breaks)
+    f4t = export_programme(prog, ExportSettings("watlow-f4t"), limits=lim)
+    assert f4t.faithful and f4t.exported.end_c == pytest.approx(20.0)
+    src = tmp_path / "steps.csv"
+    prog.to_frame().to_csv(src, index=False)
+    args = ["export", str(src), "--region", "-5", "5", "--controller"]
+    rc, text, err = run_cli([*args, "espec-p300", "--out", str(tmp_path / "p.json")])
+    assert rc == 1 and "limit broken by the export" in text and (tmp_path / "p.json").is_file()
+    rc, _, err = run_cli([*args, "watlow-f4t", "--out", str(tmp_path / "f.json")])
+    assert rc == 0, err
+
+
+def test_an_export_that_takes_the_device_past_its_limit_is_reported(monkeypatch):
+    """Plant a rounding that lifts the inner setpoints by 0.5 degC: the device, simulated
+    here with scipy from the file's own path, goes past a device limit the table keeps."""
+    prog = Programme(np.array([40.0, 60.0, 40.0]), np.array([1.0, 0.0, -1.0]), 20.0)
+    params = ThermalParams()
+    edges = np.concatenate(([0.0], np.cumsum(prog.durations_min)))
+    _, src_max = _ode_device_range_c(edges, prog.boundary_temps_c, params)
+    lim = Limits(device_max_c=round(src_max + 0.05, 3))
+    check = CoverageCheck(BinGrid(40.0, 50.0), params)
+    clean = export_programme(prog, ExportSettings("espec-p300"), limits=lim, check=check)
+    assert clean.faithful
+    real = export_mod.quantise
+
+    def lifted(programme, *a, **kw):
+        q = real(programme, *a, **kw)
+        tk = q.boundary_temps_c.copy()
+        tk[1:-1] += 0.5
+        return Programme(q.durations_min, np.diff(tk) / q.durations_min, float(tk[0]))
+
+    monkeypatch.setattr(export_mod, "quantise", lifted)
+    ex = export_programme(prog, ExportSettings("espec-p300"), limits=lim, check=check)
+    times, temps = _espec_path(ex.text)
+    _, exp_max = _ode_device_range_c(times, temps, params)
+    assert exp_max > lim.device_max_c >= src_max
+    assert not ex.coverage_lost and not ex.faithful
+    (line,) = [b for b in ex.limit_breaks if "device reaches" in b]
+    import re
+
+    reached, limit, table = (float(x) for x in re.findall(r"-?\d+\.\d+", line))
+    assert reached == pytest.approx(exp_max, abs=0.01) and limit == lim.device_max_c
+    assert table == pytest.approx(src_max, abs=0.01)

@@ -199,7 +199,7 @@ def run(args: argparse.Namespace) -> int:
     )
     if lost:
         print(
-            f"*** the controller export of {', '.join(lost)} failed or covers LESS than its "
-            "step table (see above)"
+            f"*** the controller export of {', '.join(lost)} failed, covers LESS than its "
+            "step table or breaks a limit the table meets (see above)"
         )
     return 0 if n_bad == 0 and not no_soak and not lost else 1

@@ -232,7 +232,7 @@ def write_plan_deliverables(plan, out: Path, exports=(), sheet=None, inputs=()):
         path = write_export(default_export_path(steps_path, settings.controller), ex, inputs)
         lines += [f"  {ln}" for ln in ex.summary()]
         links.append((settings.controller, path.name))
-        lost = lost or ex.coverage_lost
+        lost = lost or not ex.faithful
         done.append(ex)
     robust = None
     if len(plan.scenarios) > 1:
