@@ -496,7 +496,10 @@ class Programme:
         """Step table as a DataFrame (one row per segment)."""
         tk = self.boundary_temps_c
         d = self.durations_min
-        hhmm = [f"{int(m // 60):02d}:{int(round(m % 60)):02d}" for m in d]
+        # whole minutes first: 59.7 min is 01:00, not 00:60 (the minutes were rounded
+        # after the hours were taken)
+        whole = [int(math.floor(float(m) + 0.5)) for m in d]
+        hhmm = [f"{m // 60:02d}:{m % 60:02d}" for m in whole]
         seg_type = np.where(np.abs(self.rates_c_per_min) < 1e-12, "HOLD", "RAMP")
         return pd.DataFrame(
             {

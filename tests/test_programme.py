@@ -134,3 +134,14 @@ def test_violations_report_end_temperature_and_device():
     prog = Programme([10.0], [1.0])
     v = prog.violations(Limits())
     assert any("ends at 30.00" in s for s in v)
+
+
+def test_duration_hhmm_is_the_duration_in_whole_minutes():
+    """An off-grid duration of 59.7 min was shown as "00:60" and 119.5 min as "01:60"
+    (red team, export): the operator column must read as h:mm with minutes 0..59."""
+    d = np.array([59.7, 119.5, 30.2, 0.4, 61.49])
+    prog = Programme(d, np.zeros(d.size), 20.0)
+    for shown, minutes in zip(prog.to_frame()["duration_hhmm"], d, strict=True):
+        hours, mins = (int(x) for x in shown.split(":"))
+        assert 0 <= mins <= 59
+        assert abs(60 * hours + mins - minutes) <= 0.5
