@@ -5,7 +5,10 @@ rate_c_per_min)``. Its step table has exactly these first columns::
 
     step, start_min, duration_min, tk_start_c, tk_end_c, rate_c_per_min
 
-followed by operator aids: ``duration_hhmm`` and ``segment_type`` (RAMP/HOLD).
+followed by operator aids: ``duration_hhmm`` and ``segment_type`` (RAMP/HOLD). Where a
+table has them they must agree with the numbers (``duration_hhmm`` is ``duration_min``
+to the whole minute, a ``HOLD`` keeps its temperature): a table edited in one place only
+is refused, as the operator would type another programme than the one read.
 
 A table written by schedsyn for a plan starts with its metadata, one comment line per
 key (:class:`StepTableMeta`)::
@@ -668,6 +671,7 @@ def programme_from_frame(
                 f"{source}: step {max(r, 1)}: chamber temperature {temps[r]:g} °C is outside "
                 f"the chamber limits {limits.chamber_min_c:g} .. {limits.chamber_max_c:g} °C"
             )
+    _check_operator_columns(frame, dur, rates, source)
     total = float(dur.sum())
     if total > limits.duration_max_min + 1e-6:
         raise StepTableError(
@@ -675,6 +679,44 @@ def programme_from_frame(
             f"{limits.duration_max_min:g} min; shorten it or raise duration_max_min"
         )
     return Programme(dur, rates, float(temps[0]), meta)
+
+
+_HHMM = re.compile(r"^\s*(\d+):(\d{1,2})(?::(\d{1,2}))?\s*$")
+
+
+def _check_operator_columns(
+    frame: pd.DataFrame, dur: np.ndarray, rates: np.ndarray, source: str
+) -> None:
+    """The operator aids, where present, must say what the numbers say: ``duration_hhmm``
+    is ``duration_min`` to the whole minute and a ``HOLD`` row does not change the
+    temperature. An operator types from them, schedsyn reads the numbers: a table edited
+    in one place only would run another programme than the one checked."""
+    if "duration_hhmm" in frame.columns:
+        for r, v in enumerate(frame["duration_hhmm"]):
+            if v is None or (isinstance(v, float) and math.isnan(v)) or not str(v).strip():
+                continue
+            m = _HHMM.match(str(v))
+            # minutes up to 60: tables written before 0df4213 showed 59.7 min as 00:60
+            if m is None or int(m.group(2)) > 60 or int(m.group(3) or 0) > 59:
+                raise StepTableError(
+                    f"{source}: step {r + 1}: duration_hhmm {v!r} is not h:mm; fix it or "
+                    "delete the column (schedsyn reads duration_min)"
+                )
+            shown = 60 * int(m.group(1)) + int(m.group(2)) + int(m.group(3) or 0) / 60.0
+            if abs(shown - dur[r]) > 0.5 + 1e-6:
+                raise StepTableError(
+                    f"{source}: step {r + 1}: duration_hhmm {str(v).strip()} is {shown:g} min "
+                    f"but duration_min is {dur[r]:g}; make them agree (an operator types "
+                    "h:mm, schedsyn reads duration_min)"
+                )
+    if "segment_type" in frame.columns:
+        for r, v in enumerate(frame["segment_type"]):
+            if str(v).strip().upper() == "HOLD" and abs(rates[r]) > RATE_TOL_C_PER_MIN:
+                raise StepTableError(
+                    f"{source}: step {r + 1}: segment_type HOLD but the temperature changes "
+                    f"at {rates[r]:g} °C/min; make them agree (RAMP, or equal tk_start_c "
+                    "and tk_end_c)"
+                )
 
 
 def read_steps(path: Path | str, limits: Limits | None = None) -> Programme:

@@ -145,3 +145,37 @@ def test_duration_hhmm_is_the_duration_in_whole_minutes():
         hours, mins = (int(x) for x in shown.split(":"))
         assert 0 <= mins <= 59
         assert abs(60 * hours + mins - minutes) <= 0.5
+
+
+@pytest.mark.parametrize(
+    "column, value, match",
+    [
+        ("duration_hhmm", "00:40", r"step 2: duration_hhmm 00:40 is 40 min but duration_min is 30"),
+        ("duration_hhmm", "09:99", r"step 2: duration_hhmm '09:99' is not h:mm"),
+        ("segment_type", "HOLD", r"step 1: segment_type HOLD but the temperature changes"),
+    ],
+)
+def test_operator_columns_that_disagree_with_the_numbers_are_refused(
+    tmp_path, column, value, match
+):
+    """A hand edit of duration_min without duration_hhmm (or the reverse) was read
+    silently from duration_min while the operator types h:mm (red team, export): the
+    two would run different programmes."""
+    prog = Programme([40.0, 30.0, 40.0], [-1.0, 0.0, 1.0])
+    frame = prog.to_frame()
+    # independent of schedsyn: the table as written agrees with itself
+    for hhmm, d in zip(frame["duration_hhmm"], frame["duration_min"], strict=True):
+        h, m = (int(x) for x in hhmm.split(":"))
+        assert 60 * h + m == d
+    row = 0 if column == "segment_type" else 1
+    frame[column] = frame[column].astype(object)
+    frame.loc[row, column] = value
+    path = tmp_path / "edited.csv"
+    frame.to_csv(path, index=False)
+    with pytest.raises(StepTableError, match=match):
+        read_steps(path)
+    # the whole minute shown for an off-grid duration, an h:mm:ss cell and a blank cell pass
+    frame = prog.to_frame()
+    frame["duration_hhmm"] = ["0:40:00", "", "00:40"]
+    frame.to_csv(path, index=False)
+    assert read_steps(path).total_min == pytest.approx(110.0)
