@@ -82,6 +82,11 @@ class ControllerSpec:
         Suffix of the export file (``.json`` or ``.csv``).
     source : str
         Where these figures come from (file and function of the open library).
+    end_segment_s : int
+        Seconds each programme runs after its chamber path at its last setpoint (Binder:
+        the 1-s final segment ``binder.py`` appends). Where they would take the run past
+        ``duration_max_min``, the export takes them out of the last step (if the rate
+        limits allow; else it reports the overrun).
     """
 
     key: str
@@ -96,6 +101,7 @@ class ControllerSpec:
     end_modes: tuple[str, ...]
     file_suffix: str
     source: str
+    end_segment_s: int = 0
 
     @property
     def time_step_min(self) -> float:
@@ -753,6 +759,12 @@ class ControllerExport:
             "notes": list(self.notes),
         }
 
+    def _end_segments_text(self) -> str:
+        n, sec = len(self.decoded.parts), self.spec.end_segment_s
+        if not sec:
+            return ""
+        return f" + {n} end segment(s) of {sec} s = {self.exported.total_min + n * sec / 60:g} min"
+
     def summary(self) -> list[str]:
         """Lines for the operator; a lost coverage says so loudly."""
         parts = self.decoded.parts
@@ -764,7 +776,8 @@ class ControllerExport:
             f"programme, {self.spec.time_step_s} s and {self.spec.temp_step_c:g} °C resolution)",
             f"  rounding: boundaries moved by at most {self.max_boundary_shift_s:.0f} s, chamber "
             f"path by at most {self.max_chamber_deviation_c:.3f} °C; "
-            f"{self.exported.total_min:g} min (source {self.source.total_min:g} min)",
+            f"{self.exported.total_min:g} min{self._end_segments_text()} (source "
+            f"{self.source.total_min:g} min)",
         ]
         if self.source_coverage is not None and self.export_coverage is not None:
             s, e = self.source_coverage, self.export_coverage
@@ -830,14 +843,58 @@ def _path_deviation_c(source: Programme, exported: Programme) -> float:
 DEVICE_LIMIT_TOL_C = 1e-3
 
 
+def _room_for_end_segments(
+    parts: tuple[Programme, ...], spec: ControllerSpec, limits: Limits
+) -> tuple[Programme, ...]:
+    """``parts`` with room for the controller's end segments within ``duration_max_min``.
+
+    Each programme runs ``spec.end_segment_s`` at its last setpoint after its path (Binder:
+    the 1-s final segment). Where that would take the run past the time limit, the last
+    step of the last part is shortened by the overrun (whole time steps): it reaches the
+    same end temperature that much earlier and the end segment holds it. Unchanged where
+    the shorter step would need a rate outside the limits (the duration check reports it).
+    """
+    run_min = sum(p.total_min for p in parts) + len(parts) * spec.end_segment_s / 60.0
+    over_min = run_min - limits.duration_max_min
+    if over_min <= 1e-9:
+        return parts
+    q = spec.time_step_min
+    cut_min = math.ceil(over_min / q - 1e-6) * q
+    last = parts[-1]
+    d = last.durations_min.copy()
+    if d[-1] - cut_min < q - 1e-9:
+        return parts
+    tk = last.boundary_temps_c
+    rate = float(tk[-1] - tk[-2]) / (d[-1] - cut_min)
+    if not limits.rate_min_c_per_min - 1e-9 <= rate <= limits.rate_max_c_per_min + 1e-9:
+        return parts
+    d[-1] -= cut_min
+    rates = last.rates_c_per_min.copy()
+    rates[-1] = rate
+    return (*parts[:-1], Programme(d, rates, last.start_c))
+
+
 def _limit_breaks(
-    source: Programme, exported: Programme, limits: Limits, check: CoverageCheck | None
+    source: Programme,
+    exported: Programme,
+    limits: Limits,
+    check: CoverageCheck | None,
+    end_segments_min: float = 0.0,
 ) -> tuple[str, ...]:
     """Limits ``exported`` breaks that ``source`` meets (chamber side: rates, range, start,
-    end, duration; with a ``check``: the simulated device range, where the export goes
-    further past a device limit than the source)."""
+    end, duration, the latter with the controller's ``end_segments_min``; with a
+    ``check``: the simulated device range, where the export goes further past a device
+    limit than the source)."""
     before = set(source.violations(limits))
     out = [v for v in exported.violations(limits) if v not in before]
+    run_min = exported.total_min + end_segments_min
+    if end_segments_min > 0 and run_min > limits.duration_max_min + 1e-9:
+        out.append(
+            f"the programme runs {run_min:.3f} min with its end segment(s) of "
+            f"{end_segments_min * 60:g} s, longer than the limit "
+            f"{limits.duration_max_min:g} min (the last step cannot be shortened within "
+            "the rate limits)"
+        )
     if check is not None:
 
         def device_range(p: Programme) -> tuple[float, float]:
@@ -910,6 +967,8 @@ def export_programme(
     q = quantise(programme, spec.time_step_min, limits, spec.temp_step_c, spec.max_step_min)
     capacity = None if spec.max_steps is None else spec.max_steps - spec.reserved_steps
     parts = split_parts(q, capacity)
+    if spec.end_segment_s:
+        parts = _room_for_end_segments(parts, spec, limits)
     numbers = tuple(range(settings.first_programme, settings.first_programme + len(parts)))
     last_allowed = None if spec.programmes is None else spec.first_number + spec.programmes - 1
     if last_allowed is not None and numbers[-1] > last_allowed:
@@ -942,7 +1001,7 @@ def export_programme(
         _rounding_shift_s(programme, spec.time_step_min),
         _path_deviation_c(programme, exported),
         tuple(notes),
-        _limit_breaks(programme, exported, limits, check),
+        _limit_breaks(programme, exported, limits, check, len(parts) * spec.end_segment_s / 60.0),
     )
     # write the check into the file's header too
     head["check"] = {

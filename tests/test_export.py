@@ -722,3 +722,46 @@ def test_an_export_that_takes_the_device_past_its_limit_is_reported(monkeypatch)
     reached, limit, table = (float(x) for x in re.findall(r"-?\d+\.\d+", line))
     assert reached == pytest.approx(exp_max, abs=0.01) and limit == lim.device_max_c
     assert table == pytest.approx(src_max, abs=0.01)
+
+
+def _binder_run(text: str) -> tuple[np.ndarray, np.ndarray]:
+    """Times (min) and setpoints (degC) of a Binder segment table as the chamber runs it,
+    read here: each segment ramps from its start value to the next one's over duration_s;
+    the last segment holds its value for its duration_s."""
+    frame = pd.read_csv(io.StringIO(text), comment="#")
+    secs = frame["duration_s"].to_numpy(dtype=float)
+    vals = frame["start_value_c"].to_numpy(dtype=float)
+    times = np.concatenate(([0.0], np.cumsum(secs) / 60.0))
+    return times, np.append(vals, vals[-1])
+
+
+@pytest.mark.parametrize(
+    ("durations_min", "rates_c_per_min", "fits"),
+    [
+        ([40.0, 460.0, 40.0], [-1.0, 0.0, 1.0], True),  # the last ramp has room for 1 s
+        ([30.0, 500.0, 10.0], [-1.0, 0.0, 3.0], False),  # the last ramp is at +3 degC/min
+    ],
+)
+def test_binder_end_segment_stays_within_the_time_limit(durations_min, rates_c_per_min, fits):
+    """A 540-min table (an informative plan runs to the time limit) was written for the
+    Binder with its 1-s final segment after the path: 540 min 1 s as run (red team). The
+    last step now makes room for it where the rate limit allows; where not, it is said."""
+    prog = Programme(np.array(durations_min), np.array(rates_c_per_min), 20.0)
+    lim = Limits()
+    assert prog.total_min == lim.duration_max_min and prog.violations(lim) == []
+    ex = export_programme(prog, ExportSettings("binder-mb"), limits=lim)
+    times, temps = _binder_run(ex.text)
+    assert temps[-1] == pytest.approx(20.0)
+    t = np.linspace(0.0, prog.total_min, 5401)
+    dev = np.max(np.abs(np.interp(t, times, temps) - prog.chamber_at(t)))
+    if fits:
+        assert times[-1] == pytest.approx(lim.duration_max_min, abs=1e-9)
+        assert dev <= abs(rates_c_per_min[-1]) / 60.0 + 1e-9  # 1 s earlier on the last ramp
+        assert np.max(np.abs(np.diff(temps) / np.maximum(np.diff(times), 1e-12))) <= 3.0 + 1e-9
+        assert ex.faithful
+    else:
+        assert times[-1] == pytest.approx(lim.duration_max_min + 1 / 60.0, abs=1e-9)
+        assert dev == pytest.approx(0.0, abs=1e-9)
+        assert not ex.faithful
+        (line,) = [b for b in ex.limit_breaks if "end segment" in b]
+        assert f"{times[-1]:.3f} min" in line

@@ -20,7 +20,9 @@ the ramp the segment makes (to the next start value), for the operator to read, 
 register. The library links no programmes: a programme longer than 99 segments (plus the
 final one) is split; each part ends holding its last value for 1 s, after which the
 chamber leaves programme mode: the operator starts the next programme at once (and
-sets the manual setpoint to the hand-over temperature as a safeguard).
+sets the manual setpoint to the hand-over temperature as a safeguard). The final
+segments run after the path (``ControllerSpec.end_segment_s``): where they would pass the
+time limit, the export shortens the last step to make room (``export._room_for_end_segments``).
 """
 
 from __future__ import annotations
@@ -51,6 +53,7 @@ BINDER_MB = ControllerSpec(
     max_step_min=None,
     end_modes=(),
     file_suffix=".csv",
+    end_segment_s=1,
     source=(
         "auger-prime-sde/ess binder.py (Binder_MKFT115_MB1/MB2: NPROG 25, NSEG 100, "
         "durations in s, start value per segment, final 1-s segment)"
