@@ -87,6 +87,9 @@ class ControllerSpec:
         the 1-s final segment ``binder.py`` appends). Where they would take the run past
         ``duration_max_min``, the export takes them out of the last step (if the rate
         limits allow; else it reports the overrun).
+    first_path_step : int
+        The controller's number of a programme's first chamber-path step (F4T: 2, after
+        the ``instant`` start step): the step numbers the operator sees on the controller.
     """
 
     key: str
@@ -102,6 +105,7 @@ class ControllerSpec:
     file_suffix: str
     source: str
     end_segment_s: int = 0
+    first_path_step: int = 1
 
     @property
     def time_step_min(self) -> float:
@@ -705,8 +709,9 @@ class ControllerExport:
         return not (self.coverage_lost or self.limit_breaks)
 
     def to_frame(self) -> pd.DataFrame:
-        """One row per exported step: programme number, step within it, times and
-        temperatures (what the controller runs, read back from the file)."""
+        """One row per exported step: programme number, the step's number in it as the
+        controller counts (F4T: from 2, after the start step), times and temperatures
+        (what the controller runs, read back from the file)."""
         rows = []
         step = 0
         t = 0.0
@@ -718,7 +723,7 @@ class ControllerExport:
                     {
                         "step": step,
                         "programme": number,
-                        "programme_step": i + 1,
+                        "programme_step": i + self.spec.first_path_step,
                         "start_min": t,
                         "duration_min": float(d),
                         "duration_hms": _hms(float(d) * 60.0),

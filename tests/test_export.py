@@ -765,3 +765,39 @@ def test_binder_end_segment_stays_within_the_time_limit(durations_min, rates_c_p
         assert not ex.faithful
         (line,) = [b for b in ex.limit_breaks if "end segment" in b]
         assert f"{times[-1]:.3f} min" in line
+
+
+def _file_step_numbers(controller: str, text: str) -> list[tuple[int, int]]:
+    """(programme, step) of every chamber-path step as the file (and so the controller)
+    numbers it, read here from the file's own structure."""
+    if controller == "binder-mb":
+        frame = pd.read_csv(io.StringIO(text), comment="#")
+        out = []
+        for number, group in frame.groupby("program", sort=False):
+            out += [(int(number), int(s)) for s in group["segment"].iloc[:-1]]  # not the end
+        return out
+    out = []
+    for entry in json.loads(text)["programmes"]:
+        steps = entry["program"]["steps"]
+        if controller == "watlow-f4t":
+            out += [
+                (entry["number"], k)
+                for k, st_ in enumerate(steps, start=1)
+                if st_["type"] in ("ramptime", "soak")
+            ]
+        else:
+            out += [(entry["number"], st_["number"]) for st_ in steps]
+    return out
+
+
+@pytest.mark.parametrize("controller", ["espec-p300", "watlow-f4t", "binder-mb"])
+def test_step_numbers_shown_are_the_controllers_own(controller):
+    """The operator sheet's "programme step" column comes from ControllerExport.to_frame;
+    for the F4T it counted path steps from 1 although step 1 of every profile is the
+    instant start step (red team: the sheet's step 1, 81 min to -61 degC, is the
+    controller's step 2)."""
+    prog = read_step_table(BASELINE).programme
+    ex = export_programme(prog, ExportSettings(controller, max_steps=6, first_programme=2))
+    frame = ex.to_frame()
+    shown = list(zip(frame["programme"], frame["programme_step"], strict=True))
+    assert shown == _file_step_numbers(controller, ex.text)

@@ -58,6 +58,7 @@ F4T = ControllerSpec(
     max_step_min=99 * 60 + 59 + 59 / 60,
     end_modes=("hold", "user", "off"),
     file_suffix=".json",
+    first_path_step=2,  # step 1 is the instant step to the start temperature
     source=(
         "EspecNorthAmerica/ChamberConnectLibrary chamberconnectlibrary/watlowf4t.py "
         "(get_prgm, set_prgm: profiles 1..40, durations h:m:s); steps per profile: 50 "
