@@ -614,9 +614,9 @@ def programme_from_frame(
         bad = col.isna().to_numpy()
         if bad.any():
             r = int(np.argmax(bad))
-            raise StepTableError(
-                f"{source}: row {r + 1}, column {c}: {frame[c].iloc[r]!r} is not a number"
-            )
+            v = frame[c].iloc[r]
+            shown = "an empty cell or NaN" if pd.isna(v) else repr(str(v).strip())
+            raise StepTableError(f"{source}: row {r + 1}, column {c}: {shown} is not a number")
         values[c] = col.to_numpy(dtype=float)
         if not np.all(np.isfinite(values[c])):
             r = int(np.argmax(~np.isfinite(values[c])))

@@ -102,6 +102,11 @@ def _table(tmp_path, edit):
         (lambda f: f.__setitem__("tk_start_c", [25, -10, -10]), "starts at 25"),
         (lambda f: f.__setitem__("step", [1, 3, 2]), "row 2.*step"),
         (lambda f: f.__setitem__("duration_min", ["30", "abc", "50"]), "row 2.*duration_min"),
+        # a NaN was shown as "np.float64(nan)" (red team, export)
+        (
+            lambda f: f.__setitem__("tk_end_c", [-10, float("nan"), 20]),
+            r"row 2, column tk_end_c: an empty cell or NaN is not a number$",
+        ),
     ],
 )
 def test_bad_tables_name_row_and_problem(tmp_path, edit, match):
