@@ -28,7 +28,6 @@ Nothing here prints or writes; :func:`write_export` writes atomically.
 from __future__ import annotations
 
 import hashlib
-import io
 import math
 import re
 from collections.abc import Mapping, Sequence
@@ -43,7 +42,7 @@ from .coverage import CoverageReport, coverage_report
 from .errors import ParameterError, StepTableError
 from .grid import BinGrid
 from .params import Limits, ThermalParams
-from .programme import Programme, programme_from_frame
+from .programme import Programme
 from .simulate import simulate
 
 #: Exporters, in the order ``--help`` lists them.
@@ -294,22 +293,19 @@ def read_step_table(path: Path | str, limits: Limits | None = None) -> StepTable
     any limit the metadata names. Errors name the file, the row and what to change
     (see :func:`schedsyn.programme.programme_from_frame`).
     """
+    from .programme import _read_text, read_steps
+
     path = Path(path)
     if not path.is_file():
         raise StepTableError(f"step table {path} does not exist or is not a file")
     raw = path.read_bytes()
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        raise StepTableError(f"{path}: not a UTF-8 text file (is it a step-table CSV?)") from None
-    meta, body = split_metadata(text)
+    meta, _ = split_metadata(_read_text(path))
     lim = limits_from_meta(meta, limits, str(path))
-    try:
-        frame = pd.read_csv(io.StringIO(body))
-    except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise StepTableError(f"{path}: not a readable CSV step table ({first})") from None
-    prog = programme_from_frame(frame, lim, source=str(path))
+    # the table itself as every other command reads it: comma or semicolon/tab separated,
+    # decimal point or comma, UTF-8 or an older spreadsheet's cp1252 (export read only
+    # comma-separated UTF-8 and called a European spreadsheet's table "missing columns")
+    prog = read_steps(path, lim)
+    prog = Programme(prog.durations_min, prog.rates_c_per_min, prog.start_c)
     return StepTable(path, prog, meta, hashlib.sha256(raw).hexdigest(), lim)
 
 

@@ -801,3 +801,27 @@ def test_step_numbers_shown_are_the_controllers_own(controller):
     frame = ex.to_frame()
     shown = list(zip(frame["programme"], frame["programme_step"], strict=True))
     assert shown == _file_step_numbers(controller, ex.text)
+
+
+def test_cli_export_reads_a_semicolon_decimal_comma_table_like_the_other_commands(tmp_path):
+    """A spreadsheet in a European locale saves ';' and decimal commas; schedsyn simulate
+    and compare read it, schedsyn export said "missing column(s) step, start_min, ..."
+    (red team): export read comma-separated tables only."""
+    comma = tmp_path / "steps.csv"
+    comma.write_text(META + BASELINE_TEXT, encoding="utf-8")
+    rows = [line.split(",") for line in BASELINE_TEXT.strip().splitlines()]
+    semi = tmp_path / "semi.csv"
+    semi.write_text(
+        META + "\n".join(";".join(c.replace(".", ",") for c in r) for r in rows) + "\n",
+        encoding="utf-8",
+    )
+    docs = []
+    for src in (comma, semi):
+        out = tmp_path / f"{src.stem}.json"
+        rc, _, err = run_cli(["export", str(src), "--controller", "espec-p300", "--out", str(out)])
+        assert rc == 0, err
+        docs.append(json.loads(out.read_text())["programmes"])
+    assert docs[0] == docs[1]
+    # and the path is the baseline's own: step ends read from the comma table by hand
+    ends = [float(r[4]) for r in rows[1:]]
+    assert [s["temperature"]["setpoint"] for s in docs[1][0]["program"]["steps"]] == ends
