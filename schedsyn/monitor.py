@@ -247,6 +247,18 @@ class MonitorSettings:
                 raise ParameterError(f"{name} must be > 0, got {v!r}")
 
 
+def check_log_start(log: MeasuredLog, settings: MonitorSettings | None = None) -> None:
+    """Raise :class:`LogFormatError` (one line) if ``log`` does not start at the programme's
+    start (``time_s`` counts from it, within ``start_tol_min``)."""
+    s = MonitorSettings() if settings is None else settings
+    if abs(log.time_min[0]) > s.start_tol_min:
+        raise LogFormatError(
+            f"{log.source}: the log starts at time_s = {log.time_s[0]:g} s, but time_s counts "
+            f"from the start of the plan's programme (0 s); this log belongs to another start "
+            f"time (shift time_s so the programme starts at 0)"
+        )
+
+
 def check_log_belongs(
     log: MeasuredLog, plan: PlanRecord, settings: MonitorSettings | None = None
 ) -> None:
@@ -261,12 +273,7 @@ def check_log_belongs(
     src = log.source
     t_min = log.time_min
     total = plan.programme.total_min
-    if abs(t_min[0]) > s.start_tol_min:
-        raise LogFormatError(
-            f"{src}: the log starts at time_s = {log.time_s[0]:g} s, but time_s counts from "
-            f"the start of the plan's programme (0 s); this log belongs to another start time "
-            f"(shift time_s so the programme starts at 0)"
-        )
+    check_log_start(log, s)
     if t_min[-1] > total + s.end_tol_min:
         raise LogFormatError(
             f"{src}: the log runs to {t_min[-1]:.1f} min, past the end of the plan "
@@ -904,6 +911,7 @@ __all__ = [
     "OpenPass",
     "PlanRecord",
     "check_log_belongs",
+    "check_log_start",
     "check_effect",
     "closed_passes",
     "identify",

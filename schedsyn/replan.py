@@ -85,6 +85,7 @@ from .monitor import (
     PlanRecord,
     check_effect,
     check_log_belongs,
+    check_log_start,
     closed_passes,
     identify,
     json_safe,
@@ -323,6 +324,8 @@ def prepare_replan(
     """
     settings = MonitorSettings() if settings is None else settings
     _check_at(log, plan, at_min)
+    # before the cut: a log starting after M would be cut to nothing and refused as empty
+    check_log_start(log, settings)
     cut = _cut_log(log, at_min)
     # the log up to M must be a run of the plan: its setpoint follows the executed steps
     check_log_belongs(cut, plan, settings)

@@ -148,9 +148,20 @@ def _with_gap(frame, a_s, b_s):
         ),
         (lambda f: f.assign(tk_set_c=f["tk_set_c"] - 3.0), 150.0, LogFormatError, "setpoint"),
         (lambda f: f.assign(time_s=f["time_s"] + 1800.0), 150.0, LogFormatError, "start"),
+        # a log starting after M: cut at M it is empty, and the error must still say why
+        (lambda f: f.assign(time_s=f["time_s"] + 3 * 3600.0), 150.0, LogFormatError, "start"),
         (lambda f: f, -5.0, ParameterError, "> 0"),
     ],
-    ids=["m-past-log", "m-past-plan", "gap", "nan-run", "other-programme", "start", "negative"],
+    ids=[
+        "m-past-log",
+        "m-past-plan",
+        "gap",
+        "nan-run",
+        "other-programme",
+        "start",
+        "start-after-m",
+        "negative",
+    ],
 )
 def test_bad_inputs_give_one_line_errors(plan, make, at, err, words):
     log = log_from_frame(make(effect_log(ModelSpec(2400, 3))), "bad")
