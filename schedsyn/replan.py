@@ -67,7 +67,6 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .compare import resample_run
 from .coverage import CoverageReport, coverage_report, distinct_levels
 from .effects import ModelSpec
 from .errors import LogFormatError, ParameterError
@@ -89,6 +88,7 @@ from .monitor import (
     closed_passes,
     identify,
     json_safe,
+    measured_run,
     predict_from_state,
     with_plan_setpoint,
 )
@@ -370,7 +370,7 @@ def prepare_replan(
                 "model is used"
             )
     t_model_at = float(model.predict(prefix, np.array([at_min]), t0_c=t0).t_c[0])
-    run = resample_run(cut, est, DENSE_MIN)
+    run = measured_run(cut, est, plan.grid)
     grads, open_pass = closed_passes(run.time_min, run.t_c, run.g_c_per_min, plan.grid)
     levels = np.array([distinct_levels(g, plan.delta_c_per_min) for g in grads], dtype=np.int64)
     missing = np.maximum(plan.levels_required - levels, 0)

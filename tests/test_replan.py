@@ -760,3 +760,46 @@ def test_the_run_is_checked_at_the_corners_of_the_identified_box_as_scipy_counts
         [r[:2] for r in results].count(worst[:2]) > 1  # a tie: any of the tied corners
     )
     assert not box.complete_everywhere and "re-plan again" in box.line()
+
+
+def test_a_start_at_a_bin_edge_counts_no_pass_the_device_never_made(tmp_path):
+    """The device starts at exactly 20 degC, a bin edge inside the region, and heats: the
+    true run never enters [19, 20). The smoothed first reading lies either side of 20 by
+    the noise; a start below the edge must not count a level there (it made the re-plan
+    ask for a level too few). Truth: scipy's solve_ivp of the first-order lag; passes by
+    the plain loop :func:`own_passes`."""
+    prog = Programme(np.array([30.0, 60.0, 30.0, 60.0]), np.array([1.0, 0.0, -1.0, 0.0]))
+    path = write_plan_dir(tmp_path / "edge", prog)
+    meta = json.loads((path / "plan.json").read_text())
+    lo, hi = 15.0, 25.0
+    meta["spec"].update(working_lo_c=lo, working_hi_c=hi, approx_lo_c=5.0, approx_hi_c=35.0)
+    (path / "plan.json").write_text(json.dumps(meta))
+    plan = read_plan_dir(path)
+    tau_min, dt0_c, m = 40.0, 3.0, 60.0
+    sol = solve_ivp(
+        lambda t, y: [(prog.chamber_at(np.array([t]))[0] + dt0_c - y[0]) / tau_min],
+        (0.0, m),
+        [20.0],
+        dense_output=True,
+        rtol=1e-10,
+        atol=1e-10,
+        max_step=0.5,
+    )
+    tt = np.arange(0.0, m + 1e-9, 0.1)
+    t_true = sol.sol(tt)[0]
+    g_true = (prog.chamber_at(tt) + dt0_c - t_true) / tau_min
+    found = own_passes(t_true, g_true, lo, hi)
+    true_levels = [
+        distinct_levels([g for k, g, closed in found if k == b and closed], DELTA)
+        for b in range(int(hi - lo))
+    ]
+    assert true_levels[int(19 - lo)] == 0  # the device never was in [19, 20)
+    below_edge = 0
+    for seed in range(8):
+        f = synth_effect_log(prog, ModelSpec(60 * tau_min, dt0_c), noise_c=0.02, seed=seed)
+        f = f[f["time_s"] <= m * 60].drop(columns=["t_true_c", "g_true_c_per_min"])
+        below_edge += int(f["t_int_c"].iloc[0] < 20.0)
+        req = prepare_replan(log_from_frame(f, f"seed{seed}"), plan, m, find_effect=False)
+        # never more levels measured than the device made
+        assert np.all(req.existing_levels <= np.array(true_levels)), seed
+    assert below_edge > 0  # the case that counted a level in [19, 20) was exercised
