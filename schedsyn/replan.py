@@ -512,6 +512,10 @@ def predict_run(request: ReplanRequest, programme: Programme) -> RunPrediction:
 #: A re-planned run is also predicted at the corners of the identified model's box: tau and
 #: dT0 each this many standard deviations either side of the estimate.
 UNCERTAINTY_SIGMAS = 2.0
+#: The box's corners stay inside what :class:`schedsyn.params.ThermalParams` accepts:
+#: tau up to this, s, and |dT0| up to this, degC.
+BOX_TAU_MAX_S = 1e6
+BOX_DT0_ABS_MAX_C = 50.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -519,7 +523,9 @@ class UncertaintyCheck:
     """The chosen run predicted at the four corners of the identified model's box
     (``tau_s`` and ``dt0_c`` ranges, ± ``sigmas`` standard deviations of the fit the
     model comes from, ``sigma_source``: the base fit, or the effect's own fit when the
-    rest is planned with an effect; tau kept above a tenth of its estimate): the worst
+    rest is planned with an effect; tau kept above a tenth of its estimate and the box
+    inside what a model accepts, :data:`BOX_TAU_MAX_S` and :data:`BOX_DT0_ABS_MAX_C`,
+    the whole of it where a standard deviation is not finite): the worst
     corner's coverage and where it is. An early re-plan rests on a young estimate (5 min
     of a W3 log: tau ± 200 s); where the run does not complete at every corner, a later
     re-plan, on a longer log, should look again."""
@@ -574,8 +580,19 @@ def check_uncertainty(
         se_tau, se_dt0 = e.stderr.get("tau_s", math.nan), e.stderr.get("dt0_c", math.nan)
         if se_tau > 0.0 and se_dt0 > 0.0:  # (False for NaN)
             tau_std, dt0_std, source = se_tau, se_dt0, f"the {m.effect} fit"
-    tau = (max(m.tau_s - sigmas * tau_std, 0.1 * m.tau_s), m.tau_s + sigmas * tau_std)
-    dt0 = (m.dt0_c - sigmas * dt0_std, m.dt0_c + sigmas * dt0_std)
+    # an unknown spread is the widest box; the box is kept inside the range a model
+    # accepts (ThermalParams): a fit that has not converged (dT0 50 +- 140 degC on 30 min
+    # of a device with a second thermal mass) must give a wide box, not a crash
+    tau_std = tau_std if math.isfinite(tau_std) else math.inf
+    dt0_std = dt0_std if math.isfinite(dt0_std) else math.inf
+    tau = (
+        max(m.tau_s - sigmas * tau_std, 0.1 * m.tau_s),
+        min(m.tau_s + sigmas * tau_std, max(BOX_TAU_MAX_S, m.tau_s)),
+    )
+    dt0 = (
+        max(m.dt0_c - sigmas * dt0_std, -BOX_DT0_ABS_MAX_C),
+        min(m.dt0_c + sigmas * dt0_std, BOX_DT0_ABS_MAX_C),
+    )
     corners = [
         (predict_run(replace(request, model=replace(m, tau_s=t, dt0_c=d)), programme), t, d)
         for t in tau

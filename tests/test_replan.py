@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import pickle
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -803,3 +804,33 @@ def test_a_start_at_a_bin_edge_counts_no_pass_the_device_never_made(tmp_path):
         # never more levels measured than the device made
         assert np.all(req.existing_levels <= np.array(true_levels)), seed
     assert below_edge > 0  # the case that counted a level in [19, 20) was exercised
+
+
+def test_the_box_of_a_fit_that_has_not_converged_stays_inside_the_model_range(plan):
+    """A base fit that ran to its bound (dT0 50 ± 140 degC, as on 30 min of a device with a
+    second thermal mass) must give the widest box, not a ParameterError from a corner at
+    dT0 = 330 degC (``schedsyn replan`` exited 2, nothing written, after the planner had
+    run). The worst corner's predicted peak is checked against scipy's
+    solve_ivp of that corner's first-order lag from the state at M."""
+    f = effect_log(ModelSpec(2400.0, 3.0))
+    req = prepare_replan(log_from_frame(f, "clean"), plan, 150.0, find_effect=False)
+    wild = replace(req.identified, dt0_std_c=140.0, tau_std_s=float("nan"))
+    req = replace(req, identified=wild)
+    box = check_uncertainty(req, plan.programme)
+    assert box.dt0_c == (-50.0, 50.0)
+    assert box.tau_s == (pytest.approx(0.1 * req.model.tau_s), 1e6)
+    assert not box.complete_everywhere
+    prog, m = plan.programme, req.at_min
+    worst = replace(req.model, tau_s=box.worst_tau_s, dt0_c=box.worst_dt0_c)
+    tau_min = worst.tau_s / 60.0
+    sol = solve_ivp(
+        lambda t, y: [(prog.chamber_at(np.array([t]))[0] + worst.dt0_c - y[0]) / tau_min],
+        (m, prog.total_min),
+        [req.state.t_c],
+        dense_output=True,
+        rtol=1e-10,
+        atol=1e-10,
+        max_step=0.5,
+    )
+    tt = np.arange(m + 0.1, prog.total_min + 1e-9, 0.1)
+    assert box.worst.device_max_c == pytest.approx(float(sol.sol(tt)[0].max()), abs=0.01)
