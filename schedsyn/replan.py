@@ -551,6 +551,7 @@ class UncertaintyCheck:
             "worst_min_levels": c.min_levels,
             "worst_tau_s": self.worst_tau_s,
             "worst_dt0_c": self.worst_dt0_c,
+            "worst_problems": list(self.worst.problems),
         }
 
     def line(self) -> str:
@@ -562,10 +563,12 @@ class UncertaintyCheck:
         if self.complete_everywhere:
             return f"{box}: complete at every corner"
         c = self.worst.coverage
+        # a corner may cover every bin and still fail on a limit: say which
+        broken = f", but {self.worst.problems[0]}" if self.worst.problems else ""
         return (
             f"{box}: worst {c.coverage:.0%} (min {c.min_levels} levels) at tau "
-            f"{self.worst_tau_s:.0f} s, dT0 {self.worst_dt0_c:.2f} °C; re-plan again once "
-            "the log has pinned the model down"
+            f"{self.worst_tau_s:.0f} s, dT0 {self.worst_dt0_c:.2f} °C{broken}; re-plan "
+            "again once the log has pinned the model down"
         )
 
 

@@ -834,3 +834,43 @@ def test_the_box_of_a_fit_that_has_not_converged_stays_inside_the_model_range(pl
     )
     tt = np.arange(m + 0.1, prog.total_min + 1e-9, 0.1)
     assert box.worst.device_max_c == pytest.approx(float(sol.sol(tt)[0].max()), abs=0.01)
+
+
+def test_a_box_corner_that_covers_every_bin_but_breaks_a_device_limit_says_so(plan):
+    """W1 re-planned for a fast device predicted -52.08 degC at one corner (limit -52, 0.05
+    slack): the box line read "worst 100% (min 6 levels)" with no word of the limit. The
+    corner's lowest T after M comes from scipy's solve_ivp of its first-order lag; the
+    device floor is put between it and the nominal model's own lowest T."""
+    f = effect_log(ModelSpec(2400.0, 3.0))
+    req = prepare_replan(log_from_frame(f, "clean"), plan, 150.0, find_effect=False)
+    prog, m = plan.programme, req.at_min
+    tt = np.arange(m + 0.1, prog.total_min + 1e-9, 0.1)
+
+    def lowest(model):
+        tau_min = model.tau_s / 60.0
+        sol = solve_ivp(
+            lambda t, y: [(prog.chamber_at(np.array([t]))[0] + model.dt0_c - y[0]) / tau_min],
+            (m, prog.total_min),
+            [req.state.t_c],
+            dense_output=True,
+            rtol=1e-10,
+            atol=1e-10,
+            max_step=0.5,
+        )
+        return float(sol.sol(tt)[0].min())
+
+    i = req.identified
+    wide = replace(i, tau_std_s=100.0, dt0_std_c=0.5)  # corners 200 s and 1 degC away
+    req = replace(req, identified=wide)
+    cold = replace(req.model, tau_s=i.tau_s - 200.0, dt0_c=i.dt0_c - 1.0)
+    floor = 0.5 * (lowest(cold) + lowest(req.model))  # the cold corner goes below it
+    limits = replace(plan.limits, device_min_c=floor)
+    req = replace(req, plan=replace(plan, limits=limits))
+    assert predict_run(req, prog).problems == ()  # the nominal model keeps the limit
+    box = check_uncertainty(req, prog)
+    assert not box.complete_everywhere
+    assert box.worst.problems and "outside its limits" in box.line()
+    assert box.to_dict()["worst_problems"] == list(box.worst.problems)
+    assert box.worst.device_min_c < floor - 0.05
+    worst = replace(req.model, tau_s=box.worst_tau_s, dt0_c=box.worst_dt0_c)
+    assert box.worst.device_min_c == pytest.approx(lowest(worst), abs=0.01)
