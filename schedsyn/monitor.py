@@ -225,7 +225,9 @@ class MonitorSettings:
         widened by this, degC (a device lags its chamber plus a self-heating offset of a
         few degC; a log far outside is from another run).
     start_temp_tol_c : float
-        The first reading must lie within this of the plan's ``t_init_c``, degC.
+        The first reading must lie within this of the plan's ``t_init_c``, or of
+        ``start_c + dT0`` (the plan's model: where a powered device soaked in the chamber
+        at the start temperature sits), or between them, degC.
     """
 
     setpoint_tol_c: float = 0.3
@@ -281,10 +283,17 @@ def check_log_belongs(
         )
     finite = np.flatnonzero(np.isfinite(log.t_int_c))
     first = float(log.t_int_c[finite[0]])
-    if abs(first - plan.limits.t_init_c) > s.start_temp_tol_c:
+    # a powered device soaked in the chamber at start_c sits dT0 above it, not at t_init_c
+    # (dT0 6 degC: 26 degC, refused as another plan's log before): either start belongs
+    soaked = plan.limits.start_c + plan.params.dt0_c
+    lo = min(plan.limits.t_init_c, soaked) - s.start_temp_tol_c
+    hi = max(plan.limits.t_init_c, soaked) + s.start_temp_tol_c
+    if not lo <= first <= hi:
         raise LogFormatError(
             f"{src}: the first reading t_int_c = {first:.2f} °C is far from the plan's start "
-            f"temperature {plan.limits.t_init_c:g} °C; the log does not belong to this plan"
+            f"temperature {plan.limits.t_init_c:g} °C (or {soaked:g} °C, where the device "
+            f"settles in the chamber at {plan.limits.start_c:g} °C with the plan's dT0); the "
+            "log does not belong to this plan"
         )
     if log.tk_set_c is not None:
         ok = np.isfinite(log.tk_set_c)

@@ -874,3 +874,32 @@ def test_a_box_corner_that_covers_every_bin_but_breaks_a_device_limit_says_so(pl
     assert box.worst.device_min_c < floor - 0.05
     worst = replace(req.model, tau_s=box.worst_tau_s, dt0_c=box.worst_dt0_c)
     assert box.worst.device_min_c == pytest.approx(lowest(worst), abs=0.01)
+
+
+def test_a_device_soaked_powered_at_the_start_temperature_is_re_planned(plan):
+    """A powered device soaked in the chamber at 20 degC sits at 20 + dT0: dT0 6 degC puts
+    the first reading at 26 degC, refused before as "far from the plan's start
+    temperature" (tolerance 5 degC around 20). It is the plan's run; the re-plan takes the
+    measured start. Truth: scipy's solve_ivp from T0 = 26 degC; a log 10 degC beyond
+    either start is still refused."""
+    truth = ModelSpec(2400.0, 6.0)
+    soaked_c = 20.0 + truth.dt0_c
+    f = synth_effect_log(plan_programme(), truth, noise_c=0.01, seed=3, t0_c=soaked_c)
+    f = f.drop(columns=["t_true_c", "g_true_c_per_min"])
+    m = 60.0
+    req = prepare_replan(log_from_frame(f, "soaked"), plan, m, find_effect=False)
+    prog = plan.programme
+    sol = solve_ivp(
+        lambda t, y: [(prog.chamber_at(np.array([t]))[0] + truth.dt0_c - y[0]) / 40.0],
+        (0.0, m),
+        [soaked_c],
+        rtol=1e-10,
+        atol=1e-10,
+        max_step=0.5,
+    )
+    assert abs(req.state.t_c - sol.y[0, -1]) < max(4 * req.state.t_std_c, 0.02)
+    assert abs(req.identified.dt0_c - truth.dt0_c) < 0.3
+    assert abs(req.identified.t0_c - soaked_c) < 0.1
+    far = f.assign(t_int_c=f["t_int_c"] + 10.0)
+    with pytest.raises(LogFormatError, match="first reading"):
+        prepare_replan(log_from_frame(far, "far"), plan, m, find_effect=False)
