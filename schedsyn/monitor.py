@@ -343,6 +343,15 @@ def with_plan_setpoint(log: MeasuredLog, plan: PlanRecord) -> MeasuredLog:
 # --------------------------------------------------------------------------------------
 # identification and pass bookkeeping
 # --------------------------------------------------------------------------------------
+#: A fit whose tau is less certain than this share of itself, or dT0 than this, degC, or
+#: whose dT0 lies this close to the edge of what a model accepts (50 degC), does not pin
+#: the device down (:meth:`Identified.doubts`). Early fits are far inside: 5 min of a W3
+#: log give tau ± 7 %, 15 min ± 1 %, dT0 ± 0.2 degC.
+FIT_TAU_REL_STD_MAX = 0.5
+FIT_DT0_STD_MAX_C = 2.0
+FIT_DT0_EDGE_C = 49.0
+
+
 @dataclass(frozen=True, slots=True)
 class Identified:
     """``tau_s``, ``dt0_c`` and ``t0_c`` fitted to a log, with standard errors.
@@ -366,6 +375,34 @@ class Identified:
     @property
     def model(self) -> ModelSpec:
         return ModelSpec(self.tau_s, self.dt0_c)
+
+    def doubts(self) -> tuple[str, ...]:
+        """Why the fit does not pin the device down, or ``()``: a standard deviation that
+        is not finite or larger than :data:`FIT_TAU_REL_STD_MAX` of tau or
+        :data:`FIT_DT0_STD_MAX_C`, or an estimate at the edge of what a model accepts
+        (the fit ran to its bound). Predictions from such a fit are guesses (red team: a
+        device with a second thermal mass, 30 min: tau 16920 ± 35484 s, dT0 50.00 ± 140
+        °C, reported as if identified)."""
+        out = []
+        if not (
+            math.isfinite(self.tau_std_s) and self.tau_std_s <= FIT_TAU_REL_STD_MAX * self.tau_s
+        ):
+            out.append(f"tau {self.tau_s:.0f} ± {self.tau_std_s:.0f} s")
+        if not (math.isfinite(self.dt0_std_c) and self.dt0_std_c <= FIT_DT0_STD_MAX_C):
+            out.append(f"dT0 {self.dt0_c:.2f} ± {self.dt0_std_c:.2f} °C")
+        if abs(self.dt0_c) >= FIT_DT0_EDGE_C:
+            out.append(f"dT0 {self.dt0_c:.2f} °C at the edge of the fit's range")
+        return tuple(dict.fromkeys(out))
+
+    def doubt_line(self) -> str | None:
+        """One loud line when :meth:`doubts` has any, else None."""
+        d = self.doubts()
+        if not d:
+            return None
+        return (
+            f"*** the log does not pin the device down yet ({'; '.join(d)}): what is "
+            "predicted from it is a guess; re-plan or monitor again on a longer log ***"
+        )
 
     def to_dict(self) -> dict[str, float]:
         return {
@@ -782,6 +819,7 @@ class MonitorReport:
             f"identified from the log: tau {i.tau_s:.0f} ± {i.tau_std_s:.0f} s, dT0 "
             f"{i.dt0_c:.2f} ± {i.dt0_std_c:.2f} °C (plan: {p.params.tau_s:g} s, "
             f"{p.params.dt0_c:g} °C)",
+            *[x for x in (i.doubt_line(),) if x is not None],
             self._effect_line(),
             f"measured - planned T: now {self.gap_now_c:+.2f} °C, RMS {self.gap_rms_c:.2f} °C, "
             f"max {self.gap_max_abs_c:.2f} °C",

@@ -789,6 +789,12 @@ class ReplanResult:
         """The run is predicted to complete every bin within the limits."""
         return self.prediction.complete
 
+    @property
+    def trusted_complete(self) -> bool:
+        """:attr:`complete`, from a fit that pins the device down
+        (:meth:`~schedsyn.monitor.Identified.doubts` empty): what exit code 0 says."""
+        return self.complete and not self.request.identified.doubts()
+
     def to_frame(self) -> pd.DataFrame:
         """Per bin: levels at ``M``, missing at ``M``, predicted at the end (chosen run and
         the plan unchanged), and missing at the end."""
@@ -837,6 +843,7 @@ class ReplanResult:
                 "choice": self.choice,
                 "reason": self.reason,
                 "complete": self.complete,
+                "identification_doubts": list(self.request.identified.doubts()),
                 "predicted": self.prediction.to_dict(),
                 "unchanged_plan": self.unchanged.to_dict(),
                 "planner": self._planner_dict(),
@@ -869,6 +876,7 @@ class ReplanResult:
             f"identified from the log: tau {i.tau_s:.0f} ± {i.tau_std_s:.0f} s, dT0 "
             f"{i.dt0_c:.2f} ± {i.dt0_std_c:.2f} °C (plan: {p.params.tau_s:g} s, "
             f"{p.params.dt0_c:g} °C); model for the rest: {_model_text(r.model)}",
+            *[x for x in (i.doubt_line(),) if x is not None],
             f"measured by minute {r.at_min:g}: {int((r.missing_levels == 0).sum())}/"
             f"{p.grid.n_bins} bins with >= {p.levels_required} levels, "
             f"{int(r.missing_levels.sum())} levels missing",

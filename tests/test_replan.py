@@ -903,3 +903,31 @@ def test_a_device_soaked_powered_at_the_start_temperature_is_re_planned(plan):
     far = f.assign(t_int_c=f["t_int_c"] + 10.0)
     with pytest.raises(LogFormatError, match="first reading"):
         prepare_replan(log_from_frame(far, "far"), plan, m, find_effect=False)
+
+
+def test_a_fit_that_does_not_pin_the_device_down_is_said_and_never_exits_0(
+    tmp_path, monkeypatch, capsys
+):
+    """The same run as above (exit 0, kept plan, every corner complete), but with the base
+    fit as a device the model cannot follow gave it (a second thermal mass, 30 min: tau
+    16920 ± 35484 s, dT0 50.00 ± 140 degC, red team): the prediction is a guess, so the
+    summary says so in a *** line, replan.json lists why, and the exit code is 1. The
+    honest fit of that very log has no doubts."""
+    from schedsyn import monitor, replan
+    from schedsyn.cli import main
+
+    plan_dir = write_plan_dir(tmp_path / "plan")
+    log = _write_log(effect_log(ModelSpec(2400.0, 3.0), seed=5), tmp_path / "log.csv", 150)
+    honest = monitor.identify(log_from_frame(pd.read_csv(log), "log"))
+    assert honest.doubts() == () and honest.doubt_line() is None
+    wild = replace(honest, tau_s=16920.0, tau_std_s=35484.0, dt0_c=50.0, dt0_std_c=140.0)
+    assert len(wild.doubts()) == 3
+    # only the numbers printed change: the model for the rest stays the honest one
+    monkeypatch.setattr(replan, "identify", lambda cut: replace(honest, tau_std_s=35484.0))
+    out = tmp_path / "re"
+    assert main(["replan", str(log), str(plan_dir), "--at-min", "150", "--out", str(out)]) == 1
+    text = capsys.readouterr().out
+    assert "*** the log does not pin the device down yet (tau " in text
+    meta = json.loads((out / "replan.json").read_text())
+    assert meta["complete"] is True  # predicted complete, but not promised
+    assert meta["identification_doubts"] == [f"tau {honest.tau_s:.0f} ± 35484 s"]
