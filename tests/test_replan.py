@@ -820,20 +820,25 @@ def test_the_box_of_a_fit_that_has_not_converged_stays_inside_the_model_range(pl
     assert box.dt0_c == (-50.0, 50.0)
     assert box.tau_s == (pytest.approx(0.1 * req.model.tau_s), 1e6)
     assert not box.complete_everywhere
-    prog, m = plan.programme, req.at_min
     worst = replace(req.model, tau_s=box.worst_tau_s, dt0_c=box.worst_dt0_c)
-    tau_min = worst.tau_s / 60.0
+    peak_c = _lag_after(plan.programme, worst, req.at_min, req.state.t_c).max()
+    assert box.worst.device_max_c == pytest.approx(float(peak_c), abs=0.01)
+
+
+def _lag_after(prog: Programme, model: ModelSpec, m: float, t_c: float) -> np.ndarray:
+    """T every 0.1 min after ``m`` to the end of ``prog``: scipy's solve_ivp of the
+    first-order lag of ``model`` from ``t_c`` at ``m``."""
+    tau_min = model.tau_s / 60.0
     sol = solve_ivp(
-        lambda t, y: [(prog.chamber_at(np.array([t]))[0] + worst.dt0_c - y[0]) / tau_min],
+        lambda t, y: [(prog.chamber_at(np.array([t]))[0] + model.dt0_c - y[0]) / tau_min],
         (m, prog.total_min),
-        [req.state.t_c],
+        [t_c],
         dense_output=True,
         rtol=1e-10,
         atol=1e-10,
         max_step=0.5,
     )
-    tt = np.arange(m + 0.1, prog.total_min + 1e-9, 0.1)
-    assert box.worst.device_max_c == pytest.approx(float(sol.sol(tt)[0].max()), abs=0.01)
+    return sol.sol(np.arange(m + 0.1, prog.total_min + 1e-9, 0.1))[0]
 
 
 def test_a_box_corner_that_covers_every_bin_but_breaks_a_device_limit_says_so(plan):
@@ -844,20 +849,9 @@ def test_a_box_corner_that_covers_every_bin_but_breaks_a_device_limit_says_so(pl
     f = effect_log(ModelSpec(2400.0, 3.0))
     req = prepare_replan(log_from_frame(f, "clean"), plan, 150.0, find_effect=False)
     prog, m = plan.programme, req.at_min
-    tt = np.arange(m + 0.1, prog.total_min + 1e-9, 0.1)
 
     def lowest(model):
-        tau_min = model.tau_s / 60.0
-        sol = solve_ivp(
-            lambda t, y: [(prog.chamber_at(np.array([t]))[0] + model.dt0_c - y[0]) / tau_min],
-            (m, prog.total_min),
-            [req.state.t_c],
-            dense_output=True,
-            rtol=1e-10,
-            atol=1e-10,
-            max_step=0.5,
-        )
-        return float(sol.sol(tt)[0].min())
+        return float(_lag_after(prog, model, m, req.state.t_c).min())
 
     i = req.identified
     wide = replace(i, tau_std_s=100.0, dt0_std_c=0.5)  # corners 200 s and 1 degC away
