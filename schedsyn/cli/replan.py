@@ -20,8 +20,9 @@ rest completes the region and by how much it falls short) and ``bins.csv`` (per 
 
 Exit codes: 0 the whole run is predicted to complete every bin, by a fit that pins the
 device down; 1 it is not, or the fit does not pin the device down yet (a *** line says
-so; the files are written, the short bins listed); 2 bad input (``M`` beyond the log or the plan or not
-a whole minute, a gap in the log at ``M``, a log of another plan), nothing written.
+so; the files are written, the short bins listed); 2 bad input (``M`` beyond the log or
+the plan or not a whole minute, a gap in the log at ``M``, a log of another plan),
+nothing written.
 """
 
 from __future__ import annotations
