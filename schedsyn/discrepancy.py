@@ -45,6 +45,10 @@ _AIR_TWINS = {"chamber_lag": "second_time_constant"}
 # --------------------------------------------------------------------------------------
 # settings and input preparation
 # --------------------------------------------------------------------------------------
+#: Fewest block means of a log the base fit is made from (tau, dT0, T0 and the noise).
+FIT_MIN_BLOCKS = 20
+
+
 @dataclass(frozen=True, slots=True)
 class DiagnoseSettings:
     """Knobs of :func:`diagnose` (defaults tuned on synthetic logs, see the benchmark).
@@ -334,10 +338,18 @@ def _prepare(log, settings: DiagnoseSettings) -> tuple[_Data, dict]:
         step_s = min(max(duration_s / 1500.0, dt_s), 20.0)
     step_min = max(step_s, dt_s) / 60.0
     bt, bv, bvar = _block_means(t_min, np.asarray(log.t_int_c, dtype=float), step_min)
-    if bt.size < 20:
+    if bt.size < FIT_MIN_BLOCKS:
+        # the block is at least the sampling step: only a longer log helps, unless a
+        # fit_step_s above the sampling step was asked for (monitor and replan ask none)
+        smaller = (
+            f", or a fit_step_s nearer the sampling step {dt_s:g} s (diagnose --fit-step-s)"
+            if step_s > dt_s * 1.001
+            else ""
+        )
         raise LogFormatError(
-            f"the log has {bt.size} usable blocks of {step_min * 60:g} s; at least 20 are "
-            "needed to fit the model (use a longer log or a smaller fit_step_s)"
+            f"the log has {bt.size} usable blocks of {step_min * 60:g} s; at least "
+            f"{FIT_MIN_BLOCKS} are needed to fit the model: a log of at least "
+            f"{FIT_MIN_BLOCKS * step_min:.0f} min at this sampling{smaller}"
         )
     at = av = avar = None
     if log.tk_air_c is not None and np.isfinite(log.tk_air_c).sum() >= 20:

@@ -925,3 +925,16 @@ def test_a_fit_that_does_not_pin_the_device_down_is_said_and_never_exits_0(
     meta = json.loads((out / "replan.json").read_text())
     assert meta["complete"] is True  # predicted complete, but not promised
     assert meta["identification_doubts"] == [f"tau {honest.tau_s:.0f} ± 35484 s"]
+
+
+def test_a_log_too_short_to_fit_says_how_long_it_must_be(plan):
+    """30 min of a log sampled every 120 s hold 15 readings; the base fit needs 20 block
+    means of at least one sampling step each. The error must say how much log that is
+    (40 min), not point at a fit_step_s that replan has no option for (red team)."""
+    f = effect_log(ModelSpec(2400.0, 3.0))
+    f = f[(f["time_s"] % 120.0) == 0.0]
+    with pytest.raises(LogFormatError) as err:
+        prepare_replan(log_from_frame(f, "coarse"), plan, 30.0, find_effect=False)
+    msg = str(err.value)
+    assert "at least 20 are needed" in msg and "a log of at least 40 min" in msg, msg
+    assert "fit_step_s" not in msg, msg
