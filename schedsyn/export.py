@@ -152,7 +152,9 @@ class ExportSettings:
             v = getattr(self, key)
             if v is None and key != "first_programme":
                 continue
-            if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 0:
+            whole = not isinstance(v, bool) and isinstance(v, int | np.integer)
+            # a programme number's least is the controller's (below): say that one
+            if not whole or (v < 0 and key != "first_programme"):
                 raise ParameterError(f"{key} must be a whole number >= 0, got {v!r}")
         spec = controller_spec(self.controller)
         if self.first_programme < spec.first_number:

@@ -410,6 +410,11 @@ def test_settings_are_validated():
         ExportSettings("watlow-f4t", max_steps=2)
     with pytest.raises(ParameterError, match="first_programme must be >= 1"):
         ExportSettings("espec-p300", first_programme=0)
+    # a negative number gets the controller's least too, not a generic ">= 0" (red team)
+    with pytest.raises(ParameterError, match="first_programme must be >= 1 for ESPEC"):
+        ExportSettings("espec-p300", first_programme=-3)
+    with pytest.raises(ParameterError, match="max_steps must be a whole number >= 0"):
+        ExportSettings("espec-p300", max_steps=-3)
     with pytest.raises(ParameterError, match="name"):
         ExportSettings("espec-p300", name="W1; rm")
     with pytest.raises(ParameterError, match="no step limit"):
