@@ -877,6 +877,25 @@ def _room_for_end_segments(
     return (*parts[:-1], Programme(d, rates, last.start_c))
 
 
+def _table_device_notes(programme: Programme, limits: Limits, check: CoverageCheck) -> list[str]:
+    """A note where the step table itself takes the device past a device limit (the
+    export keeps what the table does, so this is not a break of its own; red team: a
+    table reaching 65.7 °C against 62 was exported without a word)."""
+    t = simulate(programme, check.params, dt_min=check.dt_min, t0_c=check.t0_c).t_c
+    out = []
+    for value, limit, word in (
+        (float(np.max(t)), limits.device_max_c, "above"),
+        (float(np.min(t)), limits.device_min_c, "below"),
+    ):
+        if (value - limit) * (1 if word == "above" else -1) > DEVICE_LIMIT_TOL_C:
+            out.append(
+                f"the step table itself takes the device to {value:.2f} °C, {word} its limit "
+                f"{limit:g} °C (tau {check.params.tau_s:g} s, dT0 {check.params.dt0_c:g} °C): "
+                "the export runs it as written; plan again or fix the table"
+            )
+    return out
+
+
 def _limit_breaks(
     source: Programme,
     exported: Programme,
@@ -983,6 +1002,8 @@ def export_programme(
             "a shorter programme"
         )
     notes = list(codec.notes(parts, numbers, settings))
+    if check is not None:
+        notes += _table_device_notes(programme, limits, check)
     head: dict[str, Any] = dict(header or {})
     text = codec.encode(parts, numbers, settings, limits, head)
     decoded = codec.decode(text, f"{spec.key} export", spec)

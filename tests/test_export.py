@@ -830,3 +830,29 @@ def test_cli_export_reads_a_semicolon_decimal_comma_table_like_the_other_command
     # and the path is the baseline's own: step ends read from the comma table by hand
     ends = [float(r[4]) for r in rows[1:]]
     assert [s["temperature"]["setpoint"] for s in docs[1][0]["program"]["steps"]] == ends
+
+
+def test_a_table_that_itself_passes_a_device_limit_gets_a_note(tmp_path, capsys):
+    """20 -> 61 degC, held 300 min: the device settles near 61 + dT0 = 64 degC, past its
+    62 degC limit, before any rounding. The export runs it as written (exit 0: it breaks
+    nothing the table does not), but says so, with the peak scipy finds; a table within
+    the limits gets no such note."""
+    from independent import chamber_knots, ode_trajectories
+
+    for hold_c, past in ((61.0, True), (55.0, False)):
+        ramp_min = hold_c - 20.0
+        prog = Programme(
+            np.array([ramp_min, 300.0, ramp_min]), np.array([1.0, 0.0, -1.0]), start_c=20.0
+        )
+        steps = prog.to_csv(tmp_path / f"hot{hold_c:g}.csv")
+        out = tmp_path / f"hot{hold_c:g}.json"
+        args = ["export", str(steps), "--controller", "espec-p300", "--region", "40", "50"]
+        assert main([*args, "--out", str(out)]) == 0
+        text = capsys.readouterr().out
+        _, temp, _ = ode_trajectories(*chamber_knots(steps), 2400.0, 3.0, dt_min=0.01)
+        peak_c = float(temp[0].max())
+        if past:
+            assert peak_c > 62.5
+            assert f"takes the device to {peak_c:.2f} °C, above its limit 62 °C" in text
+        else:
+            assert peak_c < 62.0 and "takes the device to" not in text
