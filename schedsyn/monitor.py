@@ -577,6 +577,12 @@ class EffectCheck:
         }
 
 
+#: Two effects the diagnosis cannot tell apart that predict the rest differently are
+#: still preferred to the base model when they differ from each other by at most this
+#: share of how far the chosen one differs from the base (:func:`check_effect`).
+RIVALS_AGREE_SHARE = 0.5
+
+
 def check_effect(
     log: MeasuredLog,
     plan: PlanRecord,
@@ -595,7 +601,9 @@ def check_effect(
     than ``material_c`` differently: the log does not identify which future to plan for
     yet (a short log often cannot, e.g. a rate limit against a chamber lag in the first
     hour). Ambiguous effects that predict the same device temperatures (a chamber lag and
-    a second time constant of the same length) leave the chosen one in use.
+    a second time constant of the same length) leave the chosen one in use, and so do
+    rivals that differ far less from each other than from the base model
+    (:data:`RIVALS_AGREE_SHARE`): the base model is then the worst guess of the three.
     """
     from .discrepancy import diagnose
 
@@ -623,12 +631,23 @@ def check_effect(
                 disagree, rival = gap, name
     material = shift > material_c
     if material and disagree > material_c:
-        material = False
-        warnings.append(
-            f"{d.effect} and {rival} fit the log nearly equally but predict the device up "
-            f"to {disagree:.2f} °C apart over the rest of the plan: not identified yet, "
-            "the base model is used"
-        )
+        if disagree <= RIVALS_AGREE_SHARE * shift:
+            # the rivals differ, but far less from each other than from the base model,
+            # which both fit much better than it: the base is the worst guess of the three
+            # (red team, a second thermal mass: rivals 2.4 degC apart, the base 10.5 off)
+            warnings.append(
+                f"{d.effect} and {rival} fit the log nearly equally and predict the device "
+                f"up to {disagree:.2f} °C apart over the rest of the plan, but both are "
+                f"further from the base model (up to {shift:.2f} °C): {d.effect}, the "
+                "better fit, is used; re-plan later to tell them apart"
+            )
+        else:
+            material = False
+            warnings.append(
+                f"{d.effect} and {rival} fit the log nearly equally but predict the device "
+                f"up to {disagree:.2f} °C apart over the rest of the plan: not identified "
+                "yet, the base model is used"
+            )
     return EffectCheck(
         d.effect,
         {k: float(v) for k, v in d.parameters.items()},

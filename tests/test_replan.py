@@ -673,16 +673,57 @@ def test_a_run_that_follows_its_model_keeps_its_plan(tmp_path):
     )
 
 
+def _diagnosis(chosen: ModelSpec, rival: ModelSpec):
+    """A stand-in for ``discrepancy.diagnose``: ``chosen`` fitted best, ``rival`` as well."""
+    from types import SimpleNamespace
+
+    fits = tuple(SimpleNamespace(effect=m.effect, model=m, t0_c=20.0) for m in (chosen, rival))
+    return lambda log: SimpleNamespace(
+        effect=chosen.effect,
+        model=chosen,
+        parameters=dict(chosen.parameters),
+        candidates=fits,
+        ambiguous_with=(rival.effect,),
+        warnings=(),
+        stderr={},
+    )
+
+
+def test_rivals_far_closer_to_each_other_than_to_the_base_model_are_planned_with(plan, monkeypatch):
+    """A device with a second thermal mass (tau2 500 s) that the diagnosis cannot yet tell
+    from a chamber lag of 600 s: the two predict the rest up to ~0.8 degC apart, the base
+    model ~5 degC away from them. Falling back to the base model (as for rivals as far
+    apart as from the base) would plan with the worst guess of the three (red team: rivals
+    2.4 degC apart, the base 10.5 off); the better fit is used, with a warning. Its
+    prediction of the device is checked against the truth's, next to the base model's."""
+    import schedsyn.discrepancy as disc
+    from schedsyn.monitor import check_effect
+
+    base = ModelSpec(2400.0, 3.0)
+    truth = ModelSpec(2400.0, 3.0, "second_time_constant", {"tau2_s": 500.0})
+    lag = ModelSpec(2400.0, 3.0, "chamber_lag", {"tau_chamber_s": 600.0})
+    log = log_from_frame(effect_log(truth, seed=1).query("time_s <= 6000"), "r")
+    t_now = float(truth.predict(plan.programme, np.array([100.0])).t_c[0])
+    monkeypatch.setattr(disc, "diagnose", _diagnosis(lag, truth))
+    eff = check_effect(log, plan, 100.0, base, 20.0, t_now)
+    assert eff.material and eff.model.effect == "chamber_lag", eff.warnings
+    assert "both are further from the base model" in eff.warnings[-1]
+    rest = np.arange(100.0, plan.programme.total_min, 0.5)
+    want = truth.predict(plan.programme, rest).t_c
+    err_used = np.max(np.abs(lag.predict(plan.programme, rest).t_c - want))
+    err_base = np.max(np.abs(base.predict(plan.programme, rest).t_c - want))
+    assert 0.2 < err_used < 0.5 * err_base
+
+
 def test_an_effect_whose_near_equal_rival_predicts_otherwise_is_not_planned_with(plan, monkeypatch):
     """The diagnosis names an effect but another fits nearly as well: if the two predict
     the rest of the plan more than 0.2 degC apart, the log does not identify the future
     yet and the base model is used; rivals predicting the same (a chamber lag and a
     second time constant of equal length) leave the effect in use."""
-    from types import SimpleNamespace
-
     import schedsyn.discrepancy as disc
     from schedsyn.monitor import check_effect
 
+    diagnosis = _diagnosis
     base = ModelSpec(2400.0, 3.0)
     rate = ModelSpec(
         2400.0,
@@ -692,18 +733,6 @@ def test_an_effect_whose_near_equal_rival_predicts_otherwise_is_not_planned_with
     )
     lag = ModelSpec(2400.0, 3.0, "chamber_lag", {"tau_chamber_s": 200.0})
     twin = ModelSpec(2400.0, 3.0, "second_time_constant", {"tau2_s": 200.0})
-
-    def diagnosis(chosen, rival):
-        fits = tuple(SimpleNamespace(effect=m.effect, model=m, t0_c=20.0) for m in (chosen, rival))
-        return lambda log: SimpleNamespace(
-            effect=chosen.effect,
-            model=chosen,
-            parameters=dict(chosen.parameters),
-            candidates=fits,
-            ambiguous_with=(rival.effect,),
-            warnings=(),
-            stderr={},
-        )
 
     log = log_from_frame(effect_log(base, seed=1).query("time_s <= 6000"), "r")
     t_now = float(base.predict(plan.programme, np.array([100.0])).t_c[0])
