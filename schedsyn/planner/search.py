@@ -284,6 +284,9 @@ class Structure:
 #: Slack of :func:`band_out_of_reach`, degC/min: a band is ruled out only when its lower
 #: speed exceeds the chamber's reach by more than this (numerical and rounding room).
 REACH_TOL_C_PER_MIN = 0.002
+#: How far back against its direction a sweep may stray between two samples, degC
+#: (:func:`band_out_of_reach`; its samples all move forward at the band's lower speed).
+REACH_STRAY_C = 0.1
 
 
 def _first_order_cap(ctx: Context, d: int) -> Callable[[np.ndarray], np.ndarray] | None:
@@ -300,9 +303,7 @@ def _first_order_cap(ctx: Context, d: int) -> Callable[[np.ndarray], np.ndarray]
     return lambda t: (t - lim.chamber_min_c - p.dt0_c) / p.tau_min
 
 
-def band_out_of_reach(
-    ctx: Context, d: int, band: Band, held_c: tuple[float, float] | None = None
-) -> bool:
+def band_out_of_reach(ctx: Context, d: int, band: Band) -> bool:
     """Whether no sweep can hold ``band`` pointwise, whatever the chamber does: a
     necessary condition checked before :func:`place_sweep` scans its starts.
 
@@ -310,26 +311,33 @@ def band_out_of_reach(
     the device's earlier history, and the chamber stays within its limits, so a heating
     pass at ``T`` is no faster than ``(Tk_max + dT0 - T) / tau`` and a cooling one no
     faster than ``(T - Tk_min - dT0) / tau``. A window (not pinned) holds ``d g >= lo(T)``
-    at every sample from beyond one extended edge to beyond the other, so some sample lies
-    within one sample's travel of every temperature in between; where the band's lower
-    speed there exceeds the cap even a travel's width on the favourable side, every
-    start fails, and the scan (hundreds of LPs where a chamber floor or ceiling is close)
-    is spared. Only for one first-order model (robust scenarios stray from the band by a
-    slack; an augmented model has no such cap). ``held_c``: the temperatures held
-    pointwise when they are not the whole band (a pinned window: its inner bins).
+    at every sample (one a minute) from beyond one extended edge to beyond the other, and
+    no faster than the cap the device moves between them, so every temperature ``T*`` in
+    between has a held sample within a minute's travel at the cap of it. Where the
+    band's least lower speed over that interval exceeds the cap's largest value there,
+    no sample near ``T*`` can hold the band, every start fails, and the scan (hundreds
+    of LPs where a chamber floor or ceiling is close) is spared. Only for one
+    first-order model (robust scenarios stray from the band by a slack; an augmented
+    model has no such cap).
     """
     cap_at = _first_order_cap(ctx, d)
-    if cap_at is None:
+    tau_min = ctx.responses.scenarios[0].params.tau_min
+    if cap_at is None or SAMPLE_MIN >= 0.5 * tau_min:
         return False
-    lo_c, hi_c = (band.knots_c[0], band.knots_c[-1]) if held_c is None else held_c
-    inner = [k for k in band.knots_c if lo_c < k < hi_c]
-    temps = np.union1d(np.linspace(lo_c, hi_c, 65), inner)
-    # the most favourable temperature within one sample's travel (the cap grows away
-    # from the limit the chamber presses against) and the least lower speed there
-    travel_c = SAMPLE_MIN * float(np.max(band.hi_c_per_min))
-    far = temps - d * travel_c
-    lo = np.minimum(band.bounds(temps)[0], band.bounds(far)[0])
-    return bool(np.any(lo > cap_at(far) + REACH_TOL_C_PER_MIN))
+    knots = np.asarray(band.knots_c, dtype=float)
+    temps = np.union1d(np.linspace(knots[0], knots[-1], 65), knots)
+    # the travel between two held samples near T*: the device never moves faster than
+    # the cap, which grows by 1/tau per degC towards the favourable side, where it may
+    # also have strayed back REACH_STRAY_C: S (cap(T*) + stray/tau) / (1 - S/tau)
+    cap_here = np.maximum(cap_at(temps), 0.0)
+    travel = SAMPLE_MIN * (cap_here + REACH_STRAY_C / tau_min) / (1.0 - SAMPLE_MIN / tau_min)
+    a, b = temps - travel, temps + travel
+    lo = np.minimum(band.bounds(a)[0], band.bounds(b)[0])
+    for k in knots:  # a piecewise-linear lower bound is least at an end or a knot
+        inside = (a <= k) & (k <= b)
+        lo[inside] = np.minimum(lo[inside], band.bounds(k)[0])
+    cap = np.maximum(cap_at(a), cap_at(b))  # the cap is monotone in T
+    return bool(np.any(lo > cap + REACH_TOL_C_PER_MIN))
 
 
 #: Slack of :func:`pins_out_of_reach`, min.
@@ -341,17 +349,17 @@ def pins_out_of_reach(
 ) -> bool:
     """Whether no pinned sweep in ``band`` can keep its pins, whatever the chamber does.
 
-    Its inner bins are held pointwise (:func:`band_out_of_reach`); each edge bin must be
-    crossed within the most minutes its pins allow (``spans_min[1]`` entry,
+    Each edge bin must be crossed within the most minutes its pins allow (it is not in
+    the bin at its pin and is out of it that many minutes later: ``spans_min[1]`` entry,
     ``spans_min[3]`` exit, from :func:`pinned_timings`), and no crossing is faster than
     the chamber's cap allows at every temperature on the way: ``integral dT / cap(T)``.
+    (Its inner bins are held pointwise too, but from samples whose temperatures the pins
+    leave loose near the edge bins: not checked here.)
     """
     cap_at = _first_order_cap(ctx, d)
     if cap_at is None:
         return False
     lo, hi, w = ctx.spec.working_lo_c, ctx.spec.working_hi_c, ctx.spec.grid.bin_c
-    if band_out_of_reach(ctx, d, band, (lo + w, hi - w)):
-        return True
     e_in, e_out = (hi, lo) if d < 0 else (lo, hi)
     for edge, most_min in ((e_in, spans_min[1]), (e_out - d * w, spans_min[3])):
         temps = np.linspace(min(edge, edge + d * w), max(edge, edge + d * w), 65)
