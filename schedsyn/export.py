@@ -877,15 +877,23 @@ def _room_for_end_segments(
     return (*parts[:-1], Programme(d, rates, last.start_c))
 
 
-def _table_device_notes(programme: Programme, limits: Limits, check: CoverageCheck) -> list[str]:
-    """A note where the step table itself takes the device past a device limit (the
-    export keeps what the table does, so this is not a break of its own; red team: a
-    table reaching 65.7 °C against 62 was exported without a word)."""
-    t = simulate(programme, check.params, dt_min=check.dt_min, t0_c=check.t0_c).t_c
+def _device_range(p: Programme, check: CoverageCheck) -> tuple[float, float]:
+    """Lowest and highest device temperature of ``p`` under ``check``'s model, degC."""
+    t = simulate(p, check.params, dt_min=check.dt_min, t0_c=check.t0_c).t_c
+    return float(np.min(t)), float(np.max(t))
+
+
+def _table_device_notes(
+    table_range_c: tuple[float, float], limits: Limits, check: CoverageCheck
+) -> list[str]:
+    """A note where the step table itself (its device range ``table_range_c``) takes
+    the device past a device limit (the export keeps what the table does, so this is
+    not a break of its own; red team: a table reaching 65.7 °C against 62 was exported
+    without a word)."""
     out = []
     for value, limit, word in (
-        (float(np.max(t)), limits.device_max_c, "above"),
-        (float(np.min(t)), limits.device_min_c, "below"),
+        (table_range_c[1], limits.device_max_c, "above"),
+        (table_range_c[0], limits.device_min_c, "below"),
     ):
         if (value - limit) * (1 if word == "above" else -1) > DEVICE_LIMIT_TOL_C:
             out.append(
@@ -902,11 +910,12 @@ def _limit_breaks(
     limits: Limits,
     check: CoverageCheck | None,
     end_segments_min: float = 0.0,
+    source_range_c: tuple[float, float] | None = None,
 ) -> tuple[str, ...]:
     """Limits ``exported`` breaks that ``source`` meets (chamber side: rates, range, start,
     end, duration, the latter with the controller's ``end_segments_min``; with a
     ``check``: the simulated device range, where the export goes further past a device
-    limit than the source)."""
+    limit than the source, whose range ``source_range_c`` is simulated unless given)."""
     before = set(source.violations(limits))
     out = [v for v in exported.violations(limits) if v not in before]
     run_min = exported.total_min + end_segments_min
@@ -918,13 +927,8 @@ def _limit_breaks(
             "the rate limits)"
         )
     if check is not None:
-
-        def device_range(p: Programme) -> tuple[float, float]:
-            t = simulate(p, check.params, dt_min=check.dt_min, t0_c=check.t0_c).t_c
-            return float(np.min(t)), float(np.max(t))
-
-        s_lo, s_hi = device_range(source)
-        e_lo, e_hi = device_range(exported)
+        s_lo, s_hi = source_range_c or _device_range(source, check)
+        e_lo, e_hi = _device_range(exported, check)
         over_hi = max(s_hi - limits.device_max_c, 0.0)
         if e_hi - limits.device_max_c > over_hi + DEVICE_LIMIT_TOL_C:
             out.append(
@@ -1002,8 +1006,9 @@ def export_programme(
             "a shorter programme"
         )
     notes = list(codec.notes(parts, numbers, settings))
-    if check is not None:
-        notes += _table_device_notes(programme, limits, check)
+    table_range_c = None if check is None else _device_range(programme, check)
+    if check is not None and table_range_c is not None:
+        notes += _table_device_notes(table_range_c, limits, check)
     head: dict[str, Any] = dict(header or {})
     text = codec.encode(parts, numbers, settings, limits, head)
     decoded = codec.decode(text, f"{spec.key} export", spec)
@@ -1025,7 +1030,14 @@ def export_programme(
         _rounding_shift_s(programme, spec.time_step_min),
         _path_deviation_c(programme, exported),
         tuple(notes),
-        _limit_breaks(programme, exported, limits, check, len(parts) * spec.end_segment_s / 60.0),
+        _limit_breaks(
+            programme,
+            exported,
+            limits,
+            check,
+            len(parts) * spec.end_segment_s / 60.0,
+            table_range_c,
+        ),
     )
     # write the check into the file's header too
     head["check"] = {

@@ -55,7 +55,7 @@ from .estimate import GradientEstimate, estimate_gradient
 from .grid import BinGrid
 from .io import strict_json as json_safe  # re-exported: NaN/inf to None
 from .logs import MeasuredLog, log_from_frame
-from .params import Limits, ThermalParams
+from .params import DT0_ABS_MAX_C, Limits, ThermalParams
 from .programme import Programme, read_steps
 from .simulate import Trajectory, dense_times
 
@@ -349,7 +349,7 @@ def with_plan_setpoint(log: MeasuredLog, plan: PlanRecord) -> MeasuredLog:
 #: log give tau ± 7 %, 15 min ± 1 %, dT0 ± 0.2 degC.
 FIT_TAU_REL_STD_MAX = 0.5
 FIT_DT0_STD_MAX_C = 2.0
-FIT_DT0_EDGE_C = 49.0
+FIT_DT0_EDGE_C = DT0_ABS_MAX_C - 1.0
 
 
 @dataclass(frozen=True, slots=True)

@@ -51,6 +51,11 @@ def _check_range(name: str, value: float, lo: float | None, hi: float | None, un
         raise ParameterError(f"{name} must be {rng} {unit}, got {value!r}")
 
 
+#: The largest time constant, s, and self-heating offset magnitude, degC, a model accepts.
+TAU_MAX_S = 1e6
+DT0_ABS_MAX_C = 50.0
+
+
 @dataclass(frozen=True, slots=True)
 class ThermalParams:
     """First-order lag of the device: ``tau_s * dT/dt + T = Tk + dt0_c``.
@@ -69,10 +74,13 @@ class ThermalParams:
     dt0_c: float = 3.0
 
     def __post_init__(self) -> None:
-        _check_range("tau_s", self.tau_s, 0.0, 1e6, "s")
+        _check_range("tau_s", self.tau_s, 0.0, TAU_MAX_S, "s")
         v = _finite("dt0_c", self.dt0_c)
-        if abs(v) > 50:
-            raise ParameterError(f"dt0_c must be within -50 .. 50 °C, got {self.dt0_c!r}")
+        if abs(v) > DT0_ABS_MAX_C:
+            raise ParameterError(
+                f"dt0_c must be within -{DT0_ABS_MAX_C:g} .. {DT0_ABS_MAX_C:g} °C, "
+                f"got {self.dt0_c!r}"
+            )
         _store_floats(self)
 
     @property

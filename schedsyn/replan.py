@@ -92,6 +92,7 @@ from .monitor import (
     predict_from_state,
     with_plan_setpoint,
 )
+from .params import DT0_ABS_MAX_C, TAU_MAX_S
 from .programme import Programme
 from .simulate import dense_times
 
@@ -514,8 +515,8 @@ def predict_run(request: ReplanRequest, programme: Programme) -> RunPrediction:
 UNCERTAINTY_SIGMAS = 2.0
 #: The box's corners stay inside what :class:`schedsyn.params.ThermalParams` accepts:
 #: tau up to this, s, and |dT0| up to this, degC.
-BOX_TAU_MAX_S = 1e6
-BOX_DT0_ABS_MAX_C = 50.0
+BOX_TAU_MAX_S = TAU_MAX_S
+BOX_DT0_ABS_MAX_C = DT0_ABS_MAX_C
 
 
 @dataclass(frozen=True, slots=True)
