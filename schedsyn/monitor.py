@@ -392,7 +392,7 @@ class Identified:
             out.append(f"dT0 {self.dt0_c:.2f} ± {self.dt0_std_c:.2f} °C")
         if abs(self.dt0_c) >= FIT_DT0_EDGE_C:
             out.append(f"dT0 {self.dt0_c:.2f} °C at the edge of the fit's range")
-        return tuple(dict.fromkeys(out))
+        return tuple(out)
 
     def doubt_line(self) -> str | None:
         """One loud line when :meth:`doubts` has any, else None."""
