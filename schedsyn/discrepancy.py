@@ -647,6 +647,10 @@ def _effect_starts(eff: Effect, base: CandidateFit, data: _Data) -> list[np.ndar
         extra = [(tau * 0.85, tau * 1.15), (tau * 1.15, tau * 0.85)]
     elif eff.name == "selfheat_slope":
         extra = [(0.0,), (0.03,), (-0.03,)]
+    elif eff.name == "dt0_drift":
+        extra = [(0.0,), (0.3,), (-0.3,)]
+    elif eff.name == "tau_temperature":
+        extra = [(0.0,), (0.005,), (-0.005,)]
     else:  # times scale with the device's time constant
         extra = [tuple(v * scale for v in g) for g in eff.guesses]
     return [np.concatenate((b, np.asarray(e, dtype=float))) for e in extra]

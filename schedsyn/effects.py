@@ -23,6 +23,11 @@ Linear effects keep the model linear and time invariant, so they are
 - ``selfheat_slope``: ``dT0 = dt0 + s (T - 20)`` gives
   ``tau/(1-s) dT/dt + T = (Tk + dt0 - 20 s)/(1-s)``: gain ``1/(1-s)``, ``tau_eff =
   tau/(1-s)``.
+- ``dt0_drift``: ``dT0 = dt0 + r t`` (``t`` from the programme's start: the device warms
+  up or its dissipation changes over the run). The extra input ``r t`` goes through the
+  device lag only, so it adds ``r R(t)`` to ``T`` and ``r S(t)`` to ``g`` (``R``, ``S`` the
+  lag's ramp and step responses), which is part of the free response: the rates' matrix
+  is unchanged and the planner's LP is exact.
 
 Nonlinear effects are simulated by an exact per-step update on a uniform grid (the
 chamber air is linear within a step; first-order hold, :func:`schedsyn.model.lag_foh`)::
@@ -33,7 +38,10 @@ with ``v = A + dT0``:
 
 - ``chamber_rate_limit``: ``A[k+1] = A[k] + clip(S[k+1] - A[k], -c h, r h)``;
 - ``chamber_cycling``: ``A = S + amp sin(2 pi t / P + phi)``;
-- ``asymmetric_tau``: ``tau = tau_heat`` while ``v > T`` (heating), else ``tau_cool``.
+- ``asymmetric_tau``: ``tau = tau_heat`` while ``v > T`` (heating), else ``tau_cool``;
+- ``tau_temperature``: ``tau(T) = tau max(1 + k (T - 20), 0.1)`` (the device's heat
+  capacity and conductances change with temperature), each step with ``tau`` at its
+  midpoint temperature (predicted with the step's starting ``tau``, then corrected once).
 
 They expose the limits they imply for the planner through
 :meth:`ModelSpec.planner_limits`.
@@ -51,13 +59,23 @@ import numpy as np
 
 from .errors import ParameterError
 from .model import affine_response, lag_foh, lag_free, lag_ramp, lag_step
-from .params import Limits, ThermalParams
+from .params import DT0_ABS_MAX_C, Limits, ThermalParams
 from .programme import Programme
 
 #: Reference temperature of the self-heating slope, degC (the paper's start temperature).
 SLOPE_REF_C = 20.0
 #: Relative separation below which the two poles of a two-pole model are nudged apart.
 _POLE_SEP = 1e-4
+#: Largest drift of the self-heating offset a model accepts, degC/h.
+DT0_DRIFT_MAX_C_PER_H = 10.0
+#: Largest relative change of the time constant per degC (``tau_temperature``), 1/degC.
+TAU_SLOPE_MAX_PER_C = 0.015
+#: Least ``tau(T) / tau`` of ``tau_temperature`` (the line is held there, never <= 0).
+TAU_FACTOR_MIN = 0.1
+#: Minute of the run at which a drifting self-heating offset is taken for the planner's
+#: first-order heuristics (the middle of the paper's 9-hour run; the exact model keeps
+#: the drift).
+DRIFT_PLANNER_AT_MIN = 270.0
 
 
 # --------------------------------------------------------------------------------------
@@ -83,6 +101,9 @@ class LinearEffectModel:
         Transport delay from chamber to device, s, >= 0.
     dt0_slope_c_per_c : float
         Change of the self-heating offset per degC of device temperature, in (-0.5, 0.5).
+    dt0_drift_c_per_h : float
+        Change of the self-heating offset per hour from the programme's start, degC/h,
+        within +-DT0_DRIFT_MAX_C_PER_H.
     """
 
     tau_s: float = 2400.0
@@ -90,6 +111,7 @@ class LinearEffectModel:
     tau2_s: float = 0.0
     delay_s: float = 0.0
     dt0_slope_c_per_c: float = 0.0
+    dt0_drift_c_per_h: float = 0.0
 
     def __post_init__(self) -> None:
         ThermalParams(self.tau_s, self.dt0_c)  # validates tau_s and dt0_c
@@ -100,6 +122,12 @@ class LinearEffectModel:
         s = float(self.dt0_slope_c_per_c)
         if not (math.isfinite(s) and abs(s) < 0.5):
             raise ParameterError(f"dt0_slope_c_per_c must be within -0.5 .. 0.5, got {s!r}")
+        r = float(self.dt0_drift_c_per_h)
+        if not (math.isfinite(r) and abs(r) <= DT0_DRIFT_MAX_C_PER_H):
+            raise ParameterError(
+                f"dt0_drift_c_per_h must be within -{DT0_DRIFT_MAX_C_PER_H:g} .. "
+                f"{DT0_DRIFT_MAX_C_PER_H:g} degC/h, got {r!r}"
+            )
 
     @property
     def gain(self) -> float:
@@ -143,7 +171,13 @@ class LinearEffectModel:
         # constant chamber Tk0 (second state starts and stays at Tk0): the first-order lag
         # towards target = K (Tk0 + dt0 - 20 s) with tau_eff
         target = self.gain * (tk0_c + self.dt0_c - SLOPE_REF_C * self.dt0_slope_c_per_c)
-        return lag_free(t_min, target, t0_c, self.tau_eff_min)
+        temp, grad = lag_free(t_min, target, t0_c, self.tau_eff_min)
+        if self.dt0_drift_c_per_h != 0.0:
+            # the drift r t (t from the start) through the device lag: r R(t), r S(t)
+            r = self.gain * self.dt0_drift_c_per_h / 60.0
+            temp = temp + r * lag_ramp(t_min, self.tau_eff_min)
+            grad = grad + r * lag_step(t_min, self.tau_eff_min)
+        return temp, grad
 
 
 # --------------------------------------------------------------------------------------
@@ -179,6 +213,36 @@ def lag_foh_asymmetric(
         end = k + (int(flip[0]) if flip.size else n - 1 - k)  # first step of the next run
         out[k + 1 : end + 1] = y[1 : end - k + 1]
         k = end
+    return out
+
+
+def lag_foh_tau_of_t(
+    v_c: np.ndarray, t0_c: float, tau_min: float, slope_per_c: float, h_min: float
+) -> np.ndarray:
+    """First-order hold lag whose time constant is ``tau max(1 + k (T - 20), 0.1)``.
+
+    Each step is the exact first-order-hold update of :func:`schedsyn.model.lag_foh` with
+    ``tau`` at the step's midpoint temperature, predicted with the ``tau`` of the step's
+    start and corrected once (second order in the step; ``tau`` changes by ``k dT`` over
+    a step of ``dT``).
+    """
+    v = np.asarray(v_c, dtype=float)
+    n = v.size
+    out = np.empty(n)
+    out[0] = t0_c
+    if slope_per_c == 0.0:
+        return lag_foh(v, t0_c, tau_min, h_min)
+    h, k, ref = float(h_min), float(slope_per_c), SLOPE_REF_C
+    exp, temp, fmin = math.exp, float(t0_c), TAU_FACTOR_MIN
+    for i in range(n - 1):
+        v0, dv = float(v[i]), float(v[i + 1] - v[i])
+        tau = tau_min * max(1.0 + k * (temp - ref), fmin)
+        a = exp(-h / tau)
+        pred = a * temp + (1.0 - a) * v0 + dv * (1.0 - tau * (1.0 - a) / h)
+        tau = tau_min * max(1.0 + k * (0.5 * (temp + pred) - ref), fmin)
+        a = exp(-h / tau)
+        temp = a * temp + (1.0 - a) * v0 + dv * (1.0 - tau * (1.0 - a) / h)
+        out[i + 1] = temp
     return out
 
 
@@ -310,6 +374,8 @@ class ModelSpec:
             kw["delay_s"] = p["delay_s"]
         elif self.effect == "selfheat_slope":
             kw["dt0_slope_c_per_c"] = p["dt0_slope_c_per_c"]
+        elif self.effect == "dt0_drift":
+            kw["dt0_drift_c_per_h"] = p["dt0_drift_c_per_h"]
         elif self.effect == "asymmetric_tau":
             # the linear part: the mean of the two time constants
             return LinearEffectModel(0.5 * (p["tau_heat_s"] + p["tau_cool_s"]), self.dt0_c)
@@ -319,12 +385,17 @@ class ModelSpec:
         """First-order equivalent for the planner's heuristics (bands, reachability).
 
         ``tau`` is the model's mean delay: ``tau/(1-s) + tau2 + delay`` (first moment of
-        the impulse response); for ``asymmetric_tau`` the mean of the two. The exact
-        response is :meth:`linear_model`; this only sizes heuristic bounds.
+        the impulse response); for ``asymmetric_tau`` the mean of the two; for
+        ``dt0_drift`` the offset at minute ``DRIFT_PLANNER_AT_MIN`` (kept within the
+        model's range). The exact response is :meth:`linear_model`; this only sizes
+        heuristic bounds.
         """
         p = self.parameters
         if self.effect == "asymmetric_tau":
             return ThermalParams(0.5 * (p["tau_heat_s"] + p["tau_cool_s"]), self.dt0_c)
+        if self.effect == "dt0_drift":
+            mid = self.dt0_c + p["dt0_drift_c_per_h"] * DRIFT_PLANNER_AT_MIN / 60.0
+            return ThermalParams(self.tau_s, min(max(mid, -DT0_ABS_MAX_C), DT0_ABS_MAX_C))
         m = self.linear_model()
         return ThermalParams(m.tau_eff_min * 60.0 + m.tau2_s + m.delay_s, self.dt0_c)
 
@@ -428,6 +499,9 @@ class ModelSpec:
         if self.effect == "asymmetric_tau":
             p = self.parameters
             return np.where(v > temp, p["tau_heat_s"], p["tau_cool_s"]) / 60.0
+        if self.effect == "tau_temperature":
+            k = self.parameters["tau_slope_per_c"]
+            return self.tau_s / 60.0 * np.maximum(1.0 + k * (temp - SLOPE_REF_C), TAU_FACTOR_MIN)
         return np.full(v.shape, self.tau_s / 60.0)
 
     def _simulate_grid(
@@ -449,6 +523,8 @@ class ModelSpec:
         v = air + self.dt0_c
         if self.effect == "asymmetric_tau":
             temp = lag_foh_asymmetric(v, t0_c, p["tau_heat_s"] / 60.0, p["tau_cool_s"] / 60.0, h)
+        elif self.effect == "tau_temperature":
+            temp = lag_foh_tau_of_t(v, t0_c, self.tau_s / 60.0, p["tau_slope_per_c"], h)
         else:
             temp = lag_foh(v, t0_c, self.tau_s / 60.0, h)
         return air, temp
@@ -588,12 +664,30 @@ def _library() -> dict[str, Effect]:
             linear=True,
         ),
         Effect(
+            "dt0_drift",
+            "the self-heating offset drifts over the run: dT0 = dt0 + r t (warm-up)",
+            ("dt0_drift_c_per_h",),
+            ((-DT0_DRIFT_MAX_C_PER_H, DT0_DRIFT_MAX_C_PER_H),),
+            ((0.0,),),
+            "dt0_drift_c_per_h",
+            linear=True,
+        ),
+        Effect(
             "asymmetric_tau",
             "heating and cooling time constants differ",
             ("tau_heat_s", "tau_cool_s"),
             ((1.0, 1e5), (1.0, 1e5)),
             (),  # from the base tau
             "tau_cool_s",
+            linear=False,
+        ),
+        Effect(
+            "tau_temperature",
+            "the time constant changes with temperature: tau(T) = tau (1 + k (T - 20))",
+            ("tau_slope_per_c",),
+            ((-TAU_SLOPE_MAX_PER_C, TAU_SLOPE_MAX_PER_C),),
+            ((0.0,),),
+            "tau_slope_per_c",
             linear=False,
         ),
     )

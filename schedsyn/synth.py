@@ -148,7 +148,11 @@ EFFECT_RANGES = {
     "second_time_constant": {"tau2_s": (300.0, 1200.0)},
     "selfheat_slope": {"dt0_slope_c_per_c": (0.01, 0.05)},
     "asymmetric_tau": {"ratio": (1.15, 1.40)},
+    "dt0_drift": {"dt0_drift_c_per_h": (0.1, 0.6)},
+    "tau_temperature": {"tau_slope_per_c": (0.003, 0.010)},
 }
+#: Effects whose parameter ranges above are magnitudes: each draw gets a random sign.
+SIGNED_EFFECTS = ("dt0_drift", "tau_temperature")
 
 
 def random_effect_model(
@@ -158,7 +162,9 @@ def random_effect_model(
 
     ``chamber_rate_limit`` limits cooling only (heating limit 10 degC/min, not binding);
     ``chamber_cycling`` gets a random phase; ``asymmetric_tau`` makes one of the two time
-    constants ``ratio`` times the other (which one at random), around ``tau_s``.
+    constants ``ratio`` times the other (which one at random), around ``tau_s``;
+    :data:`SIGNED_EFFECTS` get a random sign (a drift up or down, ``tau`` growing or
+    shrinking with temperature).
     """
     from .effects import ModelSpec
 
@@ -171,6 +177,9 @@ def random_effect_model(
         draw["max_heat_rate_c_per_min"] = 10.0
     elif effect == "chamber_cycling":
         draw["phase_rad"] = float(rng.uniform(-np.pi, np.pi))
+    elif effect in SIGNED_EFFECTS:
+        sign = 1.0 if rng.integers(2) else -1.0
+        draw = {k: sign * v for k, v in draw.items()}
     elif effect == "asymmetric_tau":
         ratio = draw.pop("ratio")
         slow, fast = tau_s * math.sqrt(ratio), tau_s / math.sqrt(ratio)

@@ -272,3 +272,65 @@ def test_vectorised_nonlinear_updates_equal_step_by_step_loops():
             a = math.exp(-h / tau)
             t.append(a * t[-1] + (1 - a) * s[k] + (s[k + 1] - s[k]) * (1 - tau * (1 - a) / h))
         np.testing.assert_allclose(lag_foh_asymmetric(s, t[0], th, tc, h), t, atol=1e-9)
+
+
+@pytest.mark.parametrize("r_c_per_h", [0.5, -1.2])
+def test_dt0_drift_matches_ode_and_goes_through_the_planner_model(r_c_per_h):
+    """dT0 = dt0 + r t: the exact prediction, the gradient, and the affine response the
+    planner's LP uses (the drift lives in the free response; the rates' matrix is the
+    base model's)."""
+    spec = ModelSpec(2400.0, 3.0, "dt0_drift", {"dt0_drift_c_per_h": r_c_per_h})
+    r = r_c_per_h / 60.0
+
+    def rhs(t, x):
+        return [_rate(t), (x[0] + 3.0 + r * t - x[1]) / 40.0]
+
+    ref = _integrate(rhs, [20.0, 17.0])
+    pred = spec.predict(PROG, TIMES, t0_c=17.0)
+    np.testing.assert_allclose(pred.t_c, ref[1], atol=1e-7)
+    g_ref = (ref[0] + 3.0 + r * TIMES - ref[1]) / 40.0
+    np.testing.assert_allclose(pred.g_c_per_min, g_ref, atol=1e-8)
+    resp = affine_response(spec.linear_model(), PROG.durations_min, TIMES, 20.0, 17.0)
+    base = affine_response(FirstOrderLag(ThermalParams()), PROG.durations_min, TIMES, 20.0, 17.0)
+    np.testing.assert_array_equal(resp.a_t, base.a_t)
+    np.testing.assert_allclose(resp.evaluate(PROG.rates_c_per_min)[0], ref[1], atol=1e-7)
+    # the first-order heuristics take the offset in the middle of a 9-hour run
+    assert spec.planner_params().dt0_c == pytest.approx(3.0 + r_c_per_h * 4.5)
+    assert spec.planner_params().tau_s == 2400.0
+
+
+@pytest.mark.parametrize("k_per_c", [0.008, -0.006])
+def test_tau_temperature_matches_ode(k_per_c):
+    spec = ModelSpec(2400.0, 3.0, "tau_temperature", {"tau_slope_per_c": k_per_c})
+
+    def rhs(t, x):
+        return [(_setpoint(t) + 3.0 - x[0]) / (40.0 * (1.0 + k_per_c * (x[0] - 20.0)))]
+
+    ref = _integrate(rhs, [17.0])
+    pred = spec.predict(PROG, TIMES, t0_c=17.0, grid_min=0.05)
+    np.testing.assert_allclose(pred.t_c, ref[0], atol=5e-5)  # linear interpolation
+    g_ref = (np.array([_setpoint(t) for t in TIMES]) + 3.0 - ref[0]) / (
+        40.0 * (1.0 + k_per_c * (ref[0] - 20.0))
+    )
+    np.testing.assert_allclose(pred.g_c_per_min, g_ref, atol=5e-5)
+    # the default grid (1/6 min) is within a thousandth of a degree
+    np.testing.assert_allclose(spec.predict(PROG, TIMES, t0_c=17.0).t_c, ref[0], atol=1e-3)
+
+
+def test_tau_temperature_without_slope_is_the_base_lag():
+    flat = ModelSpec(2400.0, 3.0, "tau_temperature", {"tau_slope_per_c": 0.0})
+    base = simulate(PROG, ThermalParams(), t0_c=17.0, dt_min=0.5)
+    pred = flat.predict(PROG, base.time_min, t0_c=17.0, grid_min=0.5)
+    np.testing.assert_allclose(pred.t_c, base.t_c, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("effect", "values"),
+    [
+        ("dt0_drift", {"dt0_drift_c_per_h": 11.0}),
+        ("tau_temperature", {"tau_slope_per_c": -0.02}),
+    ],
+)
+def test_new_effects_refuse_parameters_outside_their_range(effect, values):
+    with pytest.raises(ParameterError, match=next(iter(values))):
+        ModelSpec(2400.0, 3.0, effect, values)
