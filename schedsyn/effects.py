@@ -358,13 +358,17 @@ class ModelSpec:
     def is_linear(self) -> bool:
         return self.effect == "none" or EFFECTS[self.effect].linear
 
-    def linear_model(self) -> LinearEffectModel:
+    def linear_model(self, around_c: float | None = None) -> LinearEffectModel:
         """The :class:`LinearEffectModel` for the planner (linear effects only).
 
         For a nonlinear effect this is the linear base part; use :meth:`planner_limits`
-        with it and :meth:`predict` to check a plan.
+        with it and :meth:`predict` to check a plan. ``around_c``: the temperature the
+        plan works around (the working region's middle); ``tau_temperature`` is then
+        linearised with ``tau`` there (default: at 20 degC, its ``tau_s``).
         """
         p = self.parameters
+        if self.effect == "tau_temperature" and around_c is not None:
+            return LinearEffectModel(self.tau_at(around_c), self.dt0_c)
         kw: dict[str, float] = {}
         if self.effect == "chamber_lag":
             kw["tau2_s"] = p["tau_chamber_s"]
@@ -381,13 +385,22 @@ class ModelSpec:
             return LinearEffectModel(0.5 * (p["tau_heat_s"] + p["tau_cool_s"]), self.dt0_c)
         return LinearEffectModel(self.tau_s, self.dt0_c, **kw)
 
-    def planner_params(self) -> ThermalParams:
+    def tau_at(self, t_c: float) -> float:
+        """The device's time constant at ``t_c`` degC, s (``tau_s`` but for
+        ``tau_temperature``)."""
+        if self.effect != "tau_temperature":
+            return self.tau_s
+        factor = 1.0 + self.parameters["tau_slope_per_c"] * (float(t_c) - SLOPE_REF_C)
+        return self.tau_s * max(factor, TAU_FACTOR_MIN)
+
+    def planner_params(self, around_c: float | None = None) -> ThermalParams:
         """First-order equivalent for the planner's heuristics (bands, reachability).
 
         ``tau`` is the model's mean delay: ``tau/(1-s) + tau2 + delay`` (first moment of
         the impulse response); for ``asymmetric_tau`` the mean of the two; for
         ``dt0_drift`` the offset at minute ``DRIFT_PLANNER_AT_MIN`` (kept within the
-        model's range). The exact response is :meth:`linear_model`; this only sizes
+        model's range); for ``tau_temperature`` ``tau`` at ``around_c`` (see
+        :meth:`linear_model`). The exact response is :meth:`linear_model`; this only sizes
         heuristic bounds.
         """
         p = self.parameters
@@ -396,7 +409,7 @@ class ModelSpec:
         if self.effect == "dt0_drift":
             mid = self.dt0_c + p["dt0_drift_c_per_h"] * DRIFT_PLANNER_AT_MIN / 60.0
             return ThermalParams(self.tau_s, min(max(mid, -DT0_ABS_MAX_C), DT0_ABS_MAX_C))
-        m = self.linear_model()
+        m = self.linear_model(around_c)
         return ThermalParams(m.tau_eff_min * 60.0 + m.tau2_s + m.delay_s, self.dt0_c)
 
     def planner_limits(self, limits: Limits | None = None) -> Limits:

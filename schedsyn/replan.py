@@ -670,7 +670,10 @@ def planner_request(request: ReplanRequest, from_min: float | None = None) -> tu
         grads, _ = closed_passes(time_min[upto], temp[upto], grad[upto], plan.grid)
         t_start = float(np.interp(start, time_min, temp))
     model = request.model
-    linear = model.linear_model()
+    # a time constant that changes with temperature is planned with its value in the
+    # working region (the prediction that judges the plan keeps the whole model)
+    around_c = 0.5 * (spec.working_lo_c + spec.working_hi_c)
+    linear = model.linear_model(around_c)
     # the planner's state at the start: its linear part run over the fixed steps
     t_lin = affine_response(
         linear, prefix.durations_min, np.array([start]), prefix.start_c, request.model_t0_c
@@ -678,7 +681,8 @@ def planner_request(request: ReplanRequest, from_min: float | None = None) -> tu
     continuation = Continuation(
         prefix, grads, start_correction_c=t_start - float(t_lin[0]), t0_c=request.model_t0_c
     )
-    return spec, model.planner_params(), model.planner_limits(plan.limits), linear, continuation
+    params = model.planner_params(around_c)
+    return spec, params, model.planner_limits(plan.limits), linear, continuation
 
 
 def continuation_starts(request: ReplanRequest, edge_margin_c: float) -> list[float]:

@@ -334,3 +334,22 @@ def test_tau_temperature_without_slope_is_the_base_lag():
 def test_new_effects_refuse_parameters_outside_their_range(effect, values):
     with pytest.raises(ParameterError, match=next(iter(values))):
         ModelSpec(2400.0, 3.0, effect, values)
+
+
+def test_tau_temperature_is_linearised_where_the_plan_works():
+    """The planner's linear part of tau(T) uses tau at the working region's middle: its
+    step response there matches the nonlinear model's for a small step around it."""
+    spec = ModelSpec(2400.0, 3.0, "tau_temperature", {"tau_slope_per_c": -0.006})
+    assert spec.tau_at(-40.0) == pytest.approx(2400.0 * 1.36)
+    assert spec.linear_model().tau_s == 2400.0  # default: at 20 degC
+    lin = spec.linear_model(around_c=-40.0)
+    assert lin.tau_s == pytest.approx(2400.0 * 1.36)
+    assert spec.planner_params(around_c=-40.0).tau_s == pytest.approx(2400.0 * 1.36)
+    # a hold at -43 degC chamber (device settles at -40) from -40.5: tau as linearised
+    prog = Programme([200.0], [0.0], -43.0)
+    times = np.linspace(0.0, 200.0, 41)
+    pred = spec.predict(prog, times, t0_c=-40.5, grid_min=0.05)
+    lin_t = affine_response(lin, prog.durations_min, times, -43.0, -40.5).evaluate([0.0])[0]
+    np.testing.assert_allclose(pred.t_c, lin_t, atol=2e-3)
+    base_t = affine_response(spec.linear_model(), prog.durations_min, times, -43.0, -40.5)
+    assert np.max(np.abs(base_t.evaluate([0.0])[0] - pred.t_c)) > 0.02  # tau at 20 is off
