@@ -40,6 +40,7 @@ from __future__ import annotations
 import json
 import math
 import shlex
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -551,11 +552,26 @@ def predict_from_state(
 
 
 @dataclass(frozen=True, slots=True)
+class RivalModel:
+    """A model that fits the log up to M about as well as the one the rest is predicted
+    with, but predicts the device over the rest of the plan up to ``gap_c`` degC apart
+    from it: the log does not tell which future comes yet. ``t0_c`` is its fitted start."""
+
+    effect: str
+    model: ModelSpec
+    t0_c: float
+    gap_c: float
+
+
+@dataclass(frozen=True, slots=True)
 class EffectCheck:
     """The effect the diagnosis found on the log up to M, and whether it is material.
 
     ``stderr``: standard errors of the effect fit's parameters, ``tau_s`` and ``dt0_c``
-    included (from its Jacobian; empty when no effect was found)."""
+    included (from its Jacobian; empty when no effect was found). ``rivals``: the effects
+    the diagnosis could not tell from its choice (its choice included when the base model
+    is used instead) whose prediction of the rest differs from the model used by more
+    than ``material_c`` (:class:`RivalModel`)."""
 
     effect: str
     parameters: dict[str, float]
@@ -565,6 +581,7 @@ class EffectCheck:
     t0_c: float
     warnings: tuple[str, ...] = ()
     stderr: dict[str, float] = field(default_factory=dict)
+    rivals: tuple[RivalModel, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -574,6 +591,16 @@ class EffectCheck:
             "material": self.material,
             "material_threshold_c": MATERIAL_C,
             "warnings": list(self.warnings),
+            "rivals": [
+                {
+                    "effect": r.effect,
+                    "parameters": dict(r.model.parameters),
+                    "tau_s": r.model.tau_s,
+                    "dt0_c": r.model.dt0_c,
+                    "max_gap_over_rest_c": r.gap_c,
+                }
+                for r in self.rivals
+            ],
         }
 
 
@@ -648,6 +675,14 @@ def check_effect(
                 f"up to {disagree:.2f} °C apart over the rest of the plan: not identified "
                 "yet, the base model is used"
             )
+    rivals = _rivals(
+        d.effect,
+        d.ambiguous_with,
+        fits,
+        (d.model, t0) if material else (base, base_t0_c),
+        (plan.programme, now_min, t_now_c, times),
+        material_c,
+    )
     return EffectCheck(
         d.effect,
         {k: float(v) for k, v in d.parameters.items()},
@@ -657,7 +692,36 @@ def check_effect(
         t0,
         tuple(warnings),
         {k: float(v) for k, v in d.stderr.items()},
+        rivals,
     )
+
+
+def _rivals(
+    chosen: str,
+    ambiguous: Sequence[str],
+    fits: Mapping[str, Any],
+    used: tuple[ModelSpec, float],
+    rest: tuple[Programme, float, float, np.ndarray],
+    material_c: float,
+) -> tuple[RivalModel, ...]:
+    """The diagnosis' choice and the effects it could not tell from it, each kept where
+    its prediction of the rest differs from the used model's by more than
+    ``material_c``. (A drift of dT0 against a slope of dT0 with temperature on the first
+    hour of a W2 run: the rest was predicted 83 % apart in coverage; red team.)"""
+    programme, now_min, t_now_c, times = rest
+    if not times.size:
+        return ()
+    t_used, _ = predict_from_state(used[0], used[1], programme, now_min, t_now_c, times)
+    out = []
+    for name in (chosen, *ambiguous):
+        fit = fits.get(name)
+        if fit is None or fit.model == used[0]:
+            continue
+        t_alt, _ = predict_from_state(fit.model, fit.t0_c, programme, now_min, t_now_c, times)
+        gap = float(np.max(np.abs(t_alt - t_used)))
+        if gap > material_c:
+            out.append(RivalModel(name, fit.model, float(fit.t0_c), gap))
+    return tuple(out)
 
 
 # --------------------------------------------------------------------------------------

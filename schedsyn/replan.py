@@ -708,17 +708,21 @@ def continuation_starts(request: ReplanRequest, edge_margin_c: float) -> list[fl
 class PlannerAttempt:
     """One call of the planner for the rest of a run: new steps from ``start_min``; the
     whole run it returned predicted to its end (``None`` and ``error`` when nothing
-    fitted), and the seconds it took."""
+    fitted), and the seconds it took. ``planned_with``: ``"identified"`` (the model the
+    rest is predicted with) or the effect of a rival model (:class:`RivalPrediction`)
+    the steps were planned for; the prediction is then the rival's."""
 
     start_min: float
     plan: Any  # schedsyn.planner.Plan or None
     prediction: RunPrediction | None
     error: str | None
     planner_s: float
+    planned_with: str = "identified"
 
     def to_dict(self) -> dict[str, Any]:
         pr = self.prediction
         return {
+            "planned_with": self.planned_with,
             "new_steps_from_min": self.start_min,
             "predicted_complete": None if pr is None else pr.complete,
             "predicted_coverage": None if pr is None else pr.coverage.coverage,
@@ -734,6 +738,7 @@ def _plan_from(
     start: float,
     progress: Callable[[str], None] | None,
     say: Callable[[str], None],
+    planned_with: str = "identified",
 ) -> PlannerAttempt:
     """Ask the planner for new steps from ``start`` and predict the whole run it returns."""
     from .errors import InfeasiblePlanError
@@ -741,8 +746,9 @@ def _plan_from(
 
     plan = request.plan
     spec, params, limits, linear, continuation = planner_request(request, start)
+    rival = "" if planned_with == "identified" else f" for the rival model {planned_with}"
     say(
-        f"{plan.name}: planning new steps from minute {start:g} "
+        f"{plan.name}: planning new steps from minute {start:g}{rival} "
         f"({int(request.missing_levels.sum())} levels missing at minute {request.at_min:g}, "
         f"{plan.limits.duration_max_min - start:g} min left)"
     )
@@ -752,9 +758,55 @@ def _plan_from(
             spec, params, limits, model=linear, continuation=continuation, progress=progress
         )
     except InfeasiblePlanError as exc:
-        return PlannerAttempt(start, None, None, str(exc), time.perf_counter() - tic)
+        return PlannerAttempt(start, None, None, str(exc), time.perf_counter() - tic, planned_with)
     seconds = time.perf_counter() - tic
-    return PlannerAttempt(start, planned, predict_run(request, planned.programme), None, seconds)
+    prediction = predict_run(request, planned.programme)
+    return PlannerAttempt(start, planned, prediction, None, seconds, planned_with)
+
+
+@dataclass(frozen=True, slots=True)
+class RivalPrediction:
+    """The chosen run predicted with a rival model (:class:`schedsyn.monitor.RivalModel`:
+    one that fits the log about as well as the model used, but predicts the rest
+    ``gap_c`` degC apart from it)."""
+
+    effect: str
+    gap_c: float
+    prediction: RunPrediction
+
+    def to_dict(self) -> dict[str, Any]:
+        c = self.prediction.coverage
+        return {
+            "effect": self.effect,
+            "max_gap_over_rest_c": self.gap_c,
+            "complete": self.prediction.complete,
+            "coverage": c.coverage,
+            "min_levels": c.min_levels,
+            "problems": list(self.prediction.problems),
+        }
+
+    def line(self) -> str:
+        c = self.prediction.coverage
+        broken = f"; {self.prediction.problems[0]}" if self.prediction.problems else ""
+        return (
+            f"*** the log fits {self.effect} about as well (it predicts the device up to "
+            f"{self.gap_c:.2f} °C apart over the rest); with it the run ends at "
+            f"{c.coverage:.0%} (min {c.min_levels} levels){broken}: not a promise yet, "
+            "re-plan when the log tells them apart"
+        )
+
+
+def predict_rivals(request: ReplanRequest, programme: Programme) -> tuple[RivalPrediction, ...]:
+    """``programme`` (the whole run) predicted with each rival model of the request's
+    effect check, from the same state at ``M``."""
+    return tuple(
+        RivalPrediction(
+            r.effect,
+            r.gap_c,
+            predict_run(replace(request, model=r.model, model_t0_c=r.t0_c), programme),
+        )
+        for r in request.effect.rivals
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -783,6 +835,7 @@ class ReplanResult:
     planner_s: float = 0.0
     attempts: tuple[PlannerAttempt, ...] = ()
     uncertainty: UncertaintyCheck | None = None
+    rivals: tuple[RivalPrediction, ...] = ()
 
     @property
     def programme(self) -> Programme:
@@ -797,8 +850,13 @@ class ReplanResult:
     @property
     def trusted_complete(self) -> bool:
         """:attr:`complete`, from a fit that pins the device down
-        (:meth:`~schedsyn.monitor.Identified.doubts` empty): what exit code 0 says."""
-        return self.complete and not self.request.identified.doubts()
+        (:meth:`~schedsyn.monitor.Identified.doubts` empty), and complete too with every
+        model that fits the log about as well (:attr:`rivals`): what exit code 0 says."""
+        return (
+            self.complete
+            and not self.request.identified.doubts()
+            and all(r.prediction.complete for r in self.rivals)
+        )
 
     def to_frame(self) -> pd.DataFrame:
         """Per bin: levels at ``M``, missing at ``M``, predicted at the end (chosen run and
@@ -857,6 +915,8 @@ class ReplanResult:
                 "replan_s": self.replan_s,
                 "planner_s": self.planner_s,
                 "uncertainty_box": None if self.uncertainty is None else self.uncertainty.to_dict(),
+                "rival_models": [r.to_dict() for r in self.rivals],
+                "trusted_complete": self.trusted_complete,
             }
         )
         return json_safe(out)
@@ -904,6 +964,7 @@ class ReplanResult:
         lines.extend(f"problem: {x}" for x in self.prediction.problems)
         if self.uncertainty is not None:
             lines.append(self.uncertainty.line())
+        lines.extend(x.line() for x in self.rivals if not x.prediction.complete)
         lines.extend(f"note: {n}" for n in r.notes)
         return "\n".join(lines)
 
@@ -977,28 +1038,54 @@ def replan_run(
         log, plan, at_min, settings=settings, find_effect=find_effect, material_c=material_c
     )
     unchanged = predict_run(request, plan.programme)
+    # models that fit the log as well but predict the rest differently: a run is judged
+    # at its worst over them and the model used (red team: a dT0 drifting 0.5 degC/h
+    # read as a slope of dT0 with temperature on the first hour; the plan kept as
+    # "complete" ended at 83 %)
+    rivals = [
+        (r.effect, replace(request, model=r.model, model_t0_c=r.t0_c))
+        for r in request.effect.rivals
+    ]
+
+    def judged(run: RunPrediction) -> tuple[bool, bool, float, int, int]:
+        keys = [run.preference()]
+        keys.extend(predict_run(rq, run.programme).preference() for _, rq in rivals)
+        return min(keys)
+
+    unchanged_key = judged(unchanged)
+    worst_text = " at its worst over the model used and the rivals" if rivals else ""
     planned, error, planner_s, new_from = None, None, 0.0, None
     attempts: list[PlannerAttempt] = []
-    if keep_if_complete and unchanged.complete:
+    if keep_if_complete and unchanged_key[1]:
         choice = "keep"
         reason = (
             "the plan's own rest is predicted to complete every bin with the identified "
-            "model; no new steps"
+            f"model{' and its rivals' if rivals else ''}; no new steps"
         )
         chosen = unchanged
     else:
-        before = "completes" if unchanged.complete else f"reaches {unchanged.coverage.coverage:.0%}"
+        before = "completes" if unchanged_key[1] else f"reaches {unchanged_key[2]:.0%}{worst_text}"
         best: tuple[RunPrediction, Any, float] | None = None
-        for start in continuation_starts(request, plan_spec(plan).edge_margin_c):
-            attempt = _plan_from(request, start, progress, say)
-            attempts.append(attempt)
-            planner_s += attempt.planner_s
-            if attempt.prediction is not None and (
-                best is None or attempt.prediction.preference() > best[0].preference()
-            ):
-                best = (attempt.prediction, attempt.plan, start)
-            if best is not None and best[0].complete:
-                break  # a later start cannot do better than complete
+        best_key = None
+        for label, rq in (("identified", request), *rivals):
+            for start in continuation_starts(rq, plan_spec(plan).edge_margin_c):
+                attempt = _plan_from(rq, start, progress, say, label)
+                attempts.append(attempt)
+                planner_s += attempt.planner_s
+                if attempt.prediction is None:
+                    continue
+                run = (
+                    attempt.prediction
+                    if rq is request
+                    else predict_run(request, attempt.prediction.programme)
+                )
+                key = judged(run)
+                if best_key is None or key > best_key:
+                    best, best_key = (run, attempt.plan, start), key
+                if best_key[1]:
+                    break  # a later start cannot do better than complete
+            if best_key is not None and best_key[1]:
+                break
         if not attempts:
             error = (
                 "the device stays inside the working region until the end of the plan and "
@@ -1011,30 +1098,28 @@ def replan_run(
         new = None if best is None else best[0]
         if (
             new is not None
-            and new.preference() > unchanged.preference()
-            and (
-                new.complete
-                or (not new_only_if_complete and new.coverage.coverage >= new_min_coverage)
-            )
+            and best_key is not None
+            and best_key > unchanged_key
+            and (best_key[1] or (not new_only_if_complete and best_key[2] >= new_min_coverage))
         ):
             choice, chosen, new_from = "new", new, best[2]  # type: ignore[index]
             reason = (
-                f"the planner's continuation is predicted to reach {new.coverage.coverage:.0%}"
-                f" (min {new.coverage.min_levels} levels) in {new.programme.total_min:g} min; "
-                f"the plan unchanged {before}"
+                f"the planner's continuation is predicted to reach {best_key[2]:.0%}"
+                f" (min {best_key[3]} levels){worst_text} in {new.programme.total_min:g} "
+                f"min; the plan unchanged {before}"
             )
         else:
             choice, chosen = "keep", unchanged
             why = (
                 f"no continuation fits ({error})"
-                if new is None
-                else f"the planner's continuation would reach only {new.coverage.coverage:.0%}"
-                f" (min {new.coverage.min_levels} levels)"
+                if new is None or best_key is None
+                else f"the planner's continuation would reach only {best_key[2]:.0%}"
+                f" (min {best_key[3]} levels){worst_text}"
                 + (
                     ", and new steps are taken only when complete"
                     if new_only_if_complete
                     else f", and incomplete new steps are taken only from {new_min_coverage:.0%}"
-                    if new.coverage.coverage < new_min_coverage
+                    if best_key[2] < new_min_coverage
                     else ""
                 )
             )
@@ -1052,6 +1137,7 @@ def replan_run(
         planner_s=planner_s,
         attempts=tuple(attempts),
         uncertainty=check_uncertainty(request, chosen.programme),
+        rivals=predict_rivals(request, chosen.programme),
     )
 
 
