@@ -29,6 +29,7 @@ from schedsyn.replan import (
     cut_programme,
     join_programmes,
     planner_request,
+    predict_rivals,
     predict_run,
     prepare_replan,
     rest_of_programme,
@@ -138,6 +139,41 @@ def test_a_device_whose_tau_or_dt0_moves_is_identified_and_planned_with_it(
         assert linear.tau_s == pytest.approx(2400.0 * (1.0 - 0.008 * (mid - 20.0)), rel=0.03)
     else:
         assert linear.dt0_drift_c_per_h == pytest.approx(0.6, rel=0.1)
+
+
+def test_a_rival_that_fits_as_well_and_ends_incomplete_takes_the_promise_back(plan):
+    """The first hour of a device whose dT0 drifts 0.5 degC/h: a slope of dT0 with
+    temperature fits as well and the base model is used; the plan's rest is complete on
+    it, but the drift, which the log fits as well, ends short -- and so does the true
+    device (counted here by a plain loop on its noise-free run). No exit 0 then."""
+    truth = ModelSpec(2400.0, 3.0, "dt0_drift", {"dt0_drift_c_per_h": 0.5})
+    req = prepare_replan(log_from_frame(effect_log(truth, seed=1), "drift"), plan, 60.0)
+    assert not req.effect.material and req.model.effect == "none"
+    assert "dt0_drift" in [r.effect for r in req.effect.rivals]
+    unchanged = predict_run(req, plan.programme)
+    assert unchanged.complete
+    rivals = predict_rivals(req, plan.programme)
+    drift = next(r for r in rivals if r.effect == "dt0_drift")
+    assert not drift.prediction.complete and drift.gap_c > 1.0
+    # the truth agrees with the rival, not with the base model
+    whole = synth_effect_log(plan.programme, truth, sample_s=6.0, noise_c=0.0, seed=0)
+    t, g = whole["t_true_c"].to_numpy(), whole["g_true_c_per_min"].to_numpy()
+    per_bin = {}
+    for k, grad, _ in own_passes(t, g, *REGION):
+        per_bin.setdefault(k, []).append(grad)
+    true_short = [
+        k
+        for k in range(int(REGION[1] - REGION[0]))
+        if distinct_levels(per_bin.get(k, []), DELTA) < LEVELS
+    ]
+    assert true_short, "the true device completes: the test lost its point"
+    result = ReplanResult(req, "keep", "test", unchanged, unchanged, rivals=rivals)
+    assert result.complete and not result.trusted_complete
+    assert "*** the log fits dt0_drift" in result.summary()
+    assert result.to_json_dict()["trusted_complete"] is False
+    assert {r["effect"] for r in result.to_json_dict()["rival_models"]} >= {"dt0_drift"}
+    # without the rivals, the same run is a promise
+    assert ReplanResult(req, "keep", "test", unchanged, unchanged).trusted_complete
 
 
 def test_a_material_effect_is_kept_and_a_clean_log_keeps_the_base_model(plan):
