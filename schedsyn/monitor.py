@@ -998,6 +998,19 @@ def monitor_run(
     temp_all = np.concatenate((run.t_c, t_rest))
     g_all = np.concatenate((run.g_c_per_min, g_rest))
     predicted = coverage_report(temp_all, g_all, grid, req, delta)
+    for rival in effect.rivals if rest.size else ():
+        # a model that fits the log as well but predicts the rest differently
+        t_r, g_r = predict_from_state(rival.model, rival.t0_c, plan.programme, now, t_now, rest)
+        cov_r = coverage_report(
+            np.concatenate((run.t_c, t_r)), np.concatenate((run.g_c_per_min, g_r)), grid, req, delta
+        )
+        if cov_r.coverage < predicted.coverage or cov_r.min_levels < predicted.min_levels:
+            notes.append(
+                f"*** {rival.effect} fits the log about as well (it predicts the device up to "
+                f"{rival.gap_c:.2f} °C apart over the rest): with it the plan ends at "
+                f"{cov_r.coverage:.0%} (min {cov_r.min_levels} levels), not "
+                f"{predicted.coverage:.0%}; watch again when the log tells them apart"
+            )
     planned_pred = plan.model.predict(plan.programme, full, t0_c=plan.limits.t_init_c)
     planned = coverage_report(planned_pred.t_c, planned_pred.g_c_per_min, grid, req, delta)
     at_log = plan.model.predict(plan.programme, log.time_min, t0_c=plan.limits.t_init_c)

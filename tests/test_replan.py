@@ -1039,3 +1039,21 @@ def test_a_log_too_short_to_fit_says_how_long_it_must_be(plan):
     msg = str(err.value)
     assert "at least 20 are needed" in msg and "a log of at least 40 min" in msg, msg
     assert "fit_step_s" not in msg, msg
+
+
+def test_monitor_says_what_a_rival_that_fits_as_well_predicts(plan):
+    """The first hour of a drifting dT0 on the monitor: the plan is predicted complete
+    with the model used, and the drift, which fits as well, is named with its shortfall."""
+    from schedsyn.monitor import monitor_run
+
+    truth = ModelSpec(2400.0, 3.0, "dt0_drift", {"dt0_drift_c_per_h": 0.5})
+    frame = effect_log(truth, seed=1)
+    report = monitor_run(log_from_frame(frame[frame.time_s <= 3600.0], "drift"), plan)
+    assert report.predicted.complete
+    loud = [n for n in report.notes if n.startswith("*** dt0_drift")]
+    assert len(loud) == 1, report.notes
+    # the same shortfall replan's rival prediction gives (a separate code path)
+    req = prepare_replan(log_from_frame(frame, "drift"), plan, 60.0)
+    drift = next(r for r in predict_rivals(req, plan.programme) if r.effect == "dt0_drift")
+    assert not drift.prediction.complete
+    assert f"the plan ends at {drift.prediction.coverage.coverage:.0%}" in loud[0]
