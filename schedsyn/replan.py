@@ -1068,7 +1068,10 @@ def replan_run(
         best: tuple[RunPrediction, Any, float] | None = None
         best_key = None
         for label, rq in (("identified", request), *rivals):
-            for start in continuation_starts(rq, plan_spec(plan).edge_margin_c):
+            starts = continuation_starts(rq, plan_spec(plan).edge_margin_c)
+            # a rival's steps from M only: the sweep-end starts cost several times more
+            # and, on the red team's drifting device, all ended short (45 s each)
+            for start in starts if rq is request else starts[-1:]:
                 attempt = _plan_from(rq, start, progress, say, label)
                 attempts.append(attempt)
                 planner_s += attempt.planner_s
