@@ -156,17 +156,7 @@ def test_a_rival_that_fits_as_well_and_ends_incomplete_takes_the_promise_back(pl
     drift = next(r for r in rivals if r.effect == "dt0_drift")
     assert not drift.prediction.complete and drift.gap_c > 1.0
     # the truth agrees with the rival, not with the base model
-    whole = synth_effect_log(plan.programme, truth, sample_s=6.0, noise_c=0.0, seed=0)
-    t, g = whole["t_true_c"].to_numpy(), whole["g_true_c_per_min"].to_numpy()
-    per_bin = {}
-    for k, grad, _ in own_passes(t, g, *REGION):
-        per_bin.setdefault(k, []).append(grad)
-    true_short = [
-        k
-        for k in range(int(REGION[1] - REGION[0]))
-        if distinct_levels(per_bin.get(k, []), DELTA) < LEVELS
-    ]
-    assert true_short, "the true device completes: the test lost its point"
+    assert _true_short_bins(plan.programme, truth), "the true device completes: no point"
     result = ReplanResult(req, "keep", "test", unchanged, unchanged, rivals=rivals)
     assert result.complete and not result.trusted_complete
     assert "*** the log fits dt0_drift" in result.summary()
@@ -1057,3 +1047,28 @@ def test_monitor_says_what_a_rival_that_fits_as_well_predicts(plan):
     drift = next(r for r in predict_rivals(req, plan.programme) if r.effect == "dt0_drift")
     assert not drift.prediction.complete
     assert f"the plan ends at {drift.prediction.coverage.coverage:.0%}" in loud[0]
+
+
+def _true_short_bins(programme, truth):
+    """Bins the true device leaves short on ``programme`` (noise-free, a plain loop)."""
+    whole = synth_effect_log(programme, truth, sample_s=6.0, noise_c=0.0, seed=0)
+    t, g = whole["t_true_c"].to_numpy(), whole["g_true_c_per_min"].to_numpy()
+    per_bin: dict[int, list[float]] = {}
+    for k, grad, _ in own_passes(t, g, *REGION):
+        per_bin.setdefault(k, []).append(grad)
+    n = int(REGION[1] - REGION[0])
+    return [k for k in range(n) if distinct_levels(per_bin.get(k, []), DELTA) < LEVELS]
+
+
+def test_replan_chooses_a_rest_that_completes_under_the_rival_too(plan):
+    """Judged at its worst over the model used and the rival, the unchanged plan (90 %
+    with the drift) loses to a continuation complete under both, and that run completes
+    on the drifting device itself."""
+    from schedsyn.replan import replan_run
+
+    truth = ModelSpec(2400.0, 3.0, "dt0_drift", {"dt0_drift_c_per_h": 0.5})
+    result = replan_run(log_from_frame(effect_log(truth, seed=1), "drift"), plan, 60.0)
+    assert _true_short_bins(plan.programme, truth)  # the plan unchanged falls short
+    assert [r.effect for r in result.rivals] and result.choice == "new"
+    assert all(r.prediction.complete for r in result.rivals) and result.trusted_complete
+    assert not _true_short_bins(result.programme, truth)
