@@ -1,0 +1,260 @@
+"""The timetable stage (:mod:`schedsyn.planner.timetable`): complete plans, re-checked apart.
+
+A returned step table is re-simulated by ``tests/independent.py`` (scipy's ODE solver, the
+chamber path built from the typed temperatures) and its levels counted by a loop written
+here, not by ``schedsyn.coverage``; every limit is read off the table itself.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from independent import chamber_knots, ode_trajectories
+
+from schedsyn.campaign import load_campaign
+from schedsyn.params import Limits, ThermalParams
+from schedsyn.planner import timetable as tt
+from schedsyn.planner.check import check_programme
+from schedsyn.planner.request import ExperimentSpec
+from schedsyn.planner.timetable import timetable_search
+
+ROOT = Path(__file__).resolve().parents[1]
+
+SMALL = ExperimentSpec(
+    name="tt-small",
+    working_lo_c=0.0,
+    working_hi_c=10.0,
+    approx_lo_c=-5.0,
+    approx_hi_c=15.0,
+    levels_required=4,
+    delta_c_per_min=0.05,
+    segment_min=3,
+)
+SMALL_LIMITS = Limits(duration_max_min=200.0)
+PARAMS = ThermalParams()
+
+
+def _own_levels(temp, grad, lo, hi, delta):
+    """Passes (maximal runs of samples inside a bin), their mean gradients, and the most
+    of them pairwise ``delta`` apart, per 1 degC bin: counted here, plainly."""
+    out = []
+    for b in np.arange(lo, hi):
+        inside = (temp >= b) & (temp < b + 1)
+        means, i = [], 0
+        while i < inside.size:
+            if inside[i]:
+                j = i
+                while j < inside.size and inside[j]:
+                    j += 1
+                means.append(float(np.mean(grad[i:j])))
+                i = j
+            else:
+                i += 1
+        n, last = 0, -np.inf
+        for m in sorted(means):
+            if m - last >= delta - 1e-12:
+                n, last = n + 1, m
+        out.append(n)
+    return np.array(out)
+
+
+def assert_complete_independently(result, spec, params, limits, tmp_path):
+    """Export the table, re-simulate it apart, count, and check every limit."""
+    path = result.programme.to_csv(tmp_path / "steps.csv")
+    knots_t, knots_tk = chamber_knots(path)
+    _, temp, grad = ode_trajectories(
+        knots_t, knots_tk, params.tau_s, params.dt0_c, t0_c=limits.t_init_c, dt_min=0.05
+    )
+    lev = _own_levels(temp[0], grad[0], spec.working_lo_c, spec.working_hi_c, spec.delta_c_per_min)
+    assert lev.min() >= spec.levels_required, lev
+    dur = np.diff(knots_t)
+    rates = np.diff(knots_tk) / dur
+    assert knots_t[-1] <= limits.duration_max_min + 1e-9
+    assert np.allclose(dur, np.round(dur)) and np.all(dur >= max(1.0, spec.min_step_min))
+    assert len(dur) <= spec.max_steps
+    assert rates.min() >= limits.rate_min_c_per_min - 1e-9
+    assert rates.max() <= limits.rate_max_c_per_min + 1e-9
+    assert knots_tk.min() >= limits.chamber_min_c - 1e-9
+    assert knots_tk.max() <= limits.chamber_max_c + 1e-9
+    assert temp.min() >= limits.device_min_c and temp.max() <= limits.device_max_c
+    assert abs(knots_tk[0] - limits.start_c) < 1e-9
+    assert abs(knots_tk[-1] - limits.end_c) <= limits.end_tol_c + 1e-9
+    assert np.allclose(knots_tk * 10, np.round(knots_tk * 10))  # 0.1 degC, as typed
+    return lev
+
+
+def test_small_request_complete_and_rechecked(tmp_path):
+    res = timetable_search(SMALL, PARAMS, SMALL_LIMITS, deadline_s=30.0)
+    assert res is not None
+    assert_complete_independently(res, SMALL, PARAMS, SMALL_LIMITS, tmp_path)
+    # the planner's own check agrees, and the result says what it tried
+    cov, _, problems, _, _ = check_programme(res.programme, SMALL, SMALL_LIMITS, [PARAMS])
+    assert cov.complete and not problems
+    assert res.tried and res.n_lp > 0 and res.seconds > 0
+    assert res.order.count("C") + res.order.count("H") == SMALL.levels_required
+    # the levels keep a margin over delta (the timetable asks delta + SAFETY_C_PER_MIN)
+    assert res.min_separation_c_per_min >= SMALL.delta_c_per_min + 0.005
+
+
+def test_region_holding_the_start_with_odd_levels(tmp_path):
+    """20 degC inside the region, 5 levels (ceil/floor split)."""
+    spec = ExperimentSpec(
+        name="tt-around-20",
+        working_lo_c=15.0,
+        working_hi_c=25.0,
+        approx_lo_c=10.0,
+        approx_hi_c=30.0,
+        levels_required=5,
+        delta_c_per_min=0.05,
+        segment_min=3,
+    )
+    limits = Limits(duration_max_min=360.0)
+    res = timetable_search(spec, PARAMS, limits, deadline_s=30.0)
+    assert res is not None
+    assert_complete_independently(res, spec, PARAMS, limits, tmp_path)
+
+
+def test_budget_below_the_bound_returns_none_at_once():
+    limits = Limits(duration_max_min=120.0)  # the proven bound for SMALL is 137 min
+    tic = time.monotonic()
+    assert timetable_search(SMALL, PARAMS, limits, deadline_s=30.0) is None
+    assert time.monotonic() - tic < 5.0
+
+
+def test_too_short_budget_returns_none_within_the_deadline():
+    """Above the bound (137 min) but below what the SLP reaches (158): the SLP runs,
+    finds nothing within the budget, and gives up at the deadline."""
+    limits = Limits(duration_max_min=150.0)
+    tic = time.monotonic()
+    assert timetable_search(SMALL, PARAMS, limits, deadline_s=8.0) is None
+    assert time.monotonic() - tic < 15.0
+
+
+def test_refused_requests_return_none_at_once():
+    tic = time.monotonic()
+    # the working region plus its edge margin lies beyond the device limit
+    hot = ExperimentSpec(
+        name="tt-hot", working_lo_c=50.0, working_hi_c=62.0, approx_lo_c=45.0, approx_hi_c=62.0
+    )
+    assert timetable_search(hot, PARAMS, Limits(), deadline_s=30.0) is None
+    many = ExperimentSpec(
+        name="tt-12",
+        working_lo_c=0.0,
+        working_hi_c=10.0,
+        approx_lo_c=-5.0,
+        approx_hi_c=15.0,
+        levels_required=12,
+    )
+    assert timetable_search(many, PARAMS, Limits(), deadline_s=30.0) is None
+    informative = ExperimentSpec(
+        name="tt-inf",
+        working_lo_c=0.0,
+        working_hi_c=10.0,
+        approx_lo_c=-5.0,
+        approx_hi_c=15.0,
+        objective="informative",
+    )
+    assert timetable_search(informative, PARAMS, Limits(), deadline_s=30.0) is None
+    assert time.monotonic() - tic < 5.0
+
+
+def _setup(spec, params, limits):
+    return tt._Setup(
+        spec,
+        params,
+        limits,
+        tt.FirstOrderLag(params),
+        spec.grid.edges_c.astype(float),
+        spec.delta_c_per_min + tt.SAFETY_C_PER_MIN,
+        spec.edge_margin_c + tt.DEPTH_PAD_C,
+    )
+
+
+@pytest.mark.parametrize(
+    "tau_s,rates", [(600.0, (-3.0, 3.0)), (2400.0, (-1.0, 3.0)), (3600.0, (-0.5, 1.5))]
+)
+def test_starting_profiles_follow_the_physics(tau_s, rates):
+    """Ranks sep apart at both edges and in the cruise, under the bands' and chamber's
+    caps; the hot edge (reversed by the slow cooling rate) no faster than the cold one."""
+    params = ThermalParams(tau_s=tau_s)
+    limits = Limits(rate_min_c_per_min=rates[0], rate_max_c_per_min=rates[1])
+    spec = ExperimentSpec(
+        name="tt-prof", working_lo_c=0.0, working_hi_c=30.0, approx_lo_c=-10.0, approx_hi_c=40.0
+    )
+    su = _setup(spec, params, limits)
+    for edge_hi in (True, False):
+        v = tt.edge_speeds(su, edge_hi, 3)
+        assert np.all(np.diff(v) >= su.sep - 1e-12) and v[0] > 0
+    if -rates[0] < rates[1]:
+        assert tt.edge_speeds(su, True, 3)[0] <= tt.edge_speeds(su, False, 3)[0]
+    for d, band in ((+1, spec.max_heat_c_per_min), (-1, spec.max_cool_c_per_min)):
+        c = tt.cruise_speeds(su, d, 3, 1.0)
+        assert np.all(np.diff(c) >= su.sep - 1e-12)
+        assert c[-1] <= band + 1e-12
+    for st in tt.structures(6, -1):
+        for e, c, f in tt.starting_speeds(su, st, 1.0):
+            assert 0 < e <= c and 0 < f <= c
+
+
+def test_structures_split_odd_levels_and_alternate():
+    for levels in (4, 5, 7, 8):
+        for first in (-1, +1):
+            for st in tt.structures(levels, first):
+                assert st.dirs[0] == first
+                assert all(a == -b for a, b in zip(st.dirs, st.dirs[1:], strict=False))
+                n_first = sum(1 for d in st.dirs if d == first)
+                assert n_first == (levels + 1) // 2
+                for d in (-1, +1):
+                    ranks = sorted(r for r, x in zip(st.ranks, st.dirs, strict=True) if x == d)
+                    assert ranks == list(range(1, len(ranks) + 1))
+
+
+@pytest.mark.slow
+def test_w3_tau3600_complete_within_its_budget(tmp_path):
+    """A near miss of the planner: complete 6 levels within 540 min."""
+    cfg = load_campaign(ROOT / "data" / "bench" / "w3-tau3600.toml")
+    spec, params, limits = cfg.experiments[0], cfg.params, cfg.limits
+    res = timetable_search(spec, params, limits, deadline_s=240.0)
+    assert res is not None and res.duration_min <= 540
+    assert_complete_independently(res, spec, params, limits, tmp_path)
+
+
+@pytest.mark.parametrize("seed", [3, 7])
+def test_random_requests_give_a_checked_plan_or_none(seed):
+    """General requests (region 10-40 degC wide anywhere, tau 600-3600 s, dT0 0-6, rates,
+    chamber floors and ceilings near the region, 4-8 levels, delta, segments, budgets):
+    never a crash, the deadline kept, and any plan complete by the planner's own check."""
+    rng = np.random.default_rng(seed)
+    for i in range(3):
+        w = int(rng.integers(10, 41))
+        lo = int(rng.integers(-50, 61 - w))
+        dt0 = float(rng.uniform(0, 6))
+        rates = [(-0.5, 1.5), (-1.0, 3.0), (-3.0, 3.0)][int(rng.integers(3))]
+        near = rng.random() < 0.5
+        spec = ExperimentSpec(
+            name=f"tt-rand-{seed}-{i}",
+            working_lo_c=lo,
+            working_hi_c=lo + w,
+            approx_lo_c=lo - 5,
+            approx_hi_c=lo + w + 5,
+            levels_required=int(rng.integers(4, 9)),
+            delta_c_per_min=float(rng.choice([0.05, 0.08, 0.1])),
+            segment_min=int(rng.choice([3, 5, 10, 15])),
+        )
+        limits = Limits(
+            rate_min_c_per_min=rates[0],
+            rate_max_c_per_min=rates[1],
+            chamber_min_c=min(lo - dt0 - 6.0, 15.0) if near else -70.0,
+            chamber_max_c=max(lo + w - dt0 + 8.0, 25.0) if not near else 80.0,
+            duration_max_min=float(rng.choice([240, 360, 540, 720])),
+        )
+        params = ThermalParams(tau_s=float(rng.uniform(600, 3600)), dt0_c=dt0)
+        tic = time.monotonic()
+        res = timetable_search(spec, params, limits, deadline_s=4.0)
+        assert time.monotonic() - tic < 12.0
+        if res is not None:
+            cov, _, problems, _, _ = check_programme(res.programme, spec, limits, [params])
+            assert cov.complete and not problems
