@@ -21,7 +21,8 @@ cruise, exit speed per sweep) derived from the physics (:mod:`.physics`): rank s
 spaced ``delta + safety`` apart, cruise speeds under the bands' caps and the chamber's
 (``(Tk_max + dT0 - T)/tau`` heating, ``(T - Tk_min - dT0)/tau`` cooling), edge speeds
 small where reversing is slow. A few orders of the ranks and two speed scalings are
-tried, best start first, within a wall-clock deadline.
+tried, best start first, within a budget of LP solves (``max_lps``: the same answer on
+any machine and under any load; an optional wall-clock ``deadline_s`` on top).
 
 Every returned programme is the rounded step table (whole minutes, 0.1 degC) and has
 passed :func:`~.check.check_programme` (complete, no limit broken) and
@@ -76,6 +77,9 @@ TRACK_SHARE = 0.9
 SCALINGS = (1.0, 0.7)
 #: Levels the structure generator handles.
 LEVELS_RANGE = (2, 10)
+#: LP solves the search may spend (every candidate's together; 0.3-0.7 s each on one core
+#: of the 2-core machine): the benchmark's plans were found within 125-573.
+MAX_LPS = 500
 
 Progress = Callable[[str], None] | None
 
@@ -404,10 +408,26 @@ def crossings(su: _Setup, st: _Structure, times, T):
 
 
 # -- the SLP ------------------------------------------------------------------------------
+@dataclass
+class _Clock:
+    """The search's clock, in LP solves (deterministic), with an optional wall deadline
+    (``time.monotonic()`` value) on top."""
+
+    max_lps: int
+    deadline: float | None = None
+    lps: int = 0
+
+    def over(self, stop_lps: float) -> bool:
+        """``stop_lps`` solves done, or the wall deadline passed."""
+        late = self.deadline is not None and time.monotonic() > self.deadline
+        return self.lps >= stop_lps or late
+
+
 class _Timetable:
     """Variables, LP rows and the exact merit for one structure."""
 
-    def __init__(self, su: _Setup, st: _Structure, n_seg: int):
+    def __init__(self, su: _Setup, st: _Structure, n_seg: int, clock: _Clock | None = None):
+        self.clock = _Clock(max_lps=10**9) if clock is None else clock
         self.su, self.st = su, st
         lim = su.limits
         self.nu = n_seg
@@ -677,6 +697,7 @@ class _Timetable:
         ub[self.iend] = min(te0 + rho_t, nu * su.seg)
         bounds = np.concatenate([np.c_[lb, ub], np.c_[np.zeros(ns), np.full(ns, np.inf)]])
         self.n_lp += 1
+        self.clock.lps += 1
         try:
             res = linprog(c, A_ub=A, b_ub=b, bounds=bounds, method="highs")
         except ValueError:
@@ -754,7 +775,7 @@ def _refusal(spec: ExperimentSpec, params: ThermalParams, limits: Limits) -> str
 def _slp(
     tp: _Timetable,
     x,
-    t_stop: float,
+    stop_lps: float,
     on_better: Callable[[np.ndarray], None],
     max_iters: int = 400,
     rho_t: float = 3.0,
@@ -763,7 +784,7 @@ def _slp(
     m, v = tp.merit(x)
     stall = 0
     for _ in range(max_iters):
-        if time.monotonic() > t_stop:
+        if tp.clock.over(stop_lps):
             break
         xn, pred = tp.lp(x, rho_t, rho_u)
         if xn is None:
@@ -807,10 +828,15 @@ def timetable_search(
     limits: Limits,
     *,
     model: LinearThermalModel | None = None,
-    deadline_s: float = 120.0,
+    max_lps: int = MAX_LPS,
+    deadline_s: float | None = None,
+    first_found: bool = False,
     progress: Progress = None,
 ) -> TimetableResult | None:
-    """A complete plan by the timetable SLP, or None when none was found in ``deadline_s``.
+    """A complete plan by the timetable SLP, or None when none was found within
+    ``max_lps`` LP solves (and ``deadline_s`` wall seconds, if given). ``first_found``:
+    stop at the first candidate that gives a complete plan (else once a plan is in hand
+    and half the LPs are spent, keeping the shortest).
 
     Tries alternating structures (first direction from where the device starts relative
     to the region; both splits of an odd level count; slow ranks first, fast first, mixed)
@@ -832,7 +858,9 @@ def timetable_search(
         if why is not None:
             say(f"timetable: refused: {why}")
             return None
-        return _search(spec, params, limits, model, tic, deadline_s, say)
+        deadline = None if deadline_s is None else tic + deadline_s
+        clock = _Clock(max_lps=int(max_lps), deadline=deadline)
+        return _search(spec, params, limits, model, tic, clock, say, first_found)
     except (
         ValueError,
         ArithmeticError,
@@ -844,8 +872,10 @@ def timetable_search(
         return None
 
 
-def _search(spec, params, limits, model, tic, deadline_s, say) -> TimetableResult | None:
-    t_stop = tic + deadline_s
+def _search(
+    spec, params, limits, model, tic, clock: _Clock, say, first_found: bool = False
+) -> TimetableResult | None:
+    lp_stop = clock.max_lps
     model = FirstOrderLag(params) if model is None else model
     su = _Setup(
         spec,
@@ -897,7 +927,7 @@ def _search(spec, params, limits, model, tic, deadline_s, say) -> TimetableResul
     for st, kind in todo:
         kinds[st] = kind
         for scale in SCALINGS:
-            if time.monotonic() > t_stop:
+            if clock.over(lp_stop):
                 break
             speeds = starting_speeds(su, st, scale)
             u, end_at = track(su, st, speeds, n_track)
@@ -909,12 +939,12 @@ def _search(spec, params, limits, model, tic, deadline_s, say) -> TimetableResul
         return None
     starts = []
     for st, scale, speeds, u, end_at in cands:
-        if time.monotonic() > t_stop:
+        if clock.over(lp_stop):
             break
         n_seg = min(n_track, max(end_at + 12, int(math.ceil(1.1 * budget / su.seg))))
         n_seg = min(n_seg, int(math.ceil(1.25 * budget / su.seg)))
         uu = u[:n_seg].copy()
-        tp = _Timetable(su, st, n_seg)
+        tp = _Timetable(su, st, n_seg, clock)
         T = tp.fine_a_t @ uu + tp.fine_b_t
         tt = crossings(su, st, tp.t_fine, T)
         if tt is None:
@@ -939,13 +969,14 @@ def _search(spec, params, limits, model, tic, deadline_s, say) -> TimetableResul
     tried = []
     n_lp = 0
     for i, (_, st, scale, speeds, n_seg, x0) in enumerate(starts):
-        now = time.monotonic()
-        if now > t_stop - 2.0:
+        now, wall = clock.lps, time.monotonic()
+        if clock.over(lp_stop - 2):
             break
-        tp = _Timetable(su, st, n_seg)
+        tp = _Timetable(su, st, n_seg, clock)
         left = len(starts) - i
-        slice_s = (t_stop - now) if left == 1 else max((t_stop - now) * 0.6, (t_stop - now) / left)
-        c_stop = now + slice_s
+        room = lp_stop - now
+        slice_lps = room if left == 1 else max(room * 0.6, room / left)
+        c_stop = now + slice_lps
         state: dict[str, Any] = {"checked_end": np.inf, "found": None}
 
         def on_better(x, tp=tp, state=state):
@@ -968,13 +999,13 @@ def _search(spec, params, limits, model, tic, deadline_s, say) -> TimetableResul
                     state["found"] = (prog, cov)
                     break
 
-        say(f"timetable: SLP {st.name} x{scale} ({slice_s:.0f} s)")
+        say(f"timetable: SLP {st.name} x{scale} (up to {slice_lps:.0f} LPs)")
         x, m, v = _slp(tp, x0, c_stop, on_better)
         for _ in range(PENALTY_RAISES):  # stuck with violations left: weigh them more
             resid = sum(float(np.sum(v[k])) for k in v)
             if state["found"] is not None or resid < 1e-3 or float(x[-1]) > budget + 30.0:
                 break
-            if time.monotonic() > c_stop - 1.0:
+            if clock.over(c_stop - 1):
                 break
             for k in tp.weights:
                 tp.weights[k] *= 10.0
@@ -986,7 +1017,7 @@ def _search(spec, params, limits, model, tic, deadline_s, say) -> TimetableResul
         for weight in L1_LOWER:  # converged just over the budget: trade steps for minutes
             if state["found"] is not None or float(x[-1]) > budget + 15.0:
                 break
-            if time.monotonic() > c_stop - 1.0:
+            if clock.over(c_stop - 1):
                 break
             tp.l1 = weight
             say(f"timetable: {st.name} x{scale}: end {x[-1]:.1f} min, l1 weight {weight:g}")
@@ -1003,7 +1034,7 @@ def _search(spec, params, limits, model, tic, deadline_s, say) -> TimetableResul
             start_end_min=float(x0[-1]),
             end_min=float(x[-1]),
             lps=tp.n_lp,
-            seconds=round(time.monotonic() - now, 1),
+            seconds=round(time.monotonic() - wall, 1),
             found_min=None if found is None else found[0].total_min,
         )
         tried.append(row)
@@ -1011,8 +1042,8 @@ def _search(spec, params, limits, model, tic, deadline_s, say) -> TimetableResul
         say(f"timetable: {st.name} x{scale}: end {x[-1]:.1f} min after {tp.n_lp} LPs, {what}")
         if found is not None and (best is None or found[0].total_min < best["prog"].total_min):
             best = dict(prog=found[0], cov=found[1], st=st, scale=scale, speeds=speeds)
-        if best is not None and time.monotonic() > tic + 0.5 * deadline_s:
-            break  # a plan in hand and half the time gone: stop here
+        if best is not None and (first_found or clock.over(0.5 * lp_stop)):
+            break  # a plan in hand (and half the LPs spent): stop here
     if best is None:
         return None
     prog = best["prog"]
