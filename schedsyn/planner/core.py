@@ -271,6 +271,7 @@ def plan_experiment(
     graded: bool = True,
     effort_s: float | None = EFFORT_S,
     stop: Callable[[], bool] | None = None,
+    timetable: bool = True,
 ) -> Plan:
     """Synthesise a chamber programme for ``spec`` (see :mod:`schedsyn.planner`).
 
@@ -313,6 +314,12 @@ def plan_experiment(
     stop : callable() -> bool, optional
         Asked before each candidate structure of every search, the requested plan's too:
         True stops the search with what it has (cancellation by the caller).
+    timetable : bool
+        When the band search ends without a complete plan (and the proven bound fits the
+        budget), try the timetable stage (:mod:`.timetable`: rates and bin-boundary
+        crossing times by sequential LP, at most ``timetable.MAX_LPS`` LP solves) and
+        return its plan if it is complete. One model, no robust box, no continuation,
+        objective ``shortest``. Default True.
 
     Returns
     -------
@@ -335,20 +342,114 @@ def plan_experiment(
             f"effort_s must be a positive number of seconds or None (no limit), got {effort_s!r}"
         )
     _check_nominal_in_box(ThermalParams() if params is None else params, robust_tau_s, robust_dt0_c)
-    return _plan(
-        spec,
-        ThermalParams() if params is None else params,
-        Limits() if limits is None else limits,
-        model=model,
-        robust_tau_s=robust_tau_s,
-        robust_dt0_c=robust_dt0_c,
-        progress=progress,
-        require_complete=require_complete,
-        continuation=continuation,
-        graded=graded,
-        effort=_Effort(lp_nonzeros_solved(), effort_s, stop),
-        search_stop=stop,
+    params = ThermalParams() if params is None else params
+    limits = Limits() if limits is None else limits
+    tic = time.perf_counter()
+    try_timetable = (
+        timetable
+        and continuation is None
+        and robust_tau_s is None
+        and robust_dt0_c is None
+        and spec.objective == "shortest"
     )
+    try:
+        plan = _plan(
+            spec,
+            params,
+            limits,
+            model=model,
+            robust_tau_s=robust_tau_s,
+            robust_dt0_c=robust_dt0_c,
+            progress=progress,
+            require_complete=require_complete,
+            continuation=continuation,
+            graded=graded,
+            effort=_Effort(lp_nonzeros_solved(), effort_s, stop),
+            search_stop=stop,
+        )
+    except InfeasiblePlanError as err:
+        if not try_timetable or (stop is not None and stop()):
+            raise
+        best = err.best_plan if isinstance(err.best_plan, Plan) else None
+        found = _timetable_plan(spec, params, limits, model, progress, best, tic)
+        if found is None:
+            raise
+        return found
+    if plan.complete or not try_timetable or (stop is not None and stop()):
+        return plan
+    return _timetable_plan(spec, params, limits, model, progress, plan, tic) or plan
+
+
+def _timetable_plan(
+    spec: ExperimentSpec,
+    params: ThermalParams,
+    limits: Limits,
+    model: LinearThermalModel | None,
+    progress: Callable[[str], None] | None,
+    band_plan: Plan | None,
+    tic: float,
+) -> Plan | None:
+    """The timetable stage's plan for a request the band search did not complete, checked
+    like every plan (dense re-simulation of the rounded table, limits, step limits), or
+    None. ``band_plan``: the band search's best (its notes about the search are replaced
+    by what the timetable did)."""
+    from .timetable import timetable_search
+
+    if progress:
+        progress(f"{spec.name}: no complete plan from the band search: the timetable stage")
+    found = timetable_search(spec, params, limits, model=model, first_found=True, progress=progress)
+    if found is None:
+        if progress:
+            progress(f"{spec.name}: the timetable stage found no complete plan either")
+        return None
+    programme = found.programme
+    cov, cov01, problems, t_lo, t_hi = check_programme(programme, spec, limits, [params], model)
+    problems = [*problems, *step_limit_problems(programme, spec)]
+    if not cov.complete or problems:  # cannot happen: the stage checks its tables so
+        return None
+    bound = None
+    if model is None:
+        bound = duration_lower_bound(spec, params, limits).lower_bound_min
+    before = (
+        ""
+        if band_plan is None
+        else f" (the band search's best: {band_plan.coverage.coverage:.0%}, min "
+        f"{band_plan.coverage.min_levels} levels, {band_plan.duration_min:g} min)"
+    )
+    note = (
+        f"planned by the timetable stage{before}: {found.order} sweeps (C cooling, H "
+        f"heating, digit the rank, 1 the slowest), rates and bin-boundary crossing times "
+        f"by sequential LP ({found.n_lp} LPs); worst bin's level separation "
+        f"{found.min_separation_c_per_min:.3f} °C/min"
+    )
+    plan = Plan(
+        spec=spec,
+        params=params,
+        limits=limits,
+        programme=programme,
+        coverage=cov,
+        coverage_0p1=cov01,
+        complete=True,
+        status="complete",
+        solve_s=time.perf_counter() - tic,
+        margin_g_c_per_min=found.min_separation_c_per_min - spec.delta_c_per_min,
+        margin_t_c=float("nan"),
+        lp={
+            **(band_plan.lp if band_plan is not None else LpStats().to_dict()),
+            "timetable_lps": found.n_lp,
+            "timetable_order": found.order,
+        },
+        problem_size=band_plan.problem_size if band_plan is not None else {},
+        scenarios=(params,),
+        violations=(),
+        notes=(note,),
+        t_min_c=t_lo,
+        t_max_c=t_hi,
+        duration_lower_bound_min=bound,
+    )
+    if progress:
+        progress(f"{spec.name}: timetable stage: complete in {plan.duration_min:g} min")
+    return with_table_meta(plan)
 
 
 #: A device time constant below this is not a gyro in a chamber: the robust box was
