@@ -259,3 +259,21 @@ def test_random_requests_give_a_checked_plan_or_none(seed):
         if res is not None:
             cov, _, problems, _, _ = check_programme(res.programme, spec, limits, [params])
             assert cov.complete and not problems
+
+
+def test_plan_experiment_hands_a_request_the_band_search_leaves_short_to_the_stage(tmp_path):
+    """4 levels in [0, 6] degC within 150 min (bound 118): the band search ends short
+    (it needs about 170 min); plan_experiment then plans it with the timetable stage,
+    complete by separate code, with the note that says so and the proven bound below it."""
+    from schedsyn.planner import plan_experiment
+
+    spec = ExperimentSpec("short", 0.0, 6.0, -5.0, 11.0, levels_required=4)
+    limits = Limits(duration_max_min=150.0)
+    band = plan_experiment(spec, PARAMS, limits, timetable=False)
+    assert not band.complete
+    plan = plan_experiment(spec, PARAMS, limits)
+    assert plan.complete and plan.status == "complete" and plan.duration_min <= 150.0
+    assert plan.notes[0].startswith("planned by the timetable stage")
+    assert plan.duration_lower_bound_min <= plan.duration_min
+    assert plan.lp["timetable_lps"] > 0
+    assert_complete_independently(plan, spec, PARAMS, limits, tmp_path)
