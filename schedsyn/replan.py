@@ -764,6 +764,11 @@ def _plan_from(
     return PlannerAttempt(start, planned, prediction, None, seconds, planned_with)
 
 
+#: Rival models a re-plan also plans new steps for (the ones that disagree most with the
+#: model used); every rival still judges every run.
+MAX_RIVAL_PLANS = 1
+
+
 @dataclass(frozen=True, slots=True)
 class RivalPrediction:
     """The chosen run predicted with a rival model (:class:`schedsyn.monitor.RivalModel`:
@@ -1067,7 +1072,13 @@ def replan_run(
         before = "completes" if unchanged_key[1] else f"reaches {unchanged_key[2]:.0%}{worst_text}"
         best: tuple[RunPrediction, Any, float] | None = None
         best_key = None
-        for label, rq in (("identified", request), *rivals):
+        # new steps for the rival that disagrees most only: several rivals (4 on a W4 log
+        # of the first hour) would each cost a planner call; all still judge every run
+        planned_for = sorted(request.effect.rivals, key=lambda r: -r.gap_c)[:MAX_RIVAL_PLANS]
+        plan_rivals = [
+            (label, rq) for label, rq in rivals if label in {r.effect for r in planned_for}
+        ]
+        for label, rq in (("identified", request), *plan_rivals):
             starts = continuation_starts(rq, plan_spec(plan).edge_margin_c)
             # a rival's steps from M only: the sweep-end starts cost several times more
             # and, on the red team's drifting device, all ended short (45 s each)

@@ -1072,3 +1072,24 @@ def test_replan_chooses_a_rest_that_completes_under_the_rival_too(plan):
     assert [r.effect for r in result.rivals] and result.choice == "new"
     assert all(r.prediction.complete for r in result.rivals) and result.trusted_complete
     assert not _true_short_bins(result.programme, truth)
+
+
+def test_new_steps_are_planned_for_the_rival_that_disagrees_most_only(plan, monkeypatch):
+    """Each rival planned for costs a planner call (a W4 log of the first hour had four):
+    new steps are asked for the identified model and the rival furthest from it only."""
+    import schedsyn.replan as replan_module
+    from schedsyn.replan import PlannerAttempt, replan_run
+
+    asked: list[str] = []
+
+    def no_plan(request, start, progress, say, planned_with="identified"):
+        asked.append(planned_with)
+        return PlannerAttempt(start, None, None, "not planned in this test", 0.0, planned_with)
+
+    monkeypatch.setattr(replan_module, "_plan_from", no_plan)
+    truth = ModelSpec(2400.0, 3.0, "dt0_drift", {"dt0_drift_c_per_h": 0.5})
+    result = replan_run(log_from_frame(effect_log(truth, seed=1), "drift"), plan, 60.0)
+    rivals = sorted(result.request.effect.rivals, key=lambda r: -r.gap_c)
+    assert len(rivals) >= 2  # the point of the test: more rivals than are planned for
+    assert [a for a in asked if a != "identified"] == [rivals[0].effect]
+    assert len(result.rivals) == len(rivals)  # every rival still judges the run
