@@ -40,7 +40,7 @@ from __future__ import annotations
 import json
 import math
 import shlex
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -642,18 +642,23 @@ def check_effect(
     times = np.arange(now_min, plan.programme.total_min + 1e-9, 0.5)
     warnings = list(d.warnings)
     shift, disagree, rival = 0.0, 0.0, ""
+    # the rest predicted by the chosen effect and each effect it cannot be told from
+    predicted: dict[str, np.ndarray] = {}
+    t_base = np.zeros(0)
     if times.size:
-        t_eff, _ = predict_from_state(d.model, t0, plan.programme, now_min, t_now_c, times)
+        for name in (d.effect, *d.ambiguous_with):
+            fit = fits.get(name)
+            if fit is not None:
+                predicted[name] = predict_from_state(
+                    fit.model, fit.t0_c, plan.programme, now_min, t_now_c, times
+                )[0]
+        t_eff = predicted[d.effect]
         t_base, _ = predict_from_state(base, base_t0_c, plan.programme, now_min, t_now_c, times)
         shift = float(np.max(np.abs(t_eff - t_base)))
         for name in d.ambiguous_with:
-            alt = fits.get(name)
-            if alt is None:
+            if name not in predicted:
                 continue
-            t_alt, _ = predict_from_state(
-                alt.model, alt.t0_c, plan.programme, now_min, t_now_c, times
-            )
-            gap = float(np.max(np.abs(t_alt - t_eff)))
+            gap = float(np.max(np.abs(predicted[name] - t_eff)))
             if gap > disagree:
                 disagree, rival = gap, name
     material = shift > material_c
@@ -675,14 +680,8 @@ def check_effect(
                 f"up to {disagree:.2f} °C apart over the rest of the plan: not identified "
                 "yet, the base model is used"
             )
-    rivals = _rivals(
-        d.effect,
-        d.ambiguous_with,
-        fits,
-        (d.model, t0) if material else (base, base_t0_c),
-        (plan.programme, now_min, t_now_c, times),
-        material_c,
-    )
+    used = d.effect if material else None
+    rivals = _rivals(fits, predicted, used, predicted[d.effect] if material else t_base, material_c)
     return EffectCheck(
         d.effect,
         {k: float(v) for k, v in d.parameters.items()},
@@ -697,30 +696,25 @@ def check_effect(
 
 
 def _rivals(
-    chosen: str,
-    ambiguous: Sequence[str],
     fits: Mapping[str, Any],
-    used: tuple[ModelSpec, float],
-    rest: tuple[Programme, float, float, np.ndarray],
+    predicted: Mapping[str, np.ndarray],
+    used: str | None,
+    t_used: np.ndarray,
     material_c: float,
 ) -> tuple[RivalModel, ...]:
-    """The diagnosis' choice and the effects it could not tell from it, each kept where
-    its prediction of the rest differs from the used model's by more than
-    ``material_c``. (A drift of dT0 against a slope of dT0 with temperature on the first
-    hour of a W2 run: the rest was predicted 83 % apart in coverage; red team.)"""
-    programme, now_min, t_now_c, times = rest
-    if not times.size:
-        return ()
-    t_used, _ = predict_from_state(used[0], used[1], programme, now_min, t_now_c, times)
+    """The diagnosis' choice and the effects it could not tell from it (``predicted``:
+    each one's device temperature over the rest), but for the effect in use (``used``;
+    None: the base model), each kept where its prediction differs from the used model's
+    (``t_used``) by more than ``material_c``. (A drift of dT0 against a slope of dT0 with
+    temperature on the first hour of a W2 run: the rest was predicted 83 % apart in
+    coverage; red team.)"""
     out = []
-    for name in (chosen, *ambiguous):
-        fit = fits.get(name)
-        if fit is None or fit.model == used[0]:
+    for name, t_alt in predicted.items():
+        if name == used:
             continue
-        t_alt, _ = predict_from_state(fit.model, fit.t0_c, programme, now_min, t_now_c, times)
         gap = float(np.max(np.abs(t_alt - t_used)))
         if gap > material_c:
-            out.append(RivalModel(name, fit.model, float(fit.t0_c), gap))
+            out.append(RivalModel(name, fits[name].model, float(fits[name].t0_c), gap))
     return tuple(out)
 
 

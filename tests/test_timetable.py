@@ -1,8 +1,8 @@
 """The timetable stage (:mod:`schedsyn.planner.timetable`): complete plans, re-checked apart.
 
 A returned step table is re-simulated by ``tests/independent.py`` (scipy's ODE solver, the
-chamber path built from the typed temperatures) and its levels counted by a loop written
-here, not by ``schedsyn.coverage``; every limit is read off the table itself.
+chamber path built from the typed temperatures) and its levels counted by its plain loop
+(``levels_per_bin``), not by ``schedsyn.coverage``; every limit is read off the table itself.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from independent import chamber_knots, ode_trajectories
+from independent import chamber_knots, levels_per_bin, ode_trajectories
 
 from schedsyn.campaign import load_campaign
 from schedsyn.params import Limits, ThermalParams
@@ -37,30 +37,6 @@ SMALL_LIMITS = Limits(duration_max_min=200.0)
 PARAMS = ThermalParams()
 
 
-def _own_levels(temp, grad, lo, hi, delta):
-    """Passes (maximal runs of samples inside a bin), their mean gradients, and the most
-    of them pairwise ``delta`` apart, per 1 degC bin: counted here, plainly."""
-    out = []
-    for b in np.arange(lo, hi):
-        inside = (temp >= b) & (temp < b + 1)
-        means, i = [], 0
-        while i < inside.size:
-            if inside[i]:
-                j = i
-                while j < inside.size and inside[j]:
-                    j += 1
-                means.append(float(np.mean(grad[i:j])))
-                i = j
-            else:
-                i += 1
-        n, last = 0, -np.inf
-        for m in sorted(means):
-            if m - last >= delta - 1e-12:
-                n, last = n + 1, m
-        out.append(n)
-    return np.array(out)
-
-
 def assert_complete_independently(result, spec, params, limits, tmp_path):
     """Export the table, re-simulate it apart, count, and check every limit."""
     path = result.programme.to_csv(tmp_path / "steps.csv")
@@ -68,7 +44,8 @@ def assert_complete_independently(result, spec, params, limits, tmp_path):
     _, temp, grad = ode_trajectories(
         knots_t, knots_tk, params.tau_s, params.dt0_c, t0_c=limits.t_init_c, dt_min=0.05
     )
-    lev = _own_levels(temp[0], grad[0], spec.working_lo_c, spec.working_hi_c, spec.delta_c_per_min)
+    region = (spec.working_lo_c, spec.working_hi_c)
+    lev = levels_per_bin(temp[0], grad[0], *region, spec.delta_c_per_min)
     assert lev.min() >= spec.levels_required, lev
     dur = np.diff(knots_t)
     rates = np.diff(knots_tk) / dur
