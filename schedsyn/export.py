@@ -472,9 +472,10 @@ def quantise(
       nearest feasible value: ``Tk'_{k+1}`` in ``[Tk'_k + rate_min d_k, Tk'_k + rate_max d_k]``
       (on the grid). Rates are recomputed from the rounded temperatures.
     * Where that leaves the last boundary off the source's end temperature (times rounded
-      shorter than the rate limits allow), the last step is lengthened by up to
-      :data:`END_EXTEND_MAX_STEPS` grid steps within ``duration_max_min``: the end
-      temperature is the operator's end condition.
+      shorter than the rate limits allow), the last step is lengthened by whole grid
+      steps, by at most :func:`end_extension_max_min` and within ``duration_max_min``,
+      so that it ends exactly there: the end temperature is the operator's end
+      condition. Where that is not possible the path keeps its rounded length.
     * Equal-rate neighbours are merged (one controller step), then any step longer than
       ``max_step_min`` is cut into equal whole-grid pieces (their inner temperatures
       rounded the same way).
@@ -501,16 +502,8 @@ def quantise(
     dur = np.diff(ticks) * q
     tk = _round_path(temps, dur, limits, temp_step_c)
     end_want = _grid_round(float(temps[-1]), temp_step_c)
-    extra = 0
-    while abs(tk[-1] - end_want) > 1e-9 and extra < END_EXTEND_MAX_STEPS:
-        # the last steps were shortened past what the rate limits allow: the end
-        # temperature (the operator's end condition) is kept, the last step lengthened
-        longer = dur.copy()
-        longer[-1] += q
-        if float(longer.sum()) > limits.duration_max_min + 1e-9:
-            break
-        dur, extra = longer, extra + 1
-        tk = _round_path(temps, dur, limits, temp_step_c)
+    if abs(tk[-1] - end_want) > 1e-9:
+        dur, tk = _extend_to_end(temps, dur, tk, end_want, q, limits, temp_step_c)
     out = Programme(dur, np.diff(tk) / dur, float(tk[0])).merged(rate_tol_c_per_min=1e-9)
     if max_step_min is not None:
         out = _cut_long_steps(out, max_step_min, q, limits, temp_step_c)
@@ -520,8 +513,45 @@ def quantise(
 #: Bins that lost levels named in an export's summary (the rest are counted).
 LOST_BINS_SHOWN = 8
 #: Controller time steps the last step may be lengthened by so that the exported
-#: programme ends at the source's end temperature (:func:`quantise`).
+#: programme ends at the source's end temperature (:func:`quantise`) ...
 END_EXTEND_MAX_STEPS = 5
+#: ... or minutes, whichever is longer: on a 1-s controller five steps are 5 s, while
+#: a boundary held 0.1 degC short by the rate limit needs 6 s at -1 degC/min.
+END_EXTEND_MAX_MIN = 5.0
+
+
+def end_extension_max_min(time_step_min: float) -> float:
+    """The longest the last step may be lengthened by (min) on a ``time_step_min`` grid."""
+    return max(END_EXTEND_MAX_STEPS * time_step_min, END_EXTEND_MAX_MIN)
+
+
+def _extend_to_end(
+    temps: np.ndarray,
+    dur: np.ndarray,
+    tk: np.ndarray,
+    end_want: float,
+    q: float,
+    limits: Limits,
+    step: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Lengthen the last step by whole ``q`` steps until the rounded path ends at
+    ``end_want``; the input unchanged where that takes more than
+    :func:`end_extension_max_min` or ``limits.duration_max_min``."""
+    cap_steps = int(math.floor(end_extension_max_min(q) / q + 1e-9))
+    longer, path, extra = dur.copy(), tk, 0
+    while abs(path[-1] - end_want) > 1e-9:
+        # the last step runs at its rate limit: the time the missing degrees take there
+        # (at least one step; rounding to the temperature grid may ask for one more)
+        up = end_want > path[-1]
+        rate = limits.rate_max_c_per_min if up else -limits.rate_min_c_per_min
+        steps = max(1, math.ceil(abs(end_want - path[-1]) / max(rate, 1e-9) / q - 1e-9))
+        extra += steps
+        longer = longer.copy()
+        longer[-1] += steps * q
+        if extra > cap_steps or float(longer.sum()) > limits.duration_max_min + 1e-9:
+            return dur, tk
+        path = _round_path(temps, longer, limits, step)
+    return longer, path
 
 
 def _round_path(temps: np.ndarray, dur: np.ndarray, limits: Limits, step: float) -> np.ndarray:

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
@@ -27,10 +27,10 @@ from schedsyn.controllers import CODECS, SPECS
 from schedsyn.errors import ParameterError, StepTableError
 from schedsyn.export import (
     CONTROLLER_KEYS,
-    END_EXTEND_MAX_STEPS,
     CoverageCheck,
     ExportSettings,
     check_from_meta,
+    end_extension_max_min,
     export_programme,
     quantise,
     read_export,
@@ -180,6 +180,8 @@ def test_exported_coverage_is_that_of_the_read_back_programme(controller):
     deltas=st.lists(st.floats(-30.0, 30.0), min_size=25, max_size=25),
     q_s=st.sampled_from([1, 60]),
 )
+# found in CI: on 1-s steps the last ramp needed 6 s more, five steps allowed only 5 s
+@example(durs=[1.0] * 6 + [1.875, 1.0], deltas=[0.0] * 6 + [-2.0, -1.0] + [0.0] * 17, q_s=1)
 @settings(max_examples=60, deadline=None)
 def test_quantise_stays_within_limits_and_half_a_step(durs, deltas, q_s):
     lim = Limits()
@@ -197,12 +199,14 @@ def test_quantise_stays_within_limits_and_half_a_step(durs, deltas, q_s):
     out = quantise(prog, q, lim)
     edges = np.concatenate(([0.0], np.cumsum(out.durations_min)))
     assert np.allclose(edges / q, np.round(edges / q), atol=1e-6)
-    # the rounded length, or up to END_EXTEND_MAX_STEPS steps more to end where the
-    # source ends (its last steps rounded shorter than the rate limits allow)
+    # the rounded length, or longer by at most end_extension_max_min to end exactly where
+    # the source ends (its last steps rounded shorter than the rate limits allow)
     extended = round((out.total_min - math.floor(prog.total_min / q + 0.5 + 1e-9) * q) / q)
-    assert 0 <= extended <= END_EXTEND_MAX_STEPS
+    assert 0 <= extended * q <= end_extension_max_min(q) + 1e-9
     if extended:
-        assert abs(out.boundary_temps_c[-1] - round(tk_src[-1], 1)) < 1e-9
+        # to 0.1 degC, halves away from zero (as the export rounds)
+        end_src = math.copysign(math.floor(abs(tk_src[-1]) * 10 + 0.5 + 1e-9), tk_src[-1]) / 10
+        assert abs(out.boundary_temps_c[-1] - end_src) < 1e-9
     assert out.rates_c_per_min.min() >= lim.rate_min_c_per_min - 1e-9
     assert out.rates_c_per_min.max() <= lim.rate_max_c_per_min + 1e-9
     tk = out.boundary_temps_c
@@ -237,6 +241,20 @@ def test_a_last_ramp_rounded_shorter_than_the_rate_allows_is_lengthened_to_end_a
     tight = quantise(prog, 1.0, Limits(duration_max_min=18.4))
     assert tight.total_min == pytest.approx(18.0)
     assert tight.boundary_temps_c[-1] == pytest.approx(20.8)
+
+
+def test_on_one_second_steps_the_last_ramp_gets_the_seconds_the_end_needs():
+    """Hypothesis found it in CI: 20 -> 18.125 -> 17.125 degC at -1 degC/min after 6 min
+    at 20. On 1-s steps the first ramp rounds to 113 s and stops at 18.2, the last
+    (60 s) at 17.2; the end needs 6 s more, and five 1-s steps allowed only 5."""
+    prog = Programme(np.array([6.0, 1.875, 1.0]), np.array([0.0, -1.0, -1.0]), 20.0)
+    out = quantise(prog, 1.0 / 60.0, Limits())
+    assert out.boundary_temps_c[-1] == pytest.approx(17.1)
+    assert out.total_min * 60 == pytest.approx(533 + 6)
+    assert out.rates_c_per_min.min() >= -1.0 - 1e-9
+    # no room for the 6 s: the path keeps its rounded length, not a partial extension
+    tight = quantise(prog, 1.0 / 60.0, Limits(duration_max_min=(533 + 5) / 60))
+    assert tight.total_min * 60 == pytest.approx(533)
 
 
 # ---------------------------------------------------------------------------------------
