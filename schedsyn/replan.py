@@ -607,9 +607,12 @@ def check_uncertainty(
     return UncertaintyCheck(sigmas, tau, dt0, worst, wt, wd, every, source)
 
 
-def sweep_end_min(request: ReplanRequest, edge_margin_c: float) -> float | None:
-    """The first whole minute from ``M`` at which the device, going on with the plan, is
-    outside the working region by ``edge_margin_c`` (``M`` itself if it already is).
+def sweep_end_min(
+    request: ReplanRequest, edge_margin_c: float, from_min: float | None = None
+) -> float | None:
+    """The first whole minute from ``M`` (or ``from_min``) at which the device, going on
+    with the plan, is outside the working region by ``edge_margin_c`` (that minute itself
+    if it already is).
 
     New sweeps begin there: a sweep in progress at ``M`` is finished as planned rather
     than abandoned (the planner's sweeps start beyond the region's edges, so one begun
@@ -620,7 +623,8 @@ def sweep_end_min(request: ReplanRequest, edge_margin_c: float) -> float | None:
     time_min, temp, _ = run_series(request, plan.programme)
     lo = plan.working_lo_c - edge_margin_c
     hi = plan.working_hi_c + edge_margin_c
-    minutes = np.arange(request.at_min, math.floor(plan.programme.total_min) + 0.5, 1.0)
+    first = request.at_min if from_min is None else max(float(from_min), request.at_min)
+    minutes = np.arange(first, math.floor(plan.programme.total_min) + 0.5, 1.0)
     # T at whole minutes (the 0.1 min grid holds them up to rounding)
     at = np.interp(minutes, time_min, temp)
     out = np.flatnonzero((at <= lo) | (at >= hi))
@@ -685,7 +689,9 @@ def planner_request(request: ReplanRequest, from_min: float | None = None) -> tu
     return spec, params, model.planner_limits(plan.limits), linear, continuation
 
 
-def continuation_starts(request: ReplanRequest, edge_margin_c: float) -> list[float]:
+def continuation_starts(
+    request: ReplanRequest, edge_margin_c: float, lead_min: float = 0.0
+) -> list[float]:
     """Whole minutes from which the planner is asked for new steps, in the order tried.
 
     First where the sweep in progress ends (:func:`sweep_end_min`): finishing it as
@@ -694,11 +700,16 @@ def continuation_starts(request: ReplanRequest, edge_margin_c: float) -> list[fl
     hotter than the plan's model, say), the sweep end comes a whole sweep later or never,
     and the time left no longer holds the sweeps still needed; new steps from ``M`` take
     the sweep in progress over. Starts at or beyond the time limit are left out.
+
+    ``lead_min`` (whole minutes): no new step before ``M + lead_min``, the time the
+    re-plan and loading the controller take while the chamber runs on with the plan;
+    ``M + lead_min`` then takes the place of ``M``.
     """
     plan = request.plan
     out = []
-    end = sweep_end_min(request, edge_margin_c)
-    for start in (end, request.at_min):
+    earliest = request.at_min + float(lead_min)
+    end = sweep_end_min(request, edge_margin_c, earliest)
+    for start in (end, earliest):
         if start is not None and start < plan.limits.duration_max_min and start not in out:
             out.append(float(start))
     return out
@@ -841,6 +852,7 @@ class ReplanResult:
     attempts: tuple[PlannerAttempt, ...] = ()
     uncertainty: UncertaintyCheck | None = None
     rivals: tuple[RivalPrediction, ...] = ()
+    lead_min: float = 0.0
 
     @property
     def programme(self) -> Programme:
@@ -917,6 +929,7 @@ class ReplanResult:
                 "planner": self._planner_dict(),
                 "planner_attempts": [a.to_dict() for a in self.attempts],
                 "new_steps_from_min": self.new_steps_from_min,
+                "lead_min": self.lead_min,
                 "replan_s": self.replan_s,
                 "planner_s": self.planner_s,
                 "uncertainty_box": None if self.uncertainty is None else self.uncertainty.to_dict(),
@@ -970,8 +983,28 @@ class ReplanResult:
         if self.uncertainty is not None:
             lines.append(self.uncertainty.line())
         lines.extend(x.line() for x in self.rivals if not x.prediction.complete)
+        late = self.late_line()
+        if late is not None:
+            lines.append(late)
         lines.extend(f"note: {n}" for n in r.notes)
         return "\n".join(lines)
+
+    def late_line(self) -> str | None:
+        """A ``***`` line when the re-plan took longer than the time before its new steps
+        begin: a chamber that ran on with the plan has passed where they start."""
+        start = self.new_steps_from_min
+        if self.choice != "new" or start is None:
+            return None
+        took_min = self.replan_s / 60.0
+        if self.request.at_min + took_min <= start:
+            return None
+        lead = math.ceil(took_min) + 2
+        return (
+            f"*** the re-plan took {took_min:.1f} min and its new steps begin at minute "
+            f"{start:g}: a chamber that ran on with the plan since minute "
+            f"{self.request.at_min:g} is past them; re-plan with --lead-min {lead} (the "
+            "minutes the re-plan and loading the programme take), or hold the chamber"
+        )
 
 
 def _model_text(model: ModelSpec) -> str:
@@ -993,6 +1026,7 @@ def replan_run(
     keep_if_complete: bool = True,
     new_only_if_complete: bool = False,
     new_min_coverage: float = 0.0,
+    lead_min: float = 0.0,
     progress: Callable[[str], None] | None = None,
 ) -> ReplanResult:
     """Re-plan the rest of a run at minute ``at_min`` (what ``schedsyn replan`` does).
@@ -1024,6 +1058,11 @@ def replan_run(
         least this share of the bins (a milder form of ``new_only_if_complete`` for an
         early re-plan: a rest predicted nearly complete is worth taking on a young
         model, one far from complete is not). Default 0: the better run is taken.
+    lead_min : float, whole minutes >= 0
+        No new step begins before ``at_min + lead_min``: the minutes the re-plan takes
+        (seconds to several minutes; ``replan_s`` says) and loading the new programme,
+        while the chamber runs on with the plan. Default 0 (the chamber waits, or the
+        log ends well before the present).
     progress : callable(str), optional
         Receives short progress messages (the planner's too).
 
@@ -1035,6 +1074,11 @@ def replan_run(
     if not 0.0 <= new_min_coverage <= 1.0:
         raise ParameterError(
             f"new_min_coverage is a share of the bins, 0 to 1, got {new_min_coverage!r}"
+        )
+    if not (math.isfinite(lead_min) and lead_min >= 0 and lead_min == int(lead_min)):
+        raise ParameterError(
+            f"lead_min must be a whole number of minutes >= 0, got {lead_min!r} (the minutes "
+            "the re-plan and loading the programme take while the chamber runs on)"
         )
     tic = time.perf_counter()
     say = progress if progress is not None else (lambda _msg: None)
@@ -1079,7 +1123,7 @@ def replan_run(
             (label, rq) for label, rq in rivals if label in {r.effect for r in planned_for}
         ]
         for label, rq in (("identified", request), *plan_rivals):
-            starts = continuation_starts(rq, plan_spec(plan).edge_margin_c)
+            starts = continuation_starts(rq, plan_spec(plan).edge_margin_c, lead_min)
             # a rival's steps from M only: the sweep-end starts cost several times more
             # and, on the red team's drifting device, all ended short (45 s each)
             for start in starts if rq is request else starts[-1:]:
@@ -1104,6 +1148,9 @@ def replan_run(
             error = (
                 "the device stays inside the working region until the end of the plan and "
                 "no time is left: no new sweep can begin"
+                if lead_min == 0
+                else f"no time is left after minute {at_min + lead_min:g} (lead {lead_min:g} "
+                "min): no new sweep can begin"
             )
         elif best is None:
             error = "; ".join(f"from minute {a.start_min:g}: {a.error}" for a in attempts)
@@ -1152,6 +1199,7 @@ def replan_run(
         attempts=tuple(attempts),
         uncertainty=check_uncertainty(request, chosen.programme),
         rivals=predict_rivals(request, chosen.programme),
+        lead_min=float(lead_min),
     )
 
 

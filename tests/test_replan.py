@@ -1093,3 +1093,69 @@ def test_new_steps_are_planned_for_the_rival_that_disagrees_most_only(plan, monk
     assert len(rivals) >= 2  # the point of the test: more rivals than are planned for
     assert [a for a in asked if a != "identified"] == [rivals[0].effect]
     assert len(result.rivals) == len(rivals)  # every rival still judges the run
+
+
+# --------------------------------------------------------------------------------------
+# lead: the chamber runs on with the plan while the re-plan is computed and loaded
+# --------------------------------------------------------------------------------------
+def test_with_a_lead_no_start_comes_before_m_plus_lead(plan):
+    """``lead_min`` moves ``M`` on: the starts tried are the sweep end found from
+    ``M + lead`` and ``M + lead`` itself; no lead gives the starts as before; a lead past
+    the time limit leaves no start."""
+    from schedsyn.replan import continuation_starts
+
+    req = prepare_replan(log_from_frame(effect_log(ModelSpec(3000.0, 6.0), seed=1), "r"), plan, 60)
+    end = sweep_end_min(req, 0.5)
+    assert continuation_starts(req, 0.5) == [end, 60.0]
+    lead = end - 60.0 + 7.0  # past the sweep end found from M
+    starts = continuation_starts(req, 0.5, lead)
+    assert starts[-1] == 60.0 + lead and all(s >= 60.0 + lead for s in starts)
+    assert starts[0] == sweep_end_min(req, 0.5, 60.0 + lead)
+    assert continuation_starts(req, 0.5, 540.0) == []
+
+
+def test_replan_with_a_lead_keeps_the_plan_running_until_then(plan, tmp_path):
+    """``lead_min=30`` (the sweep in progress at 60 min ends at 81): every planner
+    attempt begins at 90 min or later, the whole run is
+    the plan's chamber path up to where the new steps begin, and on the true device
+    (scipy, counted by a plain loop) it reaches what it claims. A re-plan that took
+    longer than its lead gets a *** line with the lead to ask for."""
+    from schedsyn.replan import replan_run
+
+    truth = ModelSpec(3000.0, 6.0)
+    cut = log_from_frame(effect_log(truth, seed=1).query("time_s <= 3600"), "r")
+    result = replan_run(cut, plan, 60.0, lead_min=30.0)
+    assert result.lead_min == 30.0 and result.attempts
+    assert all(a.start_min >= 90.0 for a in result.attempts)
+    assert result.choice == "new" and result.new_steps_from_min >= 90.0
+    t = np.arange(0.0, result.new_steps_from_min + 1e-9, 0.5)
+    np.testing.assert_allclose(
+        result.programme.chamber_at(t), plan_programme().chamber_at(t), atol=2e-3
+    )
+    out = tmp_path / "re"
+    write_replan_dir(out, result)
+    assert json.loads((out / "replan.json").read_text())["lead_min"] == 30.0
+    grads, _ = _true_levels(out / "steps.csv", truth)
+    levels = np.array([distinct_levels(g, DELTA) for g in grads])
+    claimed = pd.read_csv(out / "bins.csv")["predicted_levels"].to_numpy()
+    assert np.all(np.abs(levels - claimed) <= 1)
+    # took less than its lead: no *** line; 5 min past the start: one, asking for 27
+    start = result.new_steps_from_min
+    assert replace(result, replan_s=(start - 60.0 - 1.0) * 60.0).late_line() is None
+    slow = replace(result, replan_s=(start - 60.0 + 5.0) * 60.0)
+    assert "--lead-min" in slow.late_line() and slow.late_line() in slow.summary()
+    assert f"--lead-min {int(start - 60.0) + 5 + 2}" in slow.late_line()
+
+
+def test_replan_cli_refuses_a_lead_that_is_not_whole_minutes(tmp_path, capsys):
+    from schedsyn.cli import main
+
+    plan_dir = write_plan_dir(tmp_path / "plan")
+    log = _write_log(effect_log(ModelSpec(2400.0, 3.0)), tmp_path / "log.csv", 100)
+    out = tmp_path / "re"
+    args = ["replan", str(log), str(plan_dir), "--at-min", "100", "--out", str(out), "--quiet"]
+    for bad in ("2.5", "-3"):
+        assert main([*args, "--lead-min", bad]) == 2
+        err = capsys.readouterr().err
+        assert "lead_min" in err and "whole number of minutes" in err and err.count("\n") == 1
+    assert not out.exists()

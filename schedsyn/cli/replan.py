@@ -74,6 +74,15 @@ def register(sub) -> None:
         "cover at least this share of the bins, 0 to 1 (default 0: the better run)",
     )
     p.add_argument(
+        "--lead-min",
+        type=float,
+        default=0.0,
+        metavar="N",
+        help="no new step before minute M + N: the minutes the re-plan (seconds to several "
+        "minutes; a *** line says when it took longer) and loading the programme take while "
+        "the chamber runs on with the plan (default 0)",
+    )
+    p.add_argument(
         "--no-effect",
         action="store_true",
         help="identify tau and dT0 only (skip the search for other effects)",
@@ -113,6 +122,7 @@ def run(args: argparse.Namespace) -> int:
         keep_if_complete=not args.always_replan,
         new_only_if_complete=args.only_if_complete,
         new_min_coverage=args.min_coverage,
+        lead_min=args.lead_min,
         progress=progress,
     )
     inputs = [args.log, plan.path / "steps.csv", plan.path / "plan.json"]
