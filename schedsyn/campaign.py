@@ -415,6 +415,7 @@ class _PlanJob:
     limits: Limits
     robust_tau_s: tuple[float, float] | None
     robust_dt0_c: tuple[float, float] | None
+    shorten: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -450,6 +451,7 @@ def _plan_job(job: _PlanJob, progress: Callable[[str], None] | None) -> Plan | I
             robust_tau_s=job.robust_tau_s,
             robust_dt0_c=job.robust_dt0_c,
             progress=say,
+            shorten=job.shorten,
         )
     except InfeasiblePlanError as exc:
         say(f"infeasible: {exc}")
@@ -627,6 +629,7 @@ def plan_campaign(
     backend: Any = "local",
     *,
     workers: int | None = None,
+    shorten: bool = False,
 ) -> CampaignResult:
     """Plan every experiment of ``config`` (in parallel on ``backend``, see ``run_map``).
 
@@ -642,6 +645,9 @@ def plan_campaign(
         Where to plan (default: a process pool over this machine's cores).
     workers : int, optional
         Size of the local pool.
+    shorten : bool
+        Give each complete plan to the timetable stage for a shorter one
+        (:func:`~schedsyn.planner.plan_experiment`'s ``shorten``; 1-2 min more each).
 
     Returns
     -------
@@ -651,7 +657,7 @@ def plan_campaign(
     """
     tic = time.perf_counter()
     jobs = [
-        _PlanJob(s, config.params, config.limits, config.robust_tau_s, config.robust_dt0_c)
+        _PlanJob(s, config.params, config.limits, config.robust_tau_s, config.robust_dt0_c, shorten)
         for s in config.experiments
     ]
     # longest first, so that the pool is not left waiting on one long experiment at the end

@@ -254,3 +254,22 @@ def test_plan_experiment_hands_a_request_the_band_search_leaves_short_to_the_sta
     assert plan.duration_lower_bound_min <= plan.duration_min
     assert plan.lp["timetable_lps"] > 0
     assert_complete_independently(plan, spec, PARAMS, limits, tmp_path)
+
+
+def test_shorten_gives_a_complete_band_search_plan_to_the_stage(tmp_path):
+    """4 levels in [0, 6] degC within 200 min: the band search is complete but long;
+    ``shorten=True`` returns the stage's shorter plan (complete by separate code, the
+    note says by how much) and without it the band search's plan is kept as it was."""
+    from schedsyn.planner import plan_experiment
+
+    spec = ExperimentSpec("shorten", 0.0, 6.0, -5.0, 11.0, levels_required=4)
+    limits = Limits(duration_max_min=200.0)
+    band = plan_experiment(spec, PARAMS, limits)
+    assert band.complete and "timetable_lps" not in band.lp
+    plan = plan_experiment(spec, PARAMS, limits, shorten=True)
+    assert plan.complete and plan.duration_min < band.duration_min
+    assert plan.lp["timetable_lps"] > 0
+    gain = band.duration_min - plan.duration_min
+    assert f"{gain:g} min shorter than the band search's complete plan" in plan.notes[0]
+    assert plan.duration_lower_bound_min <= plan.duration_min
+    assert_complete_independently(plan, spec, PARAMS, limits, tmp_path)

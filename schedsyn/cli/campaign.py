@@ -33,7 +33,13 @@ import argparse
 
 from ..errors import ParameterError
 from . import _common
-from .plan import ADVICE_FILES, PLAN_FILES, add_advise_options, add_end_soak_option
+from .plan import (
+    ADVICE_FILES,
+    PLAN_FILES,
+    add_advise_options,
+    add_end_soak_option,
+    add_shorten_option,
+)
 
 
 def register(sub) -> None:
@@ -65,6 +71,7 @@ def register(sub) -> None:
     )
     add_advise_options(p)
     add_end_soak_option(p)
+    add_shorten_option(p)
     _common.add_quiet_option(p)
     p.set_defaults(func=run)
 
@@ -116,6 +123,7 @@ def run(args: argparse.Namespace) -> int:
         progress=None if args.quiet else stderr_progress,
         backend=args.backend,
         workers=args.workers,
+        shorten=args.shorten,
     )
     lines = []
     no_soak: list[str] = []
