@@ -273,3 +273,27 @@ def test_shorten_gives_a_complete_band_search_plan_to_the_stage(tmp_path):
     assert f"{gain:g} min shorter than the band search's complete plan" in plan.notes[0]
     assert plan.duration_lower_bound_min <= plan.duration_min
     assert_complete_independently(plan, spec, PARAMS, limits, tmp_path)
+
+
+def test_plan_and_campaign_hand_shorten_to_the_planner(tmp_path, monkeypatch, capsys):
+    """``schedsyn plan --shorten`` and ``schedsyn campaign --shorten`` reach
+    ``plan_experiment(shorten=True)`` (the planner stubbed: the stage is tested above)."""
+    import schedsyn.campaign as campaign_mod
+    import schedsyn.planner as planner_mod
+    from schedsyn.cli import main
+    from schedsyn.errors import InfeasiblePlanError
+
+    seen: list = []
+
+    def stub(*args, **kwargs):
+        seen.append(kwargs.get("shorten"))
+        raise InfeasiblePlanError("stubbed")
+
+    monkeypatch.setattr(planner_mod, "plan_experiment", stub)
+    monkeypatch.setattr(campaign_mod, "plan_experiment", stub)
+    base = ["plan", "--working", "0", "6", "--quiet", "--out"]
+    main([*base, str(tmp_path / "a")])
+    main([*base, str(tmp_path / "b"), "--shorten"])
+    main(["campaign", "--backend", "serial", "--quiet", "--shorten", "--out", str(tmp_path / "c")])
+    capsys.readouterr()
+    assert seen[:2] == [False, True] and seen[2:] and all(seen[2:])
