@@ -280,7 +280,8 @@ def add_shorten_option(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="give a complete plan to the timetable stage for a shorter one (rates and "
         "crossing times by sequential LP; the paper's regions come out 40-80 min shorter, "
-        "at 1-2 min more planning each); objective shortest, one model, no robust box",
+        "at 1-2 min more planning each, and less robust to model error: see schedsyn sweep); "
+        "objective shortest, one model, no robust box",
     )
 
 
