@@ -7,6 +7,7 @@ chamber path built from the typed temperatures) and its levels counted by its pl
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
@@ -136,6 +137,13 @@ def test_refused_requests_return_none_at_once():
         objective="informative",
     )
     assert timetable_search(informative, PARAMS, Limits(), max_lps=200) is None
+    # a step limit below two steps per sweep and one more: refused, not searched to the
+    # end of its LPs (it only checks the limit); at that count it is searched
+    said: list[str] = []
+    few = dataclasses.replace(SMALL, max_steps=8)
+    assert timetable_search(few, PARAMS, SMALL_LIMITS, progress=said.append) is None
+    assert said and "max_steps 8" in said[0] and "(9)" in said[0]
+    assert tt._refusal(dataclasses.replace(SMALL, max_steps=9), PARAMS, SMALL_LIMITS) is None
     assert time.monotonic() - tic < 5.0
 
 

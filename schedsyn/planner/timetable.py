@@ -77,6 +77,9 @@ TRACK_SHARE = 0.9
 SCALINGS = (1.0, 0.7)
 #: Levels the structure generator handles.
 LEVELS_RANGE = (2, 10)
+#: Steps per sweep the stage's tables need at least (a speed-up and a braking rate; the
+#: benchmark's have 6-10): a lower step limit is refused at once.
+MIN_STEPS_PER_SWEEP = 2
 #: LP solves the search may spend (every candidate's together; 0.3-0.7 s each on one core
 #: of the 2-core machine): the benchmark's plans were found within 125-573.
 MAX_LPS = 500
@@ -760,6 +763,14 @@ def _refusal(spec: ExperimentSpec, params: ThermalParams, limits: Limits) -> str
         return f"levels_required {spec.levels_required} outside {LEVELS_RANGE}"
     if spec.objective != "shortest":
         return f"objective {spec.objective!r}: the timetable stage plans the shortest only"
+    if spec.max_steps < MIN_STEPS_PER_SWEEP * spec.levels_required + 1:
+        # it does not plan a step limit, only checks it: below this every table it
+        # found broke the limit and the search ran to the end of its LPs (45 s)
+        return (
+            f"max_steps {spec.max_steps} is below the {MIN_STEPS_PER_SWEEP} steps per sweep "
+            f"and one more its {spec.levels_required} sweeps need "
+            f"({MIN_STEPS_PER_SWEEP * spec.levels_required + 1}); it does not plan step limits"
+        )
     n_seg = limits.duration_max_min / spec.segment_min
     if n_seg > 400:
         return f"{n_seg:.0f} segments: too many for the timetable LPs"
