@@ -305,3 +305,34 @@ def test_plan_and_campaign_hand_shorten_to_the_planner(tmp_path, monkeypatch, ca
     main(["campaign", "--backend", "serial", "--quiet", "--shorten", "--out", str(tmp_path / "c")])
     capsys.readouterr()
     assert seen[:2] == [False, True] and seen[2:] and all(seen[2:])
+
+
+def test_a_near_miss_is_searched_again_with_less_separation(monkeypatch):
+    """No plan, but an SLP ended within NEAR_MISS_MIN of the budget: the search runs
+    again with NEAR_MISS_SAFETY_C_PER_MIN on NEAR_MISS_LPS more solves, and the LPs of
+    both count; an SLP further off, or a plan found, asks for nothing more. (The search
+    itself is stubbed; ``10-30-levels4-240`` is the benchmark's real case, in docs.)"""
+    calls: list = []
+
+    def fake(spec, params, limits, model, tic, clock, say, first_found, safety=None, ends=None):
+        calls.append((safety, clock.max_lps))
+        if safety is None:  # the first pass: nothing, its SLPs ended at end_at
+            ends.extend([fake.end_at + 30.0, fake.end_at])
+            clock.lps = 480
+            return None
+        return fake.second
+
+    monkeypatch.setattr(tt, "_search", fake)
+    budget = SMALL_LIMITS.duration_max_min
+    fake.second = tt.TimetableResult(None, None, "C1H1C2H2", 1.0, (), 0.057, 40, 1.0)
+    for end_at, again in ((budget + 0.8, True), (budget + tt.NEAR_MISS_MIN + 0.5, False)):
+        calls.clear()
+        fake.end_at = end_at
+        said: list[str] = []
+        out = timetable_search(SMALL, PARAMS, SMALL_LIMITS, progress=said.append)
+        if again:
+            assert calls == [(None, tt.MAX_LPS), (tt.NEAR_MISS_SAFETY_C_PER_MIN, tt.NEAR_MISS_LPS)]
+            assert any("near miss" in m for m in said)
+            assert out.n_lp == 480 + 40 and out.order == "C1H1C2H2"
+        else:
+            assert calls == [(None, tt.MAX_LPS)] and out is None

@@ -451,6 +451,13 @@ def _timetable_plan(
         f"by sequential LP ({found.n_lp} LPs); worst bin's level separation "
         f"{found.min_separation_c_per_min:.3f} °C/min"
     )
+    from .timetable import SAFETY_C_PER_MIN
+
+    if found.safety_c_per_min < SAFETY_C_PER_MIN:
+        note += (
+            f" (a near miss, searched again with {found.safety_c_per_min:g} °C/min above "
+            f"delta instead of {SAFETY_C_PER_MIN:g})"
+        )
     plan = Plan(
         spec=spec,
         params=params,
