@@ -309,15 +309,18 @@ def test_plan_and_campaign_hand_shorten_to_the_planner(tmp_path, monkeypatch, ca
 
 def test_a_near_miss_is_searched_again_with_less_separation(monkeypatch):
     """No plan, but an SLP ended within NEAR_MISS_MIN of the budget: the search runs
-    again with NEAR_MISS_SAFETY_C_PER_MIN on NEAR_MISS_LPS more solves, and the LPs of
-    both count; an SLP further off, or a plan found, asks for nothing more. (The search
-    itself is stubbed; ``10-30-levels4-240`` is the benchmark's real case, in docs.)"""
+    again from that SLP's start alone with NEAR_MISS_SAFETY_C_PER_MIN on NEAR_MISS_LPS
+    more solves, and the LPs of both count; an SLP further off, or a plan found, asks
+    for nothing more. (The search itself is stubbed; ``10-30-levels4-240`` and
+    ``m45-m35-floor-m52`` are the benchmark's real cases, in docs.)"""
     calls: list = []
 
-    def fake(spec, params, limits, model, tic, clock, say, first_found, safety=None, ends=None):
-        calls.append((safety, clock.max_lps))
+    def fake(
+        spec, params, limits, model, tic, clock, say, first_found, safety=None, ends=None, only=None
+    ):
+        calls.append((safety, clock.max_lps, only))
         if safety is None:  # the first pass: nothing, its SLPs ended at end_at
-            ends.extend([fake.end_at + 30.0, fake.end_at])
+            ends.extend([(fake.end_at + 30.0, "C1H1C2H2", 1.0), (fake.end_at, "C2H2C1H1", 0.7)])
             clock.lps = 480
             return None
         return fake.second
@@ -331,8 +334,11 @@ def test_a_near_miss_is_searched_again_with_less_separation(monkeypatch):
         said: list[str] = []
         out = timetable_search(SMALL, PARAMS, SMALL_LIMITS, progress=said.append)
         if again:
-            assert calls == [(None, tt.MAX_LPS), (tt.NEAR_MISS_SAFETY_C_PER_MIN, tt.NEAR_MISS_LPS)]
+            assert calls == [
+                (None, tt.MAX_LPS, None),
+                (tt.NEAR_MISS_SAFETY_C_PER_MIN, tt.NEAR_MISS_LPS, ("C2H2C1H1", 0.7)),
+            ]
             assert any("near miss" in m for m in said)
             assert out.n_lp == 480 + 40 and out.order == "C1H1C2H2"
         else:
-            assert calls == [(None, tt.MAX_LPS)] and out is None
+            assert calls == [(None, tt.MAX_LPS, None)] and out is None

@@ -56,12 +56,14 @@ from .request import ExperimentSpec, check_request, first_directions
 #: Separation the timetable keeps between ranks above ``delta``, degC/min.
 SAFETY_C_PER_MIN = 0.012
 #: A near miss (no complete plan, but an SLP ended within ``NEAR_MISS_MIN`` of the
-#: budget) is searched again with this smaller separation above ``delta``, within
-#: ``NEAR_MISS_LPS`` more LP solves: the band search's plans keep 0.0005-0.005 degC/min,
-#: and ``10-30-levels4-240`` ended 0.8 min over with 0.012, complete at 240 with 0.006.
+#: budget) is searched again from that SLP's start only, with this smaller separation
+#: above ``delta``, within ``NEAR_MISS_LPS`` more LP solves: the band search's plans keep
+#: 0.0005-0.005 degC/min; ``10-30-levels4-240`` ended 0.8 min over with 0.012 and is
+#: complete at 240 with 0.006 (51 LPs), ``m45-m35-floor-m52`` 5 min over, complete at
+#: 540 (about 300 LPs).
 NEAR_MISS_SAFETY_C_PER_MIN = 0.006
 NEAR_MISS_MIN = 10.0
-NEAR_MISS_LPS = 200
+NEAR_MISS_LPS = 350
 #: The LP asks this much more separation than the merit (second-order error of 1/D).
 LP_EXTRA_C_PER_MIN = 0.003
 #: Smallest gradient (in the sweep direction) inside a sweep's window, degC/min.
@@ -879,19 +881,29 @@ def timetable_search(
             return None
         deadline = None if deadline_s is None else tic + deadline_s
         clock = _Clock(max_lps=int(max_lps), deadline=deadline)
-        ends: list[float] = []
+        ends: list[tuple[float, str, float]] = []
         found = _search(spec, params, limits, model, tic, clock, say, first_found, ends=ends)
         budget = limits.duration_max_min
-        if found is not None or not ends or min(ends) > budget + NEAR_MISS_MIN:
+        if found is not None or not ends or min(ends)[0] > budget + NEAR_MISS_MIN:
             return found
+        end, order, scale = min(ends)
         say(
-            f"timetable: near miss (an SLP ended at {min(ends):.1f} min, budget {budget:g}): "
-            f"again with {NEAR_MISS_SAFETY_C_PER_MIN:g} °C/min above delta instead of "
-            f"{SAFETY_C_PER_MIN:g}"
+            f"timetable: near miss ({order} x{scale:g} ended at {end:.1f} min, budget "
+            f"{budget:g}): again from its start with {NEAR_MISS_SAFETY_C_PER_MIN:g} °C/min "
+            f"above delta instead of {SAFETY_C_PER_MIN:g}"
         )
         again = _Clock(max_lps=NEAR_MISS_LPS, deadline=deadline)
         found = _search(
-            spec, params, limits, model, tic, again, say, first_found, NEAR_MISS_SAFETY_C_PER_MIN
+            spec,
+            params,
+            limits,
+            model,
+            tic,
+            again,
+            say,
+            first_found,
+            NEAR_MISS_SAFETY_C_PER_MIN,
+            only=(order, scale),
         )
         if found is None:
             return None
@@ -917,9 +929,11 @@ def _search(
     say,
     first_found: bool = False,
     safety_c_per_min: float = SAFETY_C_PER_MIN,
-    ends: list[float] | None = None,
+    ends: list[tuple[float, str, float]] | None = None,
+    only: tuple[str, float] | None = None,
 ) -> TimetableResult | None:
-    """The search; ``ends`` (if given) receives every SLP's final end time, min."""
+    """The search; ``ends`` (if given) receives every SLP's final end time (min), order
+    and scale; ``only`` (order, scale) runs that start alone."""
     lp_stop = clock.max_lps
     model = FirstOrderLag(params) if model is None else model
     su = _Setup(
@@ -1010,6 +1024,8 @@ def _search(
     # slow ranks first before the other orders, the quicker first direction first,
     # then the better start
     starts.sort(key=lambda s: (kinds[s[1]], s[0]))
+    if only is not None:
+        starts = [s for s in starts if (s[1].name, s[2]) == only]
     best: dict | None = None
     tried = []
     n_lp = 0
@@ -1072,7 +1088,7 @@ def _search(
             on_better(x)
         n_lp += tp.n_lp
         if ends is not None:
-            ends.append(float(x[-1]))
+            ends.append((float(x[-1]), st.name, scale))
         found = state["found"]
         row = dict(
             order=st.name,
