@@ -60,7 +60,7 @@ SAFETY_C_PER_MIN = 0.012
 #: above ``delta``, within ``NEAR_MISS_LPS`` more LP solves: the band search's plans keep
 #: 0.0005-0.005 degC/min; ``10-30-levels4-240`` ended 0.8 min over with 0.012 and is
 #: complete at 240 with 0.006 (51 LPs), ``m45-m35-floor-m52`` 5 min over, complete at
-#: 540 (about 300 LPs).
+#: 533 (350 LPs; 200 LPs spread over every start found nothing).
 NEAR_MISS_SAFETY_C_PER_MIN = 0.006
 NEAR_MISS_MIN = 10.0
 NEAR_MISS_LPS = 350
@@ -105,7 +105,9 @@ class TimetableResult:
     ``speeds`` the starting profile's (entry, cruise, exit) per sweep, ``scale`` its cruise
     scaling; ``tried`` one dict per candidate (order, scale, speeds, start end, LPs,
     seconds, best end, found). ``min_separation_c_per_min``: the worst bin's level
-    separation (:func:`~schedsyn.coverage.level_separation`) at the check's fine sampling.
+    separation (:func:`~schedsyn.coverage.level_separation`) at the check's fine sampling;
+    ``safety_c_per_min`` the separation above ``delta`` it was planned with
+    (:data:`NEAR_MISS_SAFETY_C_PER_MIN` where a near miss was searched again).
     """
 
     programme: Programme
