@@ -342,3 +342,37 @@ def test_a_near_miss_is_searched_again_with_less_separation(monkeypatch):
             assert out.n_lp == 480 + 40 and out.order == "C1H1C2H2"
         else:
             assert calls == [(None, tt.MAX_LPS, None)] and out is None
+
+
+def test_shorten_where_it_cannot_apply_is_a_one_line_error(tmp_path, capsys):
+    """--shorten with another objective, a robust box or several chamber floors is
+    refused before any planning, in one line, nothing written (it was ignored)."""
+    from schedsyn.cli import main
+    from schedsyn.errors import ParameterError
+    from schedsyn.planner import plan_experiment
+
+    margin = dataclasses.replace(SMALL, objective="margin")
+    with pytest.raises(ParameterError, match="shorten applies to objective 'shortest'"):
+        plan_experiment(margin, PARAMS, SMALL_LIMITS, shorten=True)
+    with pytest.raises(ParameterError, match="a robust box"):
+        plan_experiment(SMALL, PARAMS, SMALL_LIMITS, robust_tau_s=(2300, 2500), shorten=True)
+    base = ["plan", "--working", "0", "6", "--shorten", "--quiet"]
+    for extra, words in (
+        (["--objective", "margin"], "shorten applies"),
+        (["--chamber-min-c", "-70", "-60"], "--shorten plans one chamber"),
+    ):
+        out = tmp_path / extra[0].strip("-")
+        assert main([*base, *extra, "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert words in err and err.count("\n") == 1
+        assert not (out / "steps.csv").exists()
+    toml = tmp_path / "robust.toml"
+    toml.write_text(
+        "[robust]\ntau_s = [2300.0, 2500.0]\n[[experiment]]\nname = 'A'\n"
+        "working_lo_c = 0.0\nworking_hi_c = 6.0\napprox_lo_c = -5.0\napprox_hi_c = 11.0\n"
+    )
+    out = tmp_path / "c"
+    assert main(["campaign", str(toml), "--shorten", "--quiet", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "remove the [robust] table or drop --shorten" in err and err.count("\n") == 1
+    assert not out.exists()

@@ -112,6 +112,15 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(
             "--advise searches with the nominal model: remove the [robust] table or drop --advise"
         )
+    if args.shorten:
+        robust = config.robust_tau_s is not None or config.robust_dt0_c is not None
+        other = sorted({s.objective for s in config.experiments} - {"shortest"})
+        if robust or other:
+            raise ParameterError(
+                "--shorten applies to the shortest objective planned for one model: "
+                + ("remove the [robust] table" if robust else f"objective {', '.join(other)}")
+                + " or drop --shorten"
+            )
     inputs = [args.config] if args.config else []
     inputs += [b for b in config.baseline_steps if b is not None]
     # checked before any planning: no output overwrites an input, the folder is writable

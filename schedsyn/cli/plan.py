@@ -664,6 +664,11 @@ def run(args: argparse.Namespace) -> int:
             "--model with several chamber floors/ceilings is not "
             "supported; give one --chamber-min-c/--chamber-max-c"
         )
+    if args.shorten and several:
+        raise ParameterError(
+            "--shorten plans one chamber: give one --chamber-min-c and one --chamber-max-c, "
+            "or drop --shorten"
+        )
     if args.advise and (model is not None or robust_tau is not None or robust_dt0 is not None):
         raise ParameterError(
             "--advise searches with the nominal first-order model: drop --model and "

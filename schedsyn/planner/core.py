@@ -325,7 +325,9 @@ def plan_experiment(
         Also give a *complete* plan of the band search to the timetable stage (same
         conditions) and return the shorter of the two: the stage searches rates and
         crossing times directly and found the paper's regions 40-80 min shorter, at
-        1-2 min of LP solves each (up to ``timetable.MAX_LPS``). Default False.
+        1-2 min of LP solves each (up to ``timetable.MAX_LPS``). Default False; with a
+        robust box, a continuation, another objective or ``timetable=False`` it is a
+        :class:`ParameterError`.
 
     Returns
     -------
@@ -351,13 +353,17 @@ def plan_experiment(
     params = ThermalParams() if params is None else params
     limits = Limits() if limits is None else limits
     tic = time.perf_counter()
-    try_timetable = (
-        timetable
-        and continuation is None
-        and robust_tau_s is None
-        and robust_dt0_c is None
-        and spec.objective == "shortest"
-    )
+    single = continuation is None and robust_tau_s is None and robust_dt0_c is None
+    if shorten and not (single and spec.objective == "shortest" and timetable):
+        raise ParameterError(
+            f"{spec.name}: shorten applies to objective 'shortest' planned for one model "
+            f"(got objective {spec.objective!r}"
+            + (", a robust box" if robust_tau_s is not None or robust_dt0_c is not None else "")
+            + (", a continuation" if continuation is not None else "")
+            + (", timetable=False" if not timetable else "")
+            + "); drop --shorten or plan the shortest objective without a robust box"
+        )
+    try_timetable = timetable and single and spec.objective == "shortest"
     try:
         plan = _plan(
             spec,
@@ -409,7 +415,7 @@ def _timetable_plan(
     by what the timetable did). ``shorten``: ``band_plan`` is complete and the stage looks
     for a shorter one (the shortest of its candidates within its LP budget, not the
     first)."""
-    from .timetable import timetable_search
+    from .timetable import SAFETY_C_PER_MIN, timetable_search
 
     if progress:
         why = (
@@ -451,8 +457,6 @@ def _timetable_plan(
         f"by sequential LP ({found.n_lp} LPs); worst bin's level separation "
         f"{found.min_separation_c_per_min:.3f} °C/min"
     )
-    from .timetable import SAFETY_C_PER_MIN
-
     if found.safety_c_per_min < SAFETY_C_PER_MIN:
         note += (
             f" (a near miss, searched again with {found.safety_c_per_min:g} °C/min above "
