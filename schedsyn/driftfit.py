@@ -70,6 +70,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+import scipy.sparse as sp
 from scipy.optimize import brentq, minimize_scalar
 
 from .errors import LogFormatError, ParameterError
@@ -89,6 +90,7 @@ from .terms import (
 
 ESTIMATORS = ("auto", "model", "kinematic")
 EIV_METHODS = ("als", "none")
+WEIGHTINGS = ("gls", "ols")
 
 
 @dataclass(frozen=True, slots=True)
@@ -104,6 +106,10 @@ class FitSettings:
     eiv : {"als", "none"}
         Errors-in-variables correction: adjusted least squares, or none (plain least
         squares on the estimates; for comparison).
+    weighting : {"gls", "ols"}
+        ``gls``: the coefficients are weighted by the fitted white-noise + bias-walk
+        model (generalised least squares, :func:`fit_samples`); ``ols``: every sample
+        alike (ordinary least squares; for comparison).
     estimator : {"auto", "model", "kinematic"}
         Gradient estimator; ``auto`` uses the model-based one when the log has a complete
         ``tk_set_c`` column.
@@ -122,6 +128,7 @@ class FitSettings:
 
     terms: str = "auto"
     eiv: str = "als"
+    weighting: str = "gls"
     estimator: str = "auto"
     n_error_draws: int = 8
     cv_folds: int = 10
@@ -135,6 +142,8 @@ class FitSettings:
             parse_terms(self.terms)  # validates
         if self.eiv not in EIV_METHODS:
             raise ParameterError(f"eiv must be one of {EIV_METHODS}, got {self.eiv!r}")
+        if self.weighting not in WEIGHTINGS:
+            raise ParameterError(f"weighting must be one of {WEIGHTINGS}, got {self.weighting!r}")
         if self.estimator not in ESTIMATORS:
             raise ParameterError(f"estimator must be one of {ESTIMATORS}, got {self.estimator!r}")
         for name, lo, hi in (
@@ -207,6 +216,7 @@ class _Sums:
     a_k: np.ndarray  # (n, p, p): corrected x x' of each sample
     b_k: np.ndarray  # (n, p): corrected x of each sample times its drift
     x: np.ndarray  # (n, p): plain coded monomials of the estimates
+    u: np.ndarray  # (n, p): corrected (unbiased) monomials of each sample
 
 
 def _normal_pieces(s: Samples, coding: Coding, terms: tuple[str, ...], eiv: bool) -> _Sums:
@@ -224,8 +234,8 @@ def _normal_pieces(s: Samples, coding: Coding, terms: tuple[str, ...], eiv: bool
     for i in range(p):
         for j in range(p):
             a_k[:, i, j] = u[(e[i][0] + e[j][0], e[i][1] + e[j][1])]
-    b_k = np.column_stack([u[e[i]] for i in range(p)]) * s.drift_dph[:, None]
-    return _Sums(a_k, b_k, monomials(x, y, terms))
+    u1 = np.column_stack([u[e[i]] for i in range(p)])
+    return _Sums(a_k, u1 * s.drift_dph[:, None], monomials(x, y, terms), u1)
 
 
 def _solve(a: np.ndarray, b: np.ndarray, what: str) -> np.ndarray:
@@ -394,12 +404,18 @@ def noise_fit(
     return NoiseFit(math.sqrt(s2), math.sqrt(math.exp(x_best) * s2), m2ll, n, p, walk_upper)
 
 
-def walk_covariance(time_s: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``X' C X`` for ``C_ij = min(t_i, t_j) - t_0`` (hours): ``sum_k dt_k S_k S_k'``."""
+def walk_covariance(time_s: np.ndarray, x: np.ndarray, start_s: float | None = None) -> np.ndarray:
+    """``X' C X`` for ``C_ij = min(t_i, t_j) - t_start`` (hours): ``sum_k dt_k S_k S_k'``.
+
+    ``start_s`` is when the walk was 0 (default: the first sample); earlier starts add
+    the walk's level at the first sample, common to every sample.
+    """
     t = np.asarray(time_s, dtype=float) / 3600.0
     s = np.cumsum(x[::-1], axis=0)[::-1]  # S_k = sum_{i >= k} x_i
     dt = np.diff(t)
-    return (s[1:] * dt[:, None]).T @ s[1:]
+    out = (s[1:] * dt[:, None]).T @ s[1:]
+    lead_h = 0.0 if start_s is None else max(0.0, t[0] - float(start_s) / 3600.0)
+    return out + lead_h * np.outer(s[0], s[0])
 
 
 @dataclass(frozen=True, slots=True)
@@ -423,6 +439,9 @@ class PolyFit:
     condition_number: float
     n: int
     eiv: bool
+    #: ``"gls"`` (weighted by the white + walk noise model) or ``"ols"`` (also when the
+    #: fitted walk was 0, where the two are the same)
+    weighting: str = "ols"
 
     @property
     def std_errors(self) -> np.ndarray:
@@ -465,18 +484,114 @@ def fit_coefficients(
     return _solve(pieces.a_k.sum(axis=0), pieces.b_k.sum(axis=0), "drift fit")
 
 
+#: Knots of the bias walk in the weighted fit: every this many hours (5 min) ...
+WALK_KNOT_STEP_H = 5.0 / 60.0
+#: ... or fewer, evenly spaced, on long logs.
+WALK_MAX_KNOTS = 400
+#: Below this walk variance over the run (in units of the white noise's), the weighted
+#: fit is the unweighted one.
+WALK_NEGLIGIBLE = 1e-9
+
+
+def walk_basis(time_s: np.ndarray) -> tuple[sp.csr_matrix, float]:
+    """The bias walk as a piecewise-linear function of time: ``(B, step_h)``.
+
+    Knots every ``step_h`` hours (:data:`WALK_KNOT_STEP_H`, at most
+    :data:`WALK_MAX_KNOTS`) from the first sample, the walk's level fixed at 0 there (the
+    constant term holds the start level, as in :func:`noise_fit`); ``B`` (n x m, sparse)
+    interpolates the m free knot levels linearly at every sample.
+    """
+    t_h = np.asarray(time_s, dtype=float) / 3600.0
+    span = float(t_h[-1] - t_h[0])
+    step = max(WALK_KNOT_STEP_H, span / WALK_MAX_KNOTS)
+    m = max(1, math.ceil(span / step - 1e-9))
+    pos = (t_h - t_h[0]) / step
+    j = np.clip(np.floor(pos).astype(int), 0, m - 1)
+    w = pos - j
+    rows = np.repeat(np.arange(t_h.size), 2)
+    cols = np.column_stack([j, j + 1]).ravel()
+    vals = np.column_stack([1.0 - w, w]).ravel()
+    full = sp.csr_matrix((vals, (rows, cols)), shape=(t_h.size, m + 1))
+    return full[:, 1:].tocsr(), step
+
+
+def walk_normal_matrix(
+    samples: Samples, pieces: _Sums, a: np.ndarray, ratio_per_h: float
+) -> tuple[np.ndarray, sp.csr_matrix]:
+    """The normal matrix of the coefficients and the walk's knots (:func:`_walk_weighted`).
+
+    ``[[a + fix, U'B], [B'U, B'B + prior]]``: ``a`` the (adjusted) ``sum x x'``, ``U``
+    the corrected monomials, ``B`` the walk's basis (:func:`walk_basis`), the prior the
+    random walk's precision over ``ratio_per_h`` (``K^2/sigma^2`` per hour). Profiling
+    the walk out leaves the Schur complement ``a - U'B Q B'U`` (``Q`` the inverse of the
+    walk's block), in which each sample's ``u_k u_k'`` has the weight ``h_k = B_k' Q B_k``
+    (its leverage on the walk) and is biased like ``x x'``: ``fix`` swaps those for the
+    adjusted ``a_k`` (no change without the errors-in-variables correction, where
+    ``a_k = u_k u_k'``). Returns ``(matrix, B)``.
+    """
+    basis, step_h = walk_basis(samples.time_s)
+    m = basis.shape[1]
+    diff = sp.eye(m, format="csr") - sp.eye(m, k=-1, format="csr")
+    prior = (diff.T @ diff).toarray() / (step_h * ratio_per_h)
+    ub = np.asarray((basis.T @ pieces.u).T)  # (p, m)
+    walk_block = (basis.T @ basis).toarray() + prior
+    lev = np.asarray(basis.multiply(basis @ np.linalg.inv(walk_block)).sum(axis=1)).ravel()
+    fix = np.einsum("k,kij->ij", lev, np.einsum("ki,kj->kij", pieces.u, pieces.u) - pieces.a_k)
+    return np.block([[a + fix, ub], [ub.T, walk_block]]), basis
+
+
+def _walk_weighted(
+    samples: Samples, pieces: _Sums, a: np.ndarray, b: np.ndarray, ratio_per_h: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Generalised least squares under white noise plus a bias random walk.
+
+    The walk is a regressor: a piecewise-linear function of time (:func:`walk_basis`)
+    whose knot levels ``beta`` carry the random walk's prior (increments of variance
+    ``K^2 dt``), so the coefficients minimise::
+
+        sum_k (d_k - x_k' c - B_k beta)^2 + (sigma^2 / K^2) sum_j (beta_j - beta_j-1)^2 / dt_j
+
+    -- generalised least squares with the covariance ``sigma^2 I + K^2 min(t_i, t_j)``
+    up to the walk's interpolation between knots (``ratio_per_h`` is ``K^2/sigma^2``).
+    The samples' monomials enter through per-sample sums (``x x'``, ``x B_k``, ``x d``),
+    so the errors-in-variables correction carries over: ``a`` and ``b`` are the adjusted
+    normal equations, the corrected monomials replace ``x`` in ``x B_k``, and each
+    sample's leverage on the walk is allowed for (:func:`walk_normal_matrix`).
+
+    Returns ``(coef, gmap)``: the coded coefficients and the (n, p) matrix with
+    ``coef = gmap' d`` (for the standard errors).
+    """
+    p = a.shape[0]
+    big, basis = walk_normal_matrix(samples, pieces, a, ratio_per_h)
+    m = basis.shape[1]
+    rhs = np.concatenate([b, basis.T @ samples.drift_dph])
+    inv_rows = np.linalg.solve(big, np.eye(p + m)[:, :p]).T  # first p rows of big^-1
+    coef = inv_rows @ rhs
+    gmap = pieces.u @ inv_rows[:, :p].T + np.asarray(basis @ inv_rows[:, p:].T)
+    return coef, gmap
+
+
 def fit_samples(
     samples: Samples,
     terms: str | tuple[str, ...],
     coding: Coding,
     *,
     eiv: bool = True,
+    weighting: str = "gls",
+    walk_start_s: float | None = None,
     what: str = "drift fit",
 ) -> PolyFit:
     """Adjusted least squares of one term set on ``samples`` (module docstring).
 
     Samples must be in time order. ``eiv=False`` is plain least squares on the estimates.
+    ``weighting="gls"`` weights the samples by the fitted white-noise + bias-walk model
+    (:func:`_walk_weighted`; the same as ``"ols"`` when the fitted walk is 0);
+    ``"ols"`` weights every sample alike. ``walk_start_s`` is when the bias walk was 0
+    (the log's start; default the first sample): the standard errors include the walk's
+    level when the samples begin, which the constant term cannot tell from its own.
     """
+    if weighting not in WEIGHTINGS:
+        raise ParameterError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
     terms_t = parse_terms(terms)
     p = len(terms_t)
     if samples.n < 2 * p:
@@ -485,15 +600,26 @@ def fit_samples(
         )
     pieces = _normal_pieces(samples, coding, terms_t, eiv)
     a = pieces.a_k.sum(axis=0)
-    coef = _solve(a, pieces.b_k.sum(axis=0), what)
-    resid = samples.drift_dph - pieces.x @ coef
+    b = pieces.b_k.sum(axis=0)
+    coef = _solve(a, b, what)
     sigma, walk, walk_upper = noise_model(samples.time_s, samples.drift_dph, pieces.x)
     # the standard errors allow for the largest walk the run cannot rule out: a run's own
     # estimate of K is often near 0 when the walk is real (module docstring)
     walk_se = max(walk, walk_upper) if math.isfinite(walk_upper) else walk
-    a_inv = np.linalg.inv(a)
-    middle = sigma**2 * (pieces.x.T @ pieces.x) + walk_se**2 * walk_covariance(
-        samples.time_s, pieces.x
+    ratio = (walk / sigma) ** 2 if sigma > 0 else 0.0
+    span_h = float(samples.time_s[-1] - samples.time_s[0]) / 3600.0
+    used = weighting
+    if weighting == "gls" and math.isfinite(ratio) and ratio * span_h > WALK_NEGLIGIBLE:
+        coef, gmap = _walk_weighted(samples, pieces, a, b, ratio)
+        middle_x = gmap
+        a_inv = np.eye(p)
+    else:
+        used = "ols"
+        a_inv = np.linalg.inv(a)
+        middle_x = pieces.x
+    resid = samples.drift_dph - pieces.x @ coef
+    middle = sigma**2 * (middle_x.T @ middle_x) + walk_se**2 * walk_covariance(
+        samples.time_s, middle_x, walk_start_s
     )
     cov = a_inv @ middle @ a_inv
     j_full = coded_to_physical(
@@ -515,6 +641,7 @@ def fit_samples(
         condition_number=float(np.linalg.cond(pieces.x)),
         n=samples.n,
         eiv=eiv,
+        weighting=used,
     )
 
 
@@ -958,6 +1085,21 @@ class DriftFit:
                     f"{WALK_UPPER_DELTA_M2LL:g} of its best in -2 log L)"
                 ),
             },
+            "weighting": {
+                "method": m.weighting,
+                "meaning": (
+                    "generalised least squares under the fitted white noise + bias walk "
+                    "(the walk a piecewise-linear function of time with its random-walk "
+                    "prior)"
+                    if m.weighting == "gls"
+                    else "every sample alike (ordinary least squares"
+                    + (
+                        "; the fitted walk was 0, where generalised least squares is the same)"
+                        if self.settings.weighting == "gls"
+                        else ")"
+                    )
+                ),
+            },
             "gradient_estimator": self.estimator,
             "errors_in_variables": {
                 "method": "adjusted least squares" if m.eiv else "none",
@@ -996,7 +1138,12 @@ class DriftFit:
             f"{m.residual_rms_dph:.4g} °/h (T-only cubic {ref.residual_rms_dph:.4g} °/h); "
             f"noise white {m.white_sigma_dph:.3g} °/h + bias walk {m.walk_dph_per_rt_h:.3g} "
             f"°/h/√h (standard errors allow up to {m.walk_for_std_errors_dph_per_rt_h:.3g}, "
-            f"the most the run cannot rule out); condition number {m.condition_number:.3g}",
+            f"the most the run cannot rule out); condition number {m.condition_number:.3g}; "
+            + (
+                "weighted by that noise model (generalised least squares)"
+                if m.weighting == "gls"
+                else "every sample weighted alike (ordinary least squares)"
+            ),
         ]
         sel = self.selection
         if len(sel) > 1:
@@ -1176,8 +1323,11 @@ def fit_drift(
     if settings.terms != "auto":
         chosen = term_set_name(parse_terms(settings.terms))
         table["chosen"] = table["candidate"] == chosen
-    model = fit_samples(s, chosen, coding, eiv=eiv)
-    reference = fit_samples(s, "t-only", coding, eiv=eiv)
+    start_s = float(np.asarray(log.time_s, dtype=float)[0])
+    model, reference = (
+        fit_samples(s, ts, coding, eiv=eiv, weighting=settings.weighting, walk_start_s=start_s)
+        for ts in (chosen, "t-only")
+    )
     if model.condition_number > 1e6:
         notes.append(
             f"the coded design is ill-conditioned (condition number {model.condition_number:.3g});"

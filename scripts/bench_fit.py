@@ -26,7 +26,7 @@ and the drift fitted over the approximation region that both runs reached
     and the RMS of error / standard deviation (1 when the stated one is right).
 
     python scripts/bench_fit.py --plans out/campaign [--gyros 20] [--regions W1 W2]
-        [--workers 2] [--out out/bench_fit] [--seed 0] [--no-walk]
+        [--workers 2] [--out out/bench_fit] [--seed 0] [--no-walk] [--weighting ols]
 
 ``--no-walk`` drops the bias random walk (white noise only): a diagnostic that shows how
 much of (a) the plan's design decides once the walk's offset is gone.
@@ -49,7 +49,7 @@ import pandas as pd
 import schedsyn
 from schedsyn.baseline import paper_like_programme
 from schedsyn.design import DesignSpace, programme_design
-from schedsyn.driftfit import fit_drift, fit_samples
+from schedsyn.driftfit import WEIGHTINGS, FitSettings, fit_drift, fit_samples
 from schedsyn.errors import ParameterError
 from schedsyn.gyro import gyro_log, random_gyro
 from schedsyn.io import write_frame_atomic, write_text_atomic
@@ -73,6 +73,7 @@ class Case:
     gradient: bool
     seed: int
     walk: bool = True
+    weighting: str = "gls"
 
 
 def _rms(x) -> float:
@@ -87,12 +88,13 @@ def _common_region(frames, approx):
     return float(math.ceil(lo * 2) / 2), float(math.floor(hi * 2) / 2)
 
 
-def _fit(frame, region, source, holdout=None):
+def _fit(frame, region, source, holdout=None, weighting="gls"):
     log = schedsyn.log_from_frame(frame, source)
     lo, hi = region
+    settings = FitSettings(weighting=weighting)
     for _ in range(6):  # shrink by 0.5 degC at an edge with too few samples
         try:
-            return fit_drift(log, (lo, hi), holdout=holdout), (lo, hi)
+            return fit_drift(log, (lo, hi), settings, holdout=holdout), (lo, hi)
         except ParameterError as exc:
             if "too few samples" not in str(exc):
                 raise
@@ -119,8 +121,8 @@ def run_case(case: Case) -> dict:
     f_base = gyro_log(base, gyro, device, sample_s=SAMPLE_S, seed=int(seeds[1]))
     region = _common_region([f_plan, f_base], case.approx)
     log_base = schedsyn.log_from_frame(f_base, "baseline")
-    fit_p, region = _fit(f_plan, region, "plan", holdout=log_base)
-    fit_b, _ = _fit(f_base, region, "baseline")
+    fit_p, region = _fit(f_plan, region, "plan", holdout=log_base, weighting=case.weighting)
+    fit_b, _ = _fit(f_base, region, "baseline", weighting=case.weighting)
     space = DesignSpace(*case.working, *case.approx)
     t_grid, g_grid = space.grid("working")
     truth = gyro.drift_dph(t_grid, g_grid)
@@ -138,7 +140,7 @@ def run_case(case: Case) -> dict:
         "baseline_selected": _name(fit_b),
     }
     for tag, fit in (("plan", fit_p), ("baseline", fit_b)):
-        full = fit_samples(fit.samples, "full", fit.model.coding)
+        full = fit_samples(fit.samples, "full", fit.model.coding, weighting=case.weighting)
         for mname, model in (("full", full), ("selected", fit.model), ("tonly", fit.reference)):
             err = model.predict(t_grid, g_grid) - truth
             row[f"{tag}_{mname}_rms_dph"] = _rms(err)
@@ -150,7 +152,7 @@ def run_case(case: Case) -> dict:
         row[f"{tag}_selected_within_2sd_share"] = float(np.mean(np.abs(err) <= 2.0 * sd))
         row[f"{tag}_selected_rms_z"] = _rms(err / np.maximum(sd, 1e-12))
     # (b) held out on the baseline's run: inside the plan fit's domain
-    full_p = fit_samples(fit_p.samples, "full", fit_p.model.coding)
+    full_p = fit_samples(fit_p.samples, "full", fit_p.model.coding, weighting=case.weighting)
     est = schedsyn.estimate_gradient_model(log_base)
     inside = fit_p.in_domain(est.t_est_c, est.g_est_c_per_min)
     t_true = f_base["t_true_c"].to_numpy()[inside]
@@ -255,6 +257,12 @@ def main() -> None:
         action="store_true",
         help="diagnostic: gyros without the bias random walk (white noise only)",
     )
+    ap.add_argument(
+        "--weighting",
+        choices=WEIGHTINGS,
+        default="gls",
+        help="the fit's weighting (default gls: white noise + bias walk; ols for comparison)",
+    )
     args = ap.parse_args()
     config = schedsyn.load_campaign(ROOT / "data" / "paper_campaign.toml")
     cases, designs = [], {}
@@ -284,6 +292,7 @@ def main() -> None:
                     gradient=gradient,
                     seed=args.seed,
                     walk=not args.no_walk,
+                    weighting=args.weighting,
                 )
                 cases.append(case)
     rows = run_map(run_case, cases, "local", workers=args.workers, desc="gyros")

@@ -16,6 +16,8 @@ from schedsyn.driftfit import (
     Coding,
     FitSettings,
     Samples,
+    _normal_pieces,
+    _walk_weighted,
     cross_validate,
     estimation_errors,
     fit_coefficients,
@@ -24,6 +26,7 @@ from schedsyn.driftfit import (
     noise_fit,
     pass_blocks,
     walk_covariance,
+    walk_normal_matrix,
 )
 from schedsyn.errors import LogFormatError, ParameterError
 from schedsyn.estimate import estimate_gradient
@@ -126,15 +129,24 @@ def test_corrected_monomials_are_unbiased_under_correlated_errors(rng):
 
 
 # -- errors in variables ---------------------------------------------------------------------
-def test_adjusted_least_squares_removes_classical_error_bias(rng):
+@pytest.mark.parametrize("walk_ratio_per_h", [0.0, 0.5])
+def test_adjusted_least_squares_removes_classical_error_bias(rng, walk_ratio_per_h):
     """Regressors with known Gaussian errors: plain least squares attenuates and shifts
-    the gradient terms; adjusted least squares does not (mean over replicates)."""
+    the gradient terms; adjusted least squares does not (mean over replicates), also
+    weighted for a bias walk (``walk_ratio_per_h`` = K^2/sigma^2 > 0)."""
     n = 3000
-    t = rng.uniform(-50, -20, n)
-    g = rng.uniform(-0.8, 1.0, n)
+    if walk_ratio_per_h:  # a run's structure: the gradient follows time (passes)
+        phase = np.arange(n) * 10.0 / 3600.0 * 2 * np.pi / 1.5
+        t = -35 + 15 * np.sin(0.37 * phase + rng.uniform(0, 6)) * np.abs(np.cos(phase))
+        g = 0.1 + 0.9 * np.sin(phase) + 0.05 * rng.standard_normal(n)
+    else:
+        t = rng.uniform(-50, -20, n)
+        g = rng.uniform(-0.8, 1.0, n)
     d = 0.2 + 0.01 * (t + 35) + 1.0 * g + 0.5 * g**3
     coding = Coding(-35.0, 15.0, 1.0)
-    sd_t, sd_g = 0.05, 0.15
+    # weighted, the fit learns from the gradient's changes within a few minutes (the walk
+    # takes the slow ones): a smaller error is as large against them
+    sd_t, sd_g = (0.05, 0.08) if walk_ratio_per_h else (0.05, 0.15)
     truth = np.zeros(10)
     truth[[0, 1, 2, 9]] = [0.2, 0.01 * 15, 1.0, 0.5]  # coded: x = (T + 35)/15, y = g
     errs = {True: [], False: []}
@@ -149,13 +161,65 @@ def test_adjusted_least_squares_removes_classical_error_bias(rng):
             np.full(n, sd_g**2),
         )
         for eiv in (True, False):
-            errs[eiv].append(fit_coefficients(s, "full", coding, eiv=eiv) - truth)
+            if walk_ratio_per_h:
+                pieces = _normal_pieces(s, coding, TERMS, eiv)
+                a, b = pieces.a_k.sum(axis=0), pieces.b_k.sum(axis=0)
+                coef = _walk_weighted(s, pieces, a, b, walk_ratio_per_h)[0]
+            else:
+                coef = fit_coefficients(s, "full", coding, eiv=eiv)
+            errs[eiv].append(coef - truth)
     plain = np.mean(errs[False], axis=0)
     adjusted = np.mean(errs[True], axis=0)
     se = np.std(errs[False], axis=0, ddof=1) / math.sqrt(30)
     for k in (2, 9):  # g and g3
         assert abs(plain[k]) > 10 * se[k]  # a real bias ...
         assert abs(adjusted[k]) < 0.2 * abs(plain[k])  # ... removed
+
+
+def test_weighted_normal_matrix_is_unbiased_under_regressor_errors(rng):
+    """With the walk profiled out, the adjusted normal matrix of the coefficients (the
+    Schur complement) averages to the error-free one over draws of the regressors'
+    errors (every entry's mean within a few standard errors); without the leverage term
+    it does not."""
+    n = 1200
+    phase = np.arange(n) * 10.0 / 3600.0 * 2 * np.pi / 1.5
+    t = -35 + 15 * np.sin(0.37 * phase) * np.abs(np.cos(phase))
+    g = 0.1 + 0.9 * np.sin(phase) + 0.05 * rng.standard_normal(n)
+    coding = Coding(-35.0, 15.0, 1.0)
+    sd_t, sd_g, ratio = 0.05, 0.15, 3.0
+    zeros, p = np.zeros(n), len(TERMS)
+
+    def schur(s, eiv, leverage=True):
+        pieces = _normal_pieces(s, coding, TERMS, eiv)
+        big, _ = walk_normal_matrix(s, pieces, pieces.a_k.sum(axis=0), ratio)
+        if not leverage:
+            big[:p, :p] = pieces.a_k.sum(axis=0)
+        ub = big[:p, p:]
+        return big[:p, :p] - ub @ np.linalg.solve(big[p:, p:], ub.T)
+
+    true = schur(Samples(np.arange(n) * 10.0, t, g, zeros, zeros, zeros, zeros), False)
+    draws: dict[str, list] = {"adjusted": [], "no leverage": [], "plain": []}
+    for _ in range(160):
+        s = Samples(np.arange(n) * 10.0, t + sd_t * rng.standard_normal(n),
+                    g + sd_g * rng.standard_normal(n), zeros, np.full(n, sd_t**2), zeros,
+                    np.full(n, sd_g**2))  # fmt: skip
+        draws["adjusted"].append(schur(s, True))
+        draws["no leverage"].append(schur(s, True, leverage=False))
+        draws["plain"].append(schur(s, False))
+    iu = np.triu_indices(p)
+    top = np.abs(true[iu]).max()
+
+    def z_max(v):  # the largest z-score of the mean's error over the matrix's entries
+        v = np.asarray(v)
+        err = np.abs(np.mean(v, axis=0) - true)[iu]
+        se = (np.std(v, axis=0, ddof=1) / np.sqrt(len(v)))[iu]
+        fixed = se <= 1e-9 * top  # entries without errors (the constant's)
+        assert np.all(err[fixed] <= 1e-6 * top)
+        return float(np.max(err[~fixed] / se[~fixed]))
+
+    z = {k: z_max(v) for k, v in draws.items()}
+    assert z["adjusted"] < 4.0, z  # 45 entries' means: |z| < 4 unless biased
+    assert z["no leverage"] > 5.0 and z["plain"] > 50, z
 
 
 def test_gradient_noise_bias_is_removed(programme):
@@ -265,8 +329,9 @@ def test_noise_fit_matches_dense_likelihood(rng, reml):
 
 
 def test_standard_errors_are_calibrated_under_a_bias_random_walk(programme):
-    """z = (estimate - truth)/std error over replicates has unit spread; standard errors
-    that ignore the walk are several times too small."""
+    """z = (estimate - truth)/std error over replicates has unit spread, for the weighted
+    (gls) and the unweighted (ols) fit; standard errors that ignore the walk are several
+    times too small."""
     traj = simulate(programme, dt_min=1 / 3)
     m = (traj.t_c >= REGION[0]) & (traj.t_c <= REGION[1])
     time_s = traj.time_min * 60.0
@@ -276,25 +341,72 @@ def test_standard_errors_are_calibrated_under_a_bias_random_walk(programme):
     coding = Coding(CENTRE, 14.5, 1.0)
     zeros = np.zeros(int(m.sum()))
     rng = np.random.default_rng(11)
-    z, z_iid = [], []
+    z: dict[str, list] = {"gls": [], "ols": []}
+    z_iid = []
     for _ in range(40):
         white, walk = drift_noise(time_s, gyro, rng)
         s = Samples(time_s[m], traj.t_c[m], traj.g_c_per_min[m], (true + white + walk)[m],
                     zeros, zeros, zeros)  # fmt: skip
-        fit = fit_samples(s, "full", coding, eiv=False)
-        z.append((fit.coefficients_dph - truth) / fit.std_errors)
+        for w in z:
+            # the walk is 0 at the log's start (time 0), an hour before the region
+            fit = fit_samples(s, "full", coding, eiv=False, weighting=w, walk_start_s=0.0)
+            assert fit.weighting == w
+            z[w].append((fit.coefficients_dph - truth) / fit.std_errors)
         x = monomials(*coding.code(s.t_c, s.g_c_per_min), TERMS)
         resid = s.drift_dph - x @ fit.coef_coded
         cov_iid = np.linalg.inv(x.T @ x) * np.mean(resid**2)
         j = np.diag(np.diag(coded_to_physical(TERMS, CENTRE, 14.5, 0.0, 1.0)))
         z_iid.append((fit.coefficients_dph - truth) / np.sqrt(np.diag(j @ cov_iid @ j)))
-    spread = np.std(z, axis=0)
-    # the standard errors allow for the largest walk the run cannot rule out (profile
-    # likelihood): about a fifth conservative on the terms; the constant, the walk's mean
-    # level over one run, had a spread of 1.9 with the run's own estimate of the walk
-    assert np.all(spread > 0.6) and np.all(spread < 1.3), spread
-    iid = np.std(z_iid, axis=0)
+    for w in z:
+        spread = np.std(z[w], axis=0)
+        # the standard errors allow for the largest walk the run cannot rule out (profile
+        # likelihood): about a fifth conservative on the terms; the constant, the walk's
+        # level, had a spread of 1.9 with the run's own estimate of the walk and 1.5 (gls)
+        # when the walk before the first sample was left out
+        assert np.all(spread > 0.6) and np.all(spread < 1.3), (w, spread)
+    iid = np.std(z_iid, axis=0)  # the ols fit's coefficients with iid standard errors
     assert np.median(iid) > 1.5 and iid.max() > 3.0, iid
+
+
+def test_weighted_fit_is_generalised_least_squares(rng):
+    """The weighted fit (the walk as a piecewise-linear regressor with its prior) equals
+    dense generalised least squares with the covariance I + lambda min(t_i, t_j), and is
+    closer to the truth than the unweighted fit when the walk dominates."""
+    n = 1500
+    t = np.cumsum(rng.uniform(8, 12, n)) + 3000.0
+    temp = -40 + 10 * np.sin(t / 3000)
+    grad = 0.5 * np.cos(t / 3000) + 0.1 * np.sin(t / 700)
+    coding = Coding(-40.0, 10.0, 0.6)
+    x = monomials(*coding.code(temp, grad), TERMS)
+    c_true = rng.normal(size=10) * 0.1
+    walk = np.cumsum(0.05 * np.sqrt(np.diff(t, prepend=t[0]) / 3600) * rng.standard_normal(n))
+    d = x @ c_true + 0.05 * rng.standard_normal(n) + walk
+    zeros = np.zeros(n)
+    s = Samples(t, temp, grad, d, zeros, zeros, zeros)
+    gls = fit_samples(s, "full", coding, eiv=False)
+    ols = fit_samples(s, "full", coding, eiv=False, weighting="ols")
+    assert gls.weighting == "gls" and ols.weighting == "ols"
+    lam = (gls.walk_dph_per_rt_h / gls.white_sigma_dph) ** 2
+    t_h = t / 3600.0
+    chol = np.linalg.cholesky(np.eye(n) + lam * (np.minimum.outer(t_h, t_h) - t_h[0]))
+    xw = np.linalg.solve(chol, x)
+    dense = np.linalg.lstsq(xw, np.linalg.solve(chol, d), rcond=None)[0]
+    se = np.sqrt(np.diag(gls.cov_coded))
+    assert np.max(np.abs(gls.coef_coded - dense) / se) < 0.1
+    assert np.max(np.abs(ols.coef_coded - dense) / se) > 0.3  # the check can tell them apart
+    # the standard errors: the linear map's, with the dense covariance at the same walk
+    k = gls.walk_for_std_errors_dph_per_rt_h
+    cov_noise = gls.white_sigma_dph**2 * np.eye(n) + k**2 * (np.minimum.outer(t_h, t_h) - t_h[0])
+    a_inv = np.linalg.inv(xw.T @ xw)
+    gmap = np.linalg.solve(chol.T, xw) @ a_inv  # dense GLS: coef = gmap' d
+    dense_se = np.sqrt(np.diag(gmap.T @ cov_noise @ gmap))
+    np.testing.assert_allclose(se, dense_se, rtol=0.05)
+    # a vanishing walk: the weighted solve is the unweighted one
+    pieces = _normal_pieces(s, coding, TERMS, False)
+    a, b = pieces.a_k.sum(axis=0), pieces.b_k.sum(axis=0)
+    coef, gmap0 = _walk_weighted(s, pieces, a, b, 1e-10)
+    np.testing.assert_allclose(coef, np.linalg.solve(a, b), rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(gmap0, x @ np.linalg.inv(a), rtol=1e-5, atol=1e-12)
 
 
 # -- end to end on synthetic logs -------------------------------------------------------------

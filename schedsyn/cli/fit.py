@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..driftfit import ESTIMATORS, FitSettings, fit_drift
+from ..driftfit import ESTIMATORS, WEIGHTINGS, FitSettings, fit_drift
 from ..io import write_frame_atomic, write_json_atomic
 from ..logs import read_log
 from . import _common
@@ -51,6 +51,13 @@ def register(sub) -> None:
         help="plain least squares on the estimates (no errors-in-variables correction)",
     )
     p.add_argument(
+        "--weighting",
+        choices=WEIGHTINGS,
+        default="gls",
+        help="gls (default): weight the samples by the fitted white-noise + bias-walk model; "
+        "ols: every sample alike (for comparison)",
+    )
+    p.add_argument(
         "--min-points-per-bin",
         type=int,
         default=5,
@@ -67,6 +74,7 @@ def run(args: argparse.Namespace) -> int:
     settings = FitSettings(
         terms=args.terms,
         eiv="none" if args.no_eiv else "als",
+        weighting=args.weighting,
         estimator=args.estimator,
         min_points_per_bin=args.min_points_per_bin,
     )
