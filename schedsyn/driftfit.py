@@ -4,8 +4,9 @@ Data flow::
 
     log (t_int_c, tk_set_c, drift_dph) -> Kalman smoother (T_hat, g_hat)
         -> error draws (covariance of the estimates' noise)
-        -> adjusted least squares over the approximation region [LO, HI]
-        -> term selection (blocked cross-validation), standard errors, compensation table
+        -> adjusted least squares over the approximation region [LO, HI], weighted by
+           the fitted white-noise + bias-walk model (generalised least squares)
+        -> term selection (BIC), standard errors, compensation table
 
 **Regressors.** ``T`` and ``g`` come from :func:`schedsyn.estimate_gradient_model` (the
 thermal model driven by the logged chamber setpoint, when the log has ``tk_set_c``) or
@@ -32,18 +33,23 @@ smoother's own posterior variance is a Bayesian figure that also counts its prio
 smoothing bias; on synthetic logs it is about twice the actual error's standard
 deviation, while the draws match it.)
 
-**Standard errors.** Residuals of a gyro are not white: the bias random walk makes them
+**Weighting.** Residuals of a gyro are not white: the bias random walk makes them
 correlated over hours. The noise is modelled as white noise plus a random walk, its two
 levels estimated by restricted maximum likelihood (:func:`noise_model`), and the
-coefficient covariance is the sandwich ``A^-1 B A^-1`` with the covariance of that noise
-model::
+coefficients are fitted by generalised least squares under that model
+(:func:`_walk_weighted`: the walk a piecewise-linear regressor in time with its random
+walk's prior; ``weighting="ols"`` weights every sample alike).
 
-    B = sigma^2 X'X + K^2 sum_k dt_k S_k S_k',   S_k = sum_{i >= k} x_i
+**Standard errors.** The coefficients are linear in the drift, ``c = G'd``, and their
+covariance under the noise model is::
 
-(``X'[K^2 min(t_i, t_j)]X``, exact for a random walk started at the first sample, whose
-start level the constant term absorbs). One run determines K poorly: its estimate is
+    sigma^2 G'G + K^2 sum_k dt_k S_k S_k',   S_k = sum_{i >= k} g_i
+
+(``G'[K^2 min(t_i, t_j)]G`` with the walk started at the log's first row: its level when
+the region's samples begin is common to all of them, like the constant term).
+Unweighted, ``G = X A^-1`` (the sandwich). One run determines K poorly: its estimate is
 often near 0 when the walk is real, and standard errors at that K were up to 2x too small
-(mostly the constant: the walk's mean level over the run). ``K`` in ``B`` is therefore
+(mostly the constant: the walk's mean level over the run). ``K`` there is therefore
 the largest walk the run cannot rule out, where the restricted ``-2 log L`` has risen by
 :data:`WALK_UPPER_DELTA_M2LL` above its best on the side of larger walks; the estimate is
 reported as well. With no walk at all this makes the standard errors up to ~2x
@@ -515,6 +521,19 @@ def walk_basis(time_s: np.ndarray) -> tuple[sp.csr_matrix, float]:
     return full[:, 1:].tocsr(), step
 
 
+def _leverage(basis: sp.csr_matrix, q: np.ndarray) -> np.ndarray:
+    """``h_k = B_k' Q B_k`` for every row of a basis with at most two entries per row
+    (:func:`walk_basis`), without forming the dense ``B Q``."""
+    coo = basis.tocoo()
+    order = np.lexsort((coo.col, coo.row))
+    r, c, v = coo.row[order], coo.col[order], coo.data[order]
+    n = basis.shape[0]
+    h = np.bincount(r, weights=v**2 * q[c, c], minlength=n)
+    same = r[1:] == r[:-1]
+    pair = 2.0 * v[1:][same] * v[:-1][same] * q[c[1:][same], c[:-1][same]]
+    return h + np.bincount(r[1:][same], weights=pair, minlength=n)
+
+
 def walk_normal_matrix(
     samples: Samples, pieces: _Sums, a: np.ndarray, ratio_per_h: float
 ) -> tuple[np.ndarray, sp.csr_matrix]:
@@ -535,14 +554,14 @@ def walk_normal_matrix(
     prior = (diff.T @ diff).toarray() / (step_h * ratio_per_h)
     ub = np.asarray((basis.T @ pieces.u).T)  # (p, m)
     walk_block = (basis.T @ basis).toarray() + prior
-    lev = np.asarray(basis.multiply(basis @ np.linalg.inv(walk_block)).sum(axis=1)).ravel()
+    lev = _leverage(basis, np.linalg.inv(walk_block))
     fix = np.einsum("k,kij->ij", lev, np.einsum("ki,kj->kij", pieces.u, pieces.u) - pieces.a_k)
     return np.block([[a + fix, ub], [ub.T, walk_block]]), basis
 
 
 def _walk_weighted(
     samples: Samples, pieces: _Sums, a: np.ndarray, b: np.ndarray, ratio_per_h: float
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray] | None:
     """Generalised least squares under white noise plus a bias random walk.
 
     The walk is a regressor: a piecewise-linear function of time (:func:`walk_basis`)
@@ -559,13 +578,21 @@ def _walk_weighted(
     sample's leverage on the walk is allowed for (:func:`walk_normal_matrix`).
 
     Returns ``(coef, gmap)``: the coded coefficients and the (n, p) matrix with
-    ``coef = gmap' d`` (for the standard errors).
+    ``coef = gmap' d`` (for the standard errors), or None when the weighted normal
+    matrix is not positive definite (the errors-in-variables correction can take more
+    from it than the samples' changes within a few minutes give).
     """
     p = a.shape[0]
     big, basis = walk_normal_matrix(samples, pieces, a, ratio_per_h)
     m = basis.shape[1]
+    try:
+        inv_rows = np.linalg.solve(big, np.eye(p + m)[:, :p]).T  # first p rows of big^-1
+    except np.linalg.LinAlgError:
+        return None
+    w = np.linalg.eigvalsh(0.5 * (inv_rows[:, :p] + inv_rows[:, :p].T))  # Schur^-1
+    if not w[0] > 0:
+        return None
     rhs = np.concatenate([b, basis.T @ samples.drift_dph])
-    inv_rows = np.linalg.solve(big, np.eye(p + m)[:, :p]).T  # first p rows of big^-1
     coef = inv_rows @ rhs
     gmap = pieces.u @ inv_rows[:, :p].T + np.asarray(basis @ inv_rows[:, p:].T)
     return coef, gmap
@@ -608,12 +635,14 @@ def fit_samples(
     walk_se = max(walk, walk_upper) if math.isfinite(walk_upper) else walk
     ratio = (walk / sigma) ** 2 if sigma > 0 else 0.0
     span_h = float(samples.time_s[-1] - samples.time_s[0]) / 3600.0
-    used = weighting
+    weighted = None
     if weighting == "gls" and math.isfinite(ratio) and ratio * span_h > WALK_NEGLIGIBLE:
-        coef, gmap = _walk_weighted(samples, pieces, a, b, ratio)
-        middle_x = gmap
+        weighted = _walk_weighted(samples, pieces, a, b, ratio)
+    if weighted is not None:
+        used = "gls"
+        coef, middle_x = weighted
         a_inv = np.eye(p)
-    else:
+    else:  # unweighted, or weighted where that is the same or cannot be solved
         used = "ols"
         a_inv = np.linalg.inv(a)
         middle_x = pieces.x
@@ -1094,7 +1123,9 @@ class DriftFit:
                     if m.weighting == "gls"
                     else "every sample alike (ordinary least squares"
                     + (
-                        "; the fitted walk was 0, where generalised least squares is the same)"
+                        "; asked for gls: the fitted walk was 0, where the two are the "
+                        "same, or the weighted normal matrix was not positive definite "
+                        "after the errors-in-variables correction)"
                         if self.settings.weighting == "gls"
                         else ")"
                     )

@@ -10,12 +10,14 @@ import pandas as pd
 import pytest
 from scipy.optimize import brentq
 
+from schedsyn import driftfit
 from schedsyn.cli import main
 from schedsyn.driftfit import (
     WALK_UPPER_DELTA_M2LL,
     Coding,
     FitSettings,
     Samples,
+    _leverage,
     _normal_pieces,
     _walk_weighted,
     cross_validate,
@@ -25,6 +27,7 @@ from schedsyn.driftfit import (
     fit_samples,
     noise_fit,
     pass_blocks,
+    walk_basis,
     walk_covariance,
     walk_normal_matrix,
 )
@@ -164,7 +167,9 @@ def test_adjusted_least_squares_removes_classical_error_bias(rng, walk_ratio_per
             if walk_ratio_per_h:
                 pieces = _normal_pieces(s, coding, TERMS, eiv)
                 a, b = pieces.a_k.sum(axis=0), pieces.b_k.sum(axis=0)
-                coef = _walk_weighted(s, pieces, a, b, walk_ratio_per_h)[0]
+                res = _walk_weighted(s, pieces, a, b, walk_ratio_per_h)
+                assert res is not None
+                coef = res[0]
             else:
                 coef = fit_coefficients(s, "full", coding, eiv=eiv)
             errs[eiv].append(coef - truth)
@@ -220,6 +225,22 @@ def test_weighted_normal_matrix_is_unbiased_under_regressor_errors(rng):
     z = {k: z_max(v) for k, v in draws.items()}
     assert z["adjusted"] < 4.0, z  # 45 entries' means: |z| < 4 unless biased
     assert z["no leverage"] > 5.0 and z["plain"] > 50, z
+
+
+def test_walk_basis_interpolates_and_its_leverage_matches_dense(rng):
+    """The walk's basis interpolates knot levels linearly (0 at the first sample), and
+    the leverage h_k = B_k' Q B_k computed from its two entries per row is the dense one."""
+    t = np.sort(rng.uniform(0, 9 * 3600, 700))
+    basis, step_h = walk_basis(t)
+    assert step_h == pytest.approx(5 / 60) and np.diff(basis.indptr).max() <= 2
+    knots = rng.normal(size=basis.shape[1])
+    t_h = (t - t[0]) / 3600.0
+    grid = step_h * np.arange(basis.shape[1] + 1)
+    np.testing.assert_allclose(basis @ knots, np.interp(t_h, grid, np.r_[0.0, knots]))
+    a = rng.normal(size=(basis.shape[1],) * 2)
+    q = a @ a.T
+    dense = np.einsum("ki,ij,kj->k", basis.toarray(), q, basis.toarray())
+    np.testing.assert_allclose(_leverage(basis, q), dense, rtol=1e-10, atol=1e-10)
 
 
 def test_gradient_noise_bias_is_removed(programme):
@@ -368,7 +389,7 @@ def test_standard_errors_are_calibrated_under_a_bias_random_walk(programme):
     assert np.median(iid) > 1.5 and iid.max() > 3.0, iid
 
 
-def test_weighted_fit_is_generalised_least_squares(rng):
+def test_weighted_fit_is_generalised_least_squares(rng, monkeypatch):
     """The weighted fit (the walk as a piecewise-linear regressor with its prior) equals
     dense generalised least squares with the covariance I + lambda min(t_i, t_j), and is
     closer to the truth than the unweighted fit when the walk dominates."""
@@ -404,9 +425,20 @@ def test_weighted_fit_is_generalised_least_squares(rng):
     # a vanishing walk: the weighted solve is the unweighted one
     pieces = _normal_pieces(s, coding, TERMS, False)
     a, b = pieces.a_k.sum(axis=0), pieces.b_k.sum(axis=0)
-    coef, gmap0 = _walk_weighted(s, pieces, a, b, 1e-10)
+    res = _walk_weighted(s, pieces, a, b, 1e-10)
+    assert res is not None
+    coef, gmap0 = res
     np.testing.assert_allclose(coef, np.linalg.solve(a, b), rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(gmap0, x @ np.linalg.inv(a), rtol=1e-5, atol=1e-12)
+    # a weighted normal matrix that is not positive definite (an errors-in-variables
+    # correction larger than what is left once the walk is out) is refused ...
+    shrink = 0.999 * np.linalg.eigvalsh(a)[-1] * np.eye(a.shape[0])
+    assert _walk_weighted(s, pieces, a - shrink, b, lam) is None
+    # ... and the fit falls back to weighting every sample alike, and says so
+    monkeypatch.setattr(driftfit, "_walk_weighted", lambda *args: None)
+    fallback = fit_samples(s, "full", coding, eiv=False)
+    assert fallback.weighting == "ols"
+    np.testing.assert_allclose(fallback.coef_coded, ols.coef_coded)
 
 
 # -- end to end on synthetic logs -------------------------------------------------------------
