@@ -571,7 +571,17 @@ def test_cli_fit_terms_option_and_errors(logs_dir, tmp_path, capsys):
                  "t-only", "--out", str(out)]) == 0  # fmt: skip
     doc = json.loads((out / "coefficients.json").read_text())
     assert [c["term"] for c in doc["coefficients"]] == list(TERM_SETS["t-only"])
-    capsys.readouterr()
+    # the weighting: as asked, in the JSON and the summary
+    out_ols = tmp_path / "fit_ols"
+    assert main(["fit", str(logs_dir / "run1.csv"), "--region", "-50", "-21", "--terms",
+                 "t-only", "--weighting", "ols", "--out", str(out_ols)]) == 0  # fmt: skip
+    assert "ordinary least squares" in capsys.readouterr().out
+    doc_ols = json.loads((out_ols / "coefficients.json").read_text())
+    assert doc_ols["weighting"]["method"] == "ols"
+    assert doc["weighting"]["method"] in ("gls", "ols")  # ols when the fitted walk is 0
+    assert main(["fit", str(logs_dir / "run1.csv"), "--region", "-50", "-21",
+                 "--weighting", "wls", "--out", str(out)]) == 2  # fmt: skip
+    assert "--weighting" in capsys.readouterr().err
     for argv, words in (
         (["--region", "30", "60"], "never enters"),
         (["--region", "-50", "-21", "--terms", "cubic"], "unknown term set"),
