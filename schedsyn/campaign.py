@@ -11,7 +11,8 @@ repository; copy and edit it)::
                    see schedsyn.chambers)
     [limits]       chamber_min_c, duration_max_min ... (Limits; any field)
     [settings]     levels_required, delta_c_per_min, segment_min, objective, ...
-                   (ExperimentSpec fields shared by every experiment)
+                   (ExperimentSpec fields shared by every experiment), and
+                   shorten = true (the whole campaign: plan_campaign's ``shorten``)
     [robust]       tau_s = [LO, HI], dt0_c = [LO, HI]  (optional robust box)
     [export]       controller = "espec-p300" (or a list), first_programme, max_steps,
                    programmes, end_mode  (optional: controller programmes, see
@@ -126,6 +127,10 @@ class CampaignConfig:
         Controller programmes written beside each step table (``[export]``).
     sheet : SheetSettings
         Operator sheets: start time, checkpoint interval, band (``[sheet]``).
+    shorten : bool
+        Give each complete plan to the timetable stage for a shorter one (``shorten =
+        true`` in ``[settings]``; :func:`plan_campaign`). Only with the ``shortest``
+        objective and no robust box.
     """
 
     experiments: tuple[ExperimentSpec, ...]
@@ -136,6 +141,7 @@ class CampaignConfig:
     baseline_steps: tuple[Path | None, ...] = ()
     exports: tuple[ExportSettings, ...] = ()
     sheet: SheetSettings = field(default_factory=SheetSettings)
+    shorten: bool = False
 
     def __post_init__(self) -> None:
         exps = tuple(self.experiments)
@@ -164,9 +170,26 @@ class CampaignConfig:
                 f"baseline_steps needs one entry per experiment ({len(exps)}), got {len(base)}"
             )
         object.__setattr__(self, "baseline_steps", base)
+        if not isinstance(self.shorten, bool):
+            raise ParameterError(f"shorten must be true or false, got {self.shorten!r}")
+        if self.shorten:
+            check_shorten(self)
 
     def baseline_for(self, i: int) -> Path | None:
         return self.baseline_steps[i] if self.baseline_steps else None
+
+
+def check_shorten(config: CampaignConfig) -> None:
+    """Refuse ``shorten`` where it cannot apply: a robust box, or another objective."""
+    robust = config.robust_tau_s is not None or config.robust_dt0_c is not None
+    other = sorted({s.objective for s in config.experiments} - {"shortest"})
+    if robust or other:
+        raise ParameterError(
+            "shorten (--shorten, or shorten = true in [settings]) applies to the shortest "
+            "objective planned for one model: "
+            + ("remove the [robust] table" if robust else f"objective {', '.join(other)}")
+            + " or drop shorten"
+        )
 
 
 def default_campaign() -> CampaignConfig:
@@ -260,8 +283,13 @@ def campaign_from_dict(doc: dict, path: Path | str = "<config>") -> CampaignConf
             }
         ),
     )
-    settings = _table(doc, "settings", path)
-    _check_keys(settings, _SETTING_KEYS, _where(path, "settings"))
+    settings = dict(_table(doc, "settings", path))
+    _check_keys(settings, (*_SETTING_KEYS, "shorten"), _where(path, "settings"))
+    shorten = settings.pop("shorten", False)
+    if not isinstance(shorten, bool):
+        raise ParameterError(
+            f"{_where(path, 'settings', 'shorten')} must be true or false, got {shorten!r}"
+        )
     settings = {k: _value(v, k, _where(path, "settings")) for k, v in settings.items()}
     if preset is not None:  # the preset's step limit, unless [settings] names one
         settings = {"max_steps": preset.max_steps, **settings}
@@ -317,6 +345,7 @@ def campaign_from_dict(doc: dict, path: Path | str = "<config>") -> CampaignConf
             baseline_steps=tuple(baselines) if any(b is not None for b in baselines) else (),
             exports=exports,
             sheet=sheet,
+            shorten=shorten,
         ),
     )
 
@@ -647,7 +676,8 @@ def plan_campaign(
         Size of the local pool.
     shorten : bool
         Give each complete plan to the timetable stage for a shorter one
-        (:func:`~schedsyn.planner.plan_experiment`'s ``shorten``; 1-2 min more each).
+        (:func:`~schedsyn.planner.plan_experiment`'s ``shorten``; 1-2 min more each);
+        also when ``config.shorten``.
 
     Returns
     -------
@@ -656,6 +686,9 @@ def plan_campaign(
         message is in ``errors``.
     """
     tic = time.perf_counter()
+    shorten = shorten or config.shorten
+    if shorten:
+        check_shorten(config)
     jobs = [
         _PlanJob(s, config.params, config.limits, config.robust_tau_s, config.robust_dt0_c, shorten)
         for s in config.experiments

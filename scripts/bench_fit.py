@@ -27,6 +27,7 @@ and the drift fitted over the approximation region that both runs reached
 
     python scripts/bench_fit.py --plans out/campaign [--gyros 20] [--regions W1 W2]
         [--workers 2] [--out out/bench_fit] [--seed 0] [--no-walk] [--weighting ols]
+        [--estimator kinematic]
 
 ``--no-walk`` drops the bias random walk (white noise only): a diagnostic that shows how
 much of (a) the plan's design decides once the walk's offset is gone.
@@ -49,7 +50,7 @@ import pandas as pd
 import schedsyn
 from schedsyn.baseline import paper_like_programme
 from schedsyn.design import DesignSpace, programme_design
-from schedsyn.driftfit import WEIGHTINGS, FitSettings, fit_drift, fit_samples
+from schedsyn.driftfit import ESTIMATORS, WEIGHTINGS, FitSettings, fit_drift, fit_samples
 from schedsyn.errors import ParameterError
 from schedsyn.gyro import gyro_log, random_gyro
 from schedsyn.io import write_frame_atomic, write_text_atomic
@@ -74,6 +75,7 @@ class Case:
     seed: int
     walk: bool = True
     weighting: str = "gls"
+    estimator: str = "auto"
 
 
 def _rms(x) -> float:
@@ -88,10 +90,10 @@ def _common_region(frames, approx):
     return float(math.ceil(lo * 2) / 2), float(math.floor(hi * 2) / 2)
 
 
-def _fit(frame, region, source, holdout=None, weighting="gls"):
+def _fit(frame, region, source, holdout=None, weighting="gls", estimator="auto"):
     log = schedsyn.log_from_frame(frame, source)
     lo, hi = region
-    settings = FitSettings(weighting=weighting)
+    settings = FitSettings(weighting=weighting, estimator=estimator)
     for _ in range(6):  # shrink by 0.5 degC at an edge with too few samples
         try:
             return fit_drift(log, (lo, hi), settings, holdout=holdout), (lo, hi)
@@ -121,8 +123,9 @@ def run_case(case: Case) -> dict:
     f_base = gyro_log(base, gyro, device, sample_s=SAMPLE_S, seed=int(seeds[1]))
     region = _common_region([f_plan, f_base], case.approx)
     log_base = schedsyn.log_from_frame(f_base, "baseline")
-    fit_p, region = _fit(f_plan, region, "plan", holdout=log_base, weighting=case.weighting)
-    fit_b, _ = _fit(f_base, region, "baseline", weighting=case.weighting)
+    kw = {"weighting": case.weighting, "estimator": case.estimator}
+    fit_p, region = _fit(f_plan, region, "plan", holdout=log_base, **kw)
+    fit_b, _ = _fit(f_base, region, "baseline", **kw)
     space = DesignSpace(*case.working, *case.approx)
     t_grid, g_grid = space.grid("working")
     truth = gyro.drift_dph(t_grid, g_grid)
@@ -263,6 +266,13 @@ def main() -> None:
         default="gls",
         help="the fit's weighting (default gls: white noise + bias walk; ols for comparison)",
     )
+    ap.add_argument(
+        "--estimator",
+        choices=ESTIMATORS,
+        default="auto",
+        help="the fit's gradient estimator (default auto: model-based, the logs have "
+        "tk_set_c; kinematic: as for a log without the chamber setpoint)",
+    )
     args = ap.parse_args()
     config = schedsyn.load_campaign(ROOT / "data" / "paper_campaign.toml")
     cases, designs = [], {}
@@ -293,6 +303,7 @@ def main() -> None:
                     seed=args.seed,
                     walk=not args.no_walk,
                     weighting=args.weighting,
+                    estimator=args.estimator,
                 )
                 cases.append(case)
     rows = run_map(run_case, cases, "local", workers=args.workers, desc="gyros")

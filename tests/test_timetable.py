@@ -305,6 +305,18 @@ def test_plan_and_campaign_hand_shorten_to_the_planner(tmp_path, monkeypatch, ca
     main(["campaign", "--backend", "serial", "--quiet", "--shorten", "--out", str(tmp_path / "c")])
     capsys.readouterr()
     assert seen[:2] == [False, True] and seen[2:] and all(seen[2:])
+    # shorten = true in a campaign file's [settings] does the same, without the flag
+    toml = tmp_path / "short.toml"
+    for value, expect in (("true", True), ("false", False)):
+        toml.write_text(
+            f"[settings]\nshorten = {value}\n[[experiment]]\nname = 'A'\nworking_lo_c = 0.0\n"
+            "working_hi_c = 6.0\napprox_lo_c = -5.0\napprox_hi_c = 11.0\n"
+        )
+        seen.clear()
+        out = tmp_path / f"toml-{value}"
+        main(["campaign", str(toml), "--backend", "serial", "--quiet", "--out", str(out)])
+        capsys.readouterr()
+        assert seen == [expect]
 
 
 def test_a_near_miss_is_searched_again_with_less_separation(monkeypatch):
@@ -347,6 +359,7 @@ def test_a_near_miss_is_searched_again_with_less_separation(monkeypatch):
 def test_shorten_where_it_cannot_apply_is_a_one_line_error(tmp_path, capsys):
     """--shorten with another objective, a robust box or several chamber floors is
     refused before any planning, in one line, nothing written (it was ignored)."""
+    from schedsyn.campaign import load_campaign
     from schedsyn.cli import main
     from schedsyn.errors import ParameterError
     from schedsyn.planner import plan_experiment
@@ -374,5 +387,19 @@ def test_shorten_where_it_cannot_apply_is_a_one_line_error(tmp_path, capsys):
     out = tmp_path / "c"
     assert main(["campaign", str(toml), "--shorten", "--quiet", "--out", str(out)]) == 2
     err = capsys.readouterr().err
-    assert "remove the [robust] table or drop --shorten" in err and err.count("\n") == 1
+    assert "remove the [robust] table or drop shorten" in err and err.count("\n") == 1
     assert not out.exists()
+    # the same from the campaign file, and a shorten that is not a boolean
+    region = "working_lo_c = 0.0\nworking_hi_c = 6.0\napprox_lo_c = -5.0\napprox_hi_c = 11.0\n"
+    for text, words in (
+        ("[settings]\nshorten = true\n[robust]\ntau_s = [2300.0, 2500.0]\n", "[robust]"),
+        ("[settings]\nshorten = true\nobjective = 'margin'\n", "objective margin"),
+        ("[settings]\nshorten = 'yes'\n", "must be true or false"),
+    ):
+        toml.write_text(text + "[[experiment]]\nname = 'A'\n" + region)
+        with pytest.raises(ParameterError, match="shorten"):  # when the file is read
+            load_campaign(toml)
+        assert main(["campaign", str(toml), "--quiet", "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert words in err and "shorten" in err and err.count("\n") == 1, err
+        assert not out.exists()

@@ -92,7 +92,13 @@ def campaign_outputs(config, advise: bool = False) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
-    from ..campaign import default_campaign, load_campaign, plan_campaign, stderr_progress
+    from ..campaign import (
+        check_shorten,
+        default_campaign,
+        load_campaign,
+        plan_campaign,
+        stderr_progress,
+    )
     from ..export import default_export_path
     from ..io import write_frame_atomic
     from ..planner import plan_experiment
@@ -113,14 +119,7 @@ def run(args: argparse.Namespace) -> int:
             "--advise searches with the nominal model: remove the [robust] table or drop --advise"
         )
     if args.shorten:
-        robust = config.robust_tau_s is not None or config.robust_dt0_c is not None
-        other = sorted({s.objective for s in config.experiments} - {"shortest"})
-        if robust or other:
-            raise ParameterError(
-                "--shorten applies to the shortest objective planned for one model: "
-                + ("remove the [robust] table" if robust else f"objective {', '.join(other)}")
-                + " or drop --shorten"
-            )
+        check_shorten(config)
     inputs = [args.config] if args.config else []
     inputs += [b for b in config.baseline_steps if b is not None]
     # checked before any planning: no output overwrites an input, the folder is writable
