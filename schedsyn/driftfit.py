@@ -546,12 +546,18 @@ def walk_normal_matrix(
     walk's block), in which each sample's ``u_k u_k'`` has the weight ``h_k = B_k' Q B_k``
     (its leverage on the walk) and is biased like ``x x'``: ``fix`` swaps those for the
     adjusted ``a_k`` (no change without the errors-in-variables correction, where
-    ``a_k = u_k u_k'``). Returns ``(matrix, B)``.
+    ``a_k = u_k u_k'``). The walk between knots (a Brownian bridge, variance
+    ``K^2 dt / 6`` on average) counts as white noise. Returns ``(matrix, B)``.
     """
     basis, step_h = walk_basis(samples.time_s)
     m = basis.shape[1]
     diff = sp.eye(m, format="csr") - sp.eye(m, k=-1, format="csr")
-    prior = (diff.T @ diff).toarray() / (step_h * ratio_per_h)
+    # between knots the walk is not linear: its bridge (variance K^2 dt/6 on average) is
+    # counted as white noise, K^2/sigma^2 -> K^2/(sigma^2 + K^2 dt/6); without it a run
+    # whose white noise is far below its walk (ratio 1e4 per hour) put its poly terms to
+    # following the walk inside the knot intervals (error 10x the unweighted fit's)
+    ratio = ratio_per_h / (1.0 + ratio_per_h * step_h / 6.0)
+    prior = (diff.T @ diff).toarray() / (step_h * ratio)
     ub = np.asarray((basis.T @ pieces.u).T)  # (p, m)
     walk_block = (basis.T @ basis).toarray() + prior
     lev = _leverage(basis, np.linalg.inv(walk_block))

@@ -181,6 +181,32 @@ def test_adjusted_least_squares_removes_classical_error_bias(rng, walk_ratio_per
         assert abs(adjusted[k]) < 0.2 * abs(plain[k])  # ... removed
 
 
+def test_weighted_fit_holds_when_the_walk_dwarfs_the_white_noise(rng):
+    """White noise far below the walk (K^2/sigma^2 ~ 1e4 per hour): the walk between the
+    5-min knots is not linear, and unless that bridge counts as noise the terms follow the
+    walk inside the knot intervals. The weighted fit stays as good as the unweighted one."""
+    n = 3000
+    t = np.arange(n) * 10.0
+    phase = t / 3600.0 * 2 * np.pi / 1.5
+    temp = -20 + 12 * np.sin(0.37 * phase) * np.abs(np.cos(phase))
+    grad = 0.1 + 0.9 * np.sin(phase)
+    coding = Coding(-20.0, 12.0, 1.0)
+    x = monomials(*coding.code(temp, grad), TERMS)
+    c_true = rng.normal(size=10) * 0.1
+    zeros = np.zeros(n)
+    err = {"gls": [], "ols": []}
+    for _ in range(6):
+        walk = np.cumsum(0.03 * np.sqrt(10.0 / 3600.0) * rng.standard_normal(n))
+        d = x @ c_true + walk + 0.0005 * rng.standard_normal(n)
+        s = Samples(t, temp, grad, d, zeros, zeros, zeros)
+        for w in err:
+            fit = fit_samples(s, "full", coding, eiv=False, weighting=w)
+            e = x @ (fit.coef_coded - c_true)
+            err[w].append(np.sqrt(np.mean((e - e.mean()) ** 2)))  # the shape, not the level
+    assert fit.walk_dph_per_rt_h > 10 * fit.white_sigma_dph
+    assert np.median(err["gls"]) < 1.2 * np.median(err["ols"]), err
+
+
 def test_weighted_normal_matrix_is_unbiased_under_regressor_errors(rng):
     """With the walk profiled out, the adjusted normal matrix of the coefficients (the
     Schur complement) averages to the error-free one over draws of the regressors'
