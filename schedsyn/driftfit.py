@@ -872,6 +872,35 @@ def _estimate(log: MeasuredLog, method: str, params: ThermalParams, **levels) ->
     return estimate_gradient(log, **levels)
 
 
+def estimator_model(
+    log: MeasuredLog, method: str, params: ThermalParams | None
+) -> tuple[ThermalParams, str]:
+    """The thermal model of the gradient estimator and where it comes from.
+
+    Given ``params`` are used as they are. Otherwise, for the model-based estimator, tau
+    and dT0 are identified from the log (:func:`schedsyn.monitor.identify`, a fit of the
+    first-order lag to the whole run): a device 200 s off the nominal tau gave the
+    smoother 0.002 degC/min of systematic gradient error, which the error draws do not
+    see; identified, 0.00004. The kinematic estimator needs no model.
+    """
+    if params is not None:
+        return params, "given"
+    if method != "model":
+        return ThermalParams(), "not used (kinematic estimator)"
+    from .errors import SchedsynError
+    from .monitor import identify
+
+    try:
+        found = identify(log)
+        params = ThermalParams(found.tau_s, found.dt0_c)
+    except (SchedsynError, ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
+        return ThermalParams(), f"nominal (identifying it from the log failed: {exc})"
+    return params, (
+        f"identified from the log (tau {found.tau_s:.0f} ± {found.tau_std_s:.0f} s, "
+        f"dT0 {found.dt0_c:.2f} ± {found.dt0_std_c:.2f} °C)"
+    )
+
+
 def choose_estimator(log: MeasuredLog, estimator: str = "auto") -> str:
     """``"model"`` when asked, or for ``auto`` when ``tk_set_c`` is complete; else kinematic."""
     if estimator == "model":
@@ -994,6 +1023,10 @@ class DriftFit:
         Rows with no ``drift_dph`` reading (blank/NaN): those whose estimated T lies in
         the region, and all of them. They are used for the T and g estimates (which run
         over the whole log) but not fitted; the summary and ``coefficients.json`` say so.
+    estimator_params, estimator_params_source : ThermalParams, str
+        The model-based estimator's thermal model and where it comes from ("given",
+        "identified from the log (...)", or nominal when that failed; see
+        :func:`estimator_model`).
     """
 
     source: str
@@ -1010,6 +1043,8 @@ class DriftFit:
     settings: FitSettings
     notes: tuple[str, ...] = field(default=())
     rows_without_drift: tuple[int, int] = (0, 0)
+    estimator_params: ThermalParams = field(default_factory=ThermalParams)
+    estimator_params_source: str = "given"
 
     @property
     def terms(self) -> tuple[str, ...]:
@@ -1138,6 +1173,11 @@ class DriftFit:
                 ),
             },
             "gradient_estimator": self.estimator,
+            "gradient_estimator_model": {
+                "tau_s": self.estimator_params.tau_s,
+                "dt0_c": self.estimator_params.dt0_c,
+                "source": self.estimator_params_source,
+            },
             "errors_in_variables": {
                 "method": "adjusted least squares" if m.eiv else "none",
                 "gradient_error_std_c_per_min": self.gradient_error_std_c_per_min,
@@ -1170,6 +1210,11 @@ class DriftFit:
             f"fit of {self.source} over {lo:g} .. {hi:g} °C: {m.n} samples, gradient from the "
             f"{self.estimator} Kalman smoother (noise std {self.gradient_error_std_c_per_min:.3g}"
             f" °C/min; uncorrected attenuation {self.attenuation:.2%})",
+            *(
+                [f"thermal model of the smoother: {self.estimator_params_source}"]
+                if self.estimator == "model"
+                else []
+            ),
             *self._without_drift_lines(),
             f"model {term_set_name(m.terms)} ({len(m.terms)} terms): residual RMS "
             f"{m.residual_rms_dph:.4g} °/h (T-only cubic {ref.residual_rms_dph:.4g} °/h); "
@@ -1240,16 +1285,18 @@ def _samples_from_log(
     log: MeasuredLog,
     region: tuple[float, float],
     settings: FitSettings,
-    params: ThermalParams,
-) -> tuple[Samples, GradientEstimate, str, tuple[int, int]]:
-    """Regression samples in the region, the gradient estimate, its method and the rows
-    without a drift reading ``(in the region, in the log)``."""
+    params: ThermalParams | None,
+) -> tuple[Samples, GradientEstimate, str, tuple[int, int], ThermalParams, str]:
+    """Regression samples in the region, the gradient estimate, its method, the rows
+    without a drift reading ``(in the region, in the log)``, and the estimator's thermal
+    model with where it comes from (:func:`estimator_model`)."""
     if log.drift_dph is None:
         raise LogFormatError(
             f"{log.source}: no drift_dph column; fitting needs the gyro's drift in °/h next to "
             "t_int_c (output minus the known reference rate)"
         )
     method = choose_estimator(log, settings.estimator)
+    params, model_source = estimator_model(log, method, params)
     est = _estimate(log, method, params)
     var_t, cov_tg, var_g = (
         estimation_errors(log, est, params, settings.n_error_draws, settings.seed)
@@ -1283,7 +1330,7 @@ def _samples_from_log(
         cov_tg[idx],
         var_g[idx],
     )
-    return s, est, method, without_drift
+    return s, est, method, without_drift, params, model_source
 
 
 def _domain(s: Samples, region: tuple[float, float], t_step: float) -> pd.DataFrame:
@@ -1337,7 +1384,6 @@ def fit_drift(
         samples, or samples that cannot determine the terms.
     """
     settings = FitSettings() if settings is None else settings
-    params = ThermalParams() if params is None else params
     try:
         lo, hi = (float(v) for v in region_c)
     except (TypeError, ValueError):
@@ -1345,7 +1391,9 @@ def fit_drift(
     if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
         raise ParameterError(f"the region needs finite lo < hi, got {lo:g} .. {hi:g} °C")
     region = (lo, hi)
-    s, _est, method, without_drift = _samples_from_log(log, region, settings, params)
+    s, _est, method, without_drift, model_params, model_source = _samples_from_log(
+        log, region, settings, params
+    )
     eiv = settings.eiv == "als"
     g_half = max(float(np.max(np.abs(s.g_c_per_min))), 0.05)
     coding = Coding(0.5 * (lo + hi), 0.5 * (hi - lo), g_half)
@@ -1388,21 +1436,26 @@ def fit_drift(
         settings=settings,
         notes=tuple(notes),
         rows_without_drift=without_drift,
+        estimator_params=model_params,
+        estimator_params_source=model_source,
     )
     if holdout is not None:
         fit = dataclasses.replace(fit, holdout=evaluate_holdout(fit, holdout, params))
     return fit
 
 
-def evaluate_holdout(fit: DriftFit, log: MeasuredLog, params: ThermalParams) -> Holdout:
+def evaluate_holdout(
+    fit: DriftFit, log: MeasuredLog, params: ThermalParams | None = None
+) -> Holdout:
     """Residual RMS of the fitted model and of the T-only reference on a second log,
-    over its samples inside the fit's region and reached gradients."""
+    over its samples inside the fit's region and reached gradients (the estimator's
+    model as :func:`estimator_model`: given, else identified from that log)."""
     if log.drift_dph is None:
         raise LogFormatError(
             f"{log.source}: the held-out log has no drift_dph column; it needs the drift in °/h"
         )
     method = choose_estimator(log, fit.settings.estimator)
-    est = _estimate(log, method, params)
+    est = _estimate(log, method, estimator_model(log, method, params)[0])
     d = np.asarray(log.drift_dph, dtype=float)
     ok = np.isfinite(d) & fit.in_domain(est.t_est_c, est.g_est_c_per_min)
     if ok.sum() < 10:

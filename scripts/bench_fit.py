@@ -50,7 +50,14 @@ import pandas as pd
 import schedsyn
 from schedsyn.baseline import paper_like_programme
 from schedsyn.design import DesignSpace, programme_design
-from schedsyn.driftfit import ESTIMATORS, WEIGHTINGS, FitSettings, fit_drift, fit_samples
+from schedsyn.driftfit import (
+    ESTIMATORS,
+    WEIGHTINGS,
+    FitSettings,
+    estimator_model,
+    fit_drift,
+    fit_samples,
+)
 from schedsyn.errors import ParameterError
 from schedsyn.gyro import gyro_log, random_gyro
 from schedsyn.io import write_frame_atomic, write_text_atomic
@@ -156,7 +163,7 @@ def run_case(case: Case) -> dict:
         row[f"{tag}_selected_rms_z"] = _rms(err / np.maximum(sd, 1e-12))
     # (b) held out on the baseline's run: inside the plan fit's domain
     full_p = fit_samples(fit_p.samples, "full", fit_p.model.coding, weighting=case.weighting)
-    est = schedsyn.estimate_gradient_model(log_base)
+    est = schedsyn.estimate_gradient_model(log_base, estimator_model(log_base, "model", None)[0])
     inside = fit_p.in_domain(est.t_est_c, est.g_est_c_per_min)
     t_true = f_base["t_true_c"].to_numpy()[inside]
     g_true = f_base["g_true_c_per_min"].to_numpy()[inside]

@@ -64,7 +64,7 @@ def register(sub) -> None:
         help="samples every 1 °C bin of the region needs (default 5)",
     )
     p.add_argument("--out", default=None, help="output directory (default out/fit)")
-    _common.add_model_options(p)
+    _common.add_model_options(p, "identified from each log for the model-based smoother")
     p.set_defaults(func=run)
 
 
@@ -83,7 +83,10 @@ def run(args: argparse.Namespace) -> int:
     for one in (log, holdout):
         if one is not None:
             _common.log_warnings(one)
-    params = _common.thermal_params(args)
+    # the smoother's model: as given (either option; the other at its default), else
+    # identified from each log
+    given = args.tau_s is not None or args.dt0_c is not None
+    params = _common.thermal_params(args) if given else None
     fit = fit_drift(log, tuple(args.region), settings, params, holdout=holdout)
     out = _common.out_dir(args.out, "out/fit")
     inputs = [args.log] + ([args.holdout] if args.holdout else [])
