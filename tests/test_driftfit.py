@@ -622,6 +622,8 @@ def test_cli_fit_writes_every_output(logs_dir, tmp_path, capsys):
         assert (out / name).stat().st_size > 0, name
     doc = json.loads((out / "coefficients.json").read_text())
     assert doc["holdout"]["n_in_domain"] > 0
+    assert doc["gradient_estimator_model"]["source"].startswith("identified from the log")
+    assert "thermal model of the smoother: identified" in text
     comp = pd.read_csv(out / "compensation.csv")
     assert list(comp.columns) == ["t_c", "g_c_per_min", "drift_dph"]
 
@@ -635,10 +637,13 @@ def test_cli_fit_terms_option_and_errors(logs_dir, tmp_path, capsys):
     # the weighting: as asked, in the JSON and the summary
     out_ols = tmp_path / "fit_ols"
     assert main(["fit", str(logs_dir / "run1.csv"), "--region", "-50", "-21", "--terms",
-                 "t-only", "--weighting", "ols", "--out", str(out_ols)]) == 0  # fmt: skip
+                 "t-only", "--weighting", "ols", "--tau-s", "2300", "--out",
+                 str(out_ols)]) == 0  # fmt: skip
     assert "ordinary least squares" in capsys.readouterr().out
     doc_ols = json.loads((out_ols / "coefficients.json").read_text())
     assert doc_ols["weighting"]["method"] == "ols"
+    model = doc_ols["gradient_estimator_model"]  # one option given: the other's default
+    assert (model["tau_s"], model["dt0_c"], model["source"]) == (2300.0, 3.0, "given")
     assert doc["weighting"]["method"] in ("gls", "ols")  # ols when the fitted walk is 0
     assert main(["fit", str(logs_dir / "run1.csv"), "--region", "-50", "-21",
                  "--weighting", "wls", "--out", str(out)]) == 2  # fmt: skip
