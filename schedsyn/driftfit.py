@@ -896,8 +896,8 @@ def estimator_model(
     except (SchedsynError, ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
         return ThermalParams(), f"nominal (identifying it from the log failed: {exc})"
     return params, (
-        f"identified from the log (tau {found.tau_s:.0f} ± {found.tau_std_s:.0f} s, "
-        f"dT0 {found.dt0_c:.2f} ± {found.dt0_std_c:.2f} °C)"
+        f"identified from the log (tau {found.tau_s:.0f} ± {found.tau_std_s:.2g} s, "
+        f"dT0 {found.dt0_c:.2f} ± {found.dt0_std_c:.2g} °C)"
     )
 
 
