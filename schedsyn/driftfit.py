@@ -872,6 +872,11 @@ def _estimate(log: MeasuredLog, method: str, params: ThermalParams, **levels) ->
     return estimate_gradient(log, **levels)
 
 
+#: The smoother's tau is taken from the log only when identified this precisely
+#: (standard deviation over value); else the nominal model (a flat log: 874 ± 2800 s).
+IDENTIFIED_TAU_REL_STD = 0.2
+
+
 def estimator_model(
     log: MeasuredLog, method: str, params: ThermalParams | None
 ) -> tuple[ThermalParams, str]:
@@ -890,11 +895,18 @@ def estimator_model(
     from .errors import SchedsynError
     from .monitor import identify
 
+    nominal = ThermalParams()
     try:
         found = identify(log)
         params = ThermalParams(found.tau_s, found.dt0_c)
     except (SchedsynError, ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
-        return ThermalParams(), f"nominal (identifying it from the log failed: {exc})"
+        return nominal, f"nominal (identifying it from the log failed: {exc})"
+    if not found.tau_std_s <= IDENTIFIED_TAU_REL_STD * found.tau_s:
+        return nominal, (
+            f"nominal, tau {nominal.tau_s:g} s, dT0 {nominal.dt0_c:g} °C (the log does not "
+            f"determine tau: {found.tau_s:.0f} ± {found.tau_std_s:.2g} s; give --tau-s and "
+            "--dt0-c)"
+        )
     return params, (
         f"identified from the log (tau {found.tau_s:.0f} ± {found.tau_std_s:.2g} s, "
         f"dT0 {found.dt0_c:.2f} ± {found.dt0_std_c:.2g} °C)"

@@ -22,6 +22,7 @@ from schedsyn.driftfit import (
     _walk_weighted,
     cross_validate,
     estimation_errors,
+    estimator_model,
     fit_coefficients,
     fit_drift,
     fit_samples,
@@ -504,6 +505,12 @@ def test_the_smoothers_model_is_identified_from_the_log(programme):
     assert doc["tau_s"] == found.estimator_params.tau_s and "identified" in doc["source"]
     assert any("identified from the log" in line for line in found.summary_lines())
     s = found.samples
+    # a log that does not determine tau (the device held flat): the nominal model, said so
+    t = np.arange(0.0, 7200.0, 10.0)
+    flat = pd.DataFrame({"time_s": t, "t_int_c": 23.0 + 0.02 * np.sin(t), "tk_set_c": 20.0,
+                         "drift_dph": 0.1})  # fmt: skip
+    params, source = estimator_model(log_from_frame(flat, "flat"), "model", None)
+    assert params == ThermalParams() and "does not determine tau" in source, source
     # the regressors: the identified smoother's gradient is far closer to the truth (the
     # fitted drift barely differs here: the nominal smoother's error is 0.002 degC/min)
     g_true = dict(zip(f["time_s"], f["g_true_c_per_min"], strict=True))
