@@ -79,9 +79,10 @@ import pandas as pd
 import scipy.sparse as sp
 from scipy.optimize import brentq, minimize_scalar
 
-from .errors import LogFormatError, ParameterError
+from .errors import LogFormatError, ParameterError, SchedsynError
 from .estimate import GradientEstimate, estimate_gradient, estimate_gradient_model
 from .logs import MeasuredLog
+from .monitor import identify
 from .params import ThermalParams
 from .terms import (
     CANDIDATES,
@@ -892,9 +893,6 @@ def estimator_model(
         return params, "given"
     if method != "model":
         return ThermalParams(), "not used (kinematic estimator)"
-    from .errors import SchedsynError
-    from .monitor import identify
-
     nominal = ThermalParams()
     try:
         found = identify(log)
