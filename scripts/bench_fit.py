@@ -27,7 +27,7 @@ and the drift fitted over the approximation region that both runs reached
 
     python scripts/bench_fit.py --plans out/campaign [--gyros 20] [--regions W1 W2]
         [--workers 2] [--out out/bench_fit] [--seed 0] [--no-walk] [--weighting ols]
-        [--estimator kinematic]
+        [--estimator kinematic] [--nominal-smoother]
 
 ``--no-walk`` drops the bias random walk (white noise only): a diagnostic that shows how
 much of (a) the plan's design decides once the walk's offset is gone.
@@ -83,6 +83,7 @@ class Case:
     walk: bool = True
     weighting: str = "gls"
     estimator: str = "auto"
+    nominal_smoother: bool = False
 
 
 def _rms(x) -> float:
@@ -97,13 +98,13 @@ def _common_region(frames, approx):
     return float(math.ceil(lo * 2) / 2), float(math.floor(hi * 2) / 2)
 
 
-def _fit(frame, region, source, holdout=None, weighting="gls", estimator="auto"):
+def _fit(frame, region, source, holdout=None, weighting="gls", estimator="auto", params=None):
     log = schedsyn.log_from_frame(frame, source)
     lo, hi = region
     settings = FitSettings(weighting=weighting, estimator=estimator)
     for _ in range(6):  # shrink by 0.5 degC at an edge with too few samples
         try:
-            return fit_drift(log, (lo, hi), settings, holdout=holdout), (lo, hi)
+            return fit_drift(log, (lo, hi), settings, params, holdout=holdout), (lo, hi)
         except ParameterError as exc:
             if "too few samples" not in str(exc):
                 raise
@@ -130,7 +131,11 @@ def run_case(case: Case) -> dict:
     f_base = gyro_log(base, gyro, device, sample_s=SAMPLE_S, seed=int(seeds[1]))
     region = _common_region([f_plan, f_base], case.approx)
     log_base = schedsyn.log_from_frame(f_base, "baseline")
-    kw = {"weighting": case.weighting, "estimator": case.estimator}
+    kw = {
+        "weighting": case.weighting,
+        "estimator": case.estimator,
+        "params": schedsyn.ThermalParams() if case.nominal_smoother else None,
+    }
     fit_p, region = _fit(f_plan, region, "plan", holdout=log_base, **kw)
     fit_b, _ = _fit(f_base, region, "baseline", **kw)
     space = DesignSpace(*case.working, *case.approx)
@@ -280,6 +285,12 @@ def main() -> None:
         help="the fit's gradient estimator (default auto: model-based, the logs have "
         "tk_set_c; kinematic: as for a log without the chamber setpoint)",
     )
+    ap.add_argument(
+        "--nominal-smoother",
+        action="store_true",
+        help="the smoother's model at the nominal 2400 s / 3 degC instead of identified "
+        "from each log (for comparison)",
+    )
     args = ap.parse_args()
     config = schedsyn.load_campaign(ROOT / "data" / "paper_campaign.toml")
     cases, designs = [], {}
@@ -311,6 +322,7 @@ def main() -> None:
                     walk=not args.no_walk,
                     weighting=args.weighting,
                     estimator=args.estimator,
+                    nominal_smoother=args.nominal_smoother,
                 )
                 cases.append(case)
     rows = run_map(run_case, cases, "local", workers=args.workers, desc="gyros")
