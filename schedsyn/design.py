@@ -548,3 +548,79 @@ def plan_space(plan) -> DesignSpace:
 def plan_design(plan, terms: str | tuple = "full") -> DesignReport:
     """:func:`design_report` of a planner ``Plan``'s exported programme (1-min samples)."""
     return programme_design(plan.programme, plan_space(plan), terms)
+
+
+# -- the drift's level: a floor no programme and no fit can beat ---------------------------
+#: Time step of the entry-time search, min.
+ENTRY_STEP_MIN = 0.1
+
+
+def first_entry_min(
+    programme: Programme, space: DesignSpace, *, dt_min: float = ENTRY_STEP_MIN
+) -> float:
+    """When ``programme`` first brings the device into the approximation region, min
+    (simulated with the space's device model from the limits' initial temperature; to
+    ``dt_min``); ``inf`` if it never does."""
+    traj = simulate(programme, space.params, dt_min=dt_min, t0_c=space.limits.t_init_c)
+    inside = np.flatnonzero((traj.t_c >= space.approx_lo_c) & (traj.t_c <= space.approx_hi_c))
+    return float(traj.time_min[inside[0]]) if inside.size else math.inf
+
+
+def fastest_entry_min(space: DesignSpace, *, dt_min: float = ENTRY_STEP_MIN) -> float:
+    """The earliest any programme within the space's limits can bring the device into the
+    approximation region, min (``inf`` if none can within ``duration_max_min``).
+
+    The device's temperature is monotone in the chamber's path (first-order lag), so the
+    fastest entry from above is the chamber cooling at its full rate down to its floor and
+    holding there; from below, heating at the full rate up to its ceiling.
+    """
+    lim = space.limits
+    t0 = lim.t_init_c
+    if space.approx_lo_c <= t0 <= space.approx_hi_c:
+        return 0.0
+    rate, stop = (
+        (lim.rate_min_c_per_min, lim.chamber_min_c)
+        if t0 > space.approx_hi_c
+        else (lim.rate_max_c_per_min, lim.chamber_max_c)
+    )
+    total = lim.duration_max_min
+    ramp = min((stop - lim.start_c) / rate, total) if rate else total
+    if ramp <= 0.0:  # the chamber starts at (or beyond) its limit: hold there
+        durations, rates = [total], [0.0]
+    elif ramp < total:
+        durations, rates = [ramp, total - ramp], [rate, 0.0]
+    else:
+        durations, rates = [total], [rate]
+    programme = Programme(np.array(durations), np.array(rates), start_c=lim.start_c)
+    return first_entry_min(programme, space, dt_min=dt_min)
+
+
+def level_floor_dph(
+    walk_dph_per_rt_h: float, white_dph_per_rt_hz: float, entry_min: float
+) -> float:
+    """The smallest RMS error, deg/h, with which any fit can know the drift's level when
+    the device first reaches the approximation region ``entry_min`` after the bias random
+    walk started (switch-on, the start of the run)::
+
+        var >= K^2 t_entry + K N        (K in deg/h per sqrt(s), N in deg/h sqrt(s))
+
+    The fit uses samples inside the approximation region only (outside it the drift
+    polynomial is not assumed to hold), so the walk accumulated before the entry,
+    variance ``K^2 t_entry``, is indistinguishable from the drift's constant; and even
+    with the drift's shape known, a level observed through white noise N while it walks
+    at K is known at the start of the record to ``sqrt(K N)`` at best (the stationary
+    variance of the Kalman filter for a random walk in white noise, run backward from the
+    end of an infinitely long record; a finite or gappy record knows it worse). Every
+    point of the compensation table carries the level, so this bounds the RMS error of
+    the fitted drift over any grid (for any fit whose error does not depend on the
+    drift's unknown level, as least squares' does not).
+    """
+    for name, v in (
+        ("walk_dph_per_rt_h", walk_dph_per_rt_h),
+        ("white_dph_per_rt_hz", white_dph_per_rt_hz),
+        ("entry_min", entry_min),
+    ):
+        if not (v >= 0.0):
+            raise ParameterError(f"{name} must be >= 0, got {v!r}")
+    k = walk_dph_per_rt_h / 60.0  # deg/h per sqrt(s)
+    return math.sqrt(k * k * entry_min * 60.0 + k * white_dph_per_rt_hz)

@@ -16,7 +16,10 @@ from schedsyn.design import (
     MAX_HEAT_C_PER_MIN,
     DesignSpace,
     design_report,
+    fastest_entry_min,
+    first_entry_min,
     i_optimal_design,
+    level_floor_dph,
     log_det_information,
     plan_design,
     programme_design,
@@ -294,3 +297,91 @@ def test_paper_like_generator_rejects_bad_requests():
         paper_like_programme(-50, -30, -52, -20, 480, heat_rates_c_per_min=(4.0,))
     with pytest.raises(ParameterError, match="device limits"):
         paper_like_programme(-50, -30, -60, -20, 480)
+
+
+# -- the drift's level: entry time and floor -------------------------------------------------
+def _entry_by_ode(rate, stop_c, region, p, lim):
+    """First time the device reaches ``region`` with the chamber ramping at ``rate`` from
+    its start to ``stop_c`` and holding there (solve_ivp, an event on each edge)."""
+
+    def chamber_rate(t, tk):
+        return rate if (stop_c - tk) * rate > 0 else 0.0
+
+    lo, hi = region
+    sol = solve_ivp(
+        lambda t, y: [chamber_rate(t, y[0]), (y[0] + p.dt0_c - y[1]) / p.tau_min],
+        (0, lim.duration_max_min),
+        [lim.start_c, lim.t_init_c],
+        events=[lambda t, y: y[1] - hi, lambda t, y: y[1] - lo],
+        rtol=1e-10,
+        atol=1e-10,
+        max_step=0.5,
+    )
+    times = [ev[0] for ev in sol.t_events if ev.size]
+    return min(times) if times else math.inf
+
+
+@pytest.mark.parametrize(
+    "region, limits",
+    [
+        ((-52.0, -20.0), Limits()),  # W1: full cooling, above the chamber floor
+        ((45.0, 60.0), Limits()),  # heating at 3 degC/min into the ceiling (80) and holding
+        ((-58.0, -54.0), Limits(device_min_c=-60.0, chamber_min_c=-62.0)),  # after the floor
+    ],
+)
+def test_fastest_entry_by_ode_and_no_programme_enters_earlier(region, limits, rng):
+    p = ThermalParams()
+    lo, hi = region
+    space = DesignSpace(lo, hi, lo, hi, p, limits, 99.0, 99.0)
+    fastest = fastest_entry_min(space)
+    rate, stop = (
+        (limits.rate_min_c_per_min, limits.chamber_min_c)
+        if limits.t_init_c > hi
+        else (limits.rate_max_c_per_min, limits.chamber_max_c)
+    )
+    assert fastest == pytest.approx(_entry_by_ode(rate, stop, region, p, limits), abs=0.11)
+    # random programmes within the chamber's rate and air limits never get there sooner
+    for _ in range(40):
+        durations, rates, tk = [], [], limits.start_c
+        for _ in range(int(rng.integers(1, 5))):
+            target = float(rng.uniform(limits.chamber_min_c, limits.chamber_max_c))
+            up = target > tk
+            r = float(rng.uniform(0.3, 1.0)) * (
+                limits.rate_max_c_per_min if up else -limits.rate_min_c_per_min
+            )
+            durations += [abs(target - tk) / r, float(rng.uniform(0.5, 30.0))]
+            rates += [r if up else -r, 0.0]
+            tk = target
+        durations[-1] = 500.0
+        entry = first_entry_min(Programme(np.array(durations), np.array(rates)), space)
+        assert entry >= fastest - 0.11
+    assert fastest_entry_min(DesignSpace(0.0, 30.0, -10.0, 40.0)) == 0.0  # starts inside
+
+
+@pytest.mark.parametrize(
+    "walk, white, entry_min",
+    [(0.01, 0.3, 0.0), (0.02, 0.1, 77.0), (0.005, 0.5, 35.0)],
+)
+def test_level_floor_is_the_variance_of_the_best_fit_of_a_long_record(walk, white, entry_min):
+    """Independent: the exact generalised-least-squares variance of a constant seen in
+    10-s rows (white noise N / sqrt(10 s) each, the walk from 0 at t = 0) over 8 h from
+    the entry on. A long record's variance is the floor; no record does better."""
+    h_s = 10.0
+    t_s = entry_min * 60.0 + h_s * np.arange(1, 8 * 360 + 1)
+    k_s = walk / 60.0
+    omega = (white**2 / h_s) * np.eye(t_s.size) + k_s**2 * np.minimum.outer(t_s, t_s)
+    ones = np.ones(t_s.size)
+    var_gls = 1.0 / (ones @ np.linalg.solve(omega, ones))
+    floor = level_floor_dph(walk, white, entry_min)
+    assert floor**2 <= var_gls <= 1.03 * floor**2
+    # a shorter record knows the level worse, never better
+    n = t_s.size // 8
+    var_short = 1.0 / (ones[:n] @ np.linalg.solve(omega[:n, :n], ones[:n]))
+    assert var_short > var_gls
+
+
+def test_level_floor_rejects_bad_input():
+    for args in ((-0.01, 0.3, 0.0), (0.01, math.nan, 0.0), (0.01, 0.3, -1.0)):
+        with pytest.raises(ParameterError, match="must be >= 0"):
+            level_floor_dph(*args)
+    assert level_floor_dph(0.01, 0.3, math.inf) == math.inf
