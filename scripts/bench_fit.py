@@ -16,6 +16,9 @@ and the drift fitted over the approximation region that both runs reached
     true polynomial over the working region x reachable gradients
     (``DesignSpace.grid("working")``), for the plan and the baseline; also with the
     mean offset removed (what is left when the random walk's average level is ignored);
+    and the level floor no programme and no fit can beat
+    (``schedsyn.design.level_floor_dph``: the walk accumulated before the fastest possible
+    entry into the fit's region, plus ``K N``), as a share of the baseline's error;
 (b) on gyros with gradient terms: the error of the full model and of the T-only cubic
     fitted on the plan's run, held out on the baseline's run (a different trajectory,
     independent noise), over its samples inside the fit's domain: against the noise-free
@@ -49,7 +52,7 @@ import pandas as pd
 
 import schedsyn
 from schedsyn.baseline import paper_like_programme
-from schedsyn.design import DesignSpace, programme_design
+from schedsyn.design import DesignSpace, fastest_entry_min, level_floor_dph, programme_design
 from schedsyn.driftfit import (
     ESTIMATORS,
     WEIGHTINGS,
@@ -153,6 +156,7 @@ def run_case(case: Case) -> dict:
         "walk_dph_per_rt_h": gyro.bias_walk_dph_per_rt_h,
         "plan_selected": _name(fit_p),
         "baseline_selected": _name(fit_b),
+        **_level_floor(gyro, device, region, (f_plan, f_base)),
     }
     for tag, fit in (("plan", fit_p), ("baseline", fit_b)):
         full = fit_samples(fit.samples, "full", fit.model.coding, weighting=case.weighting)
@@ -182,6 +186,24 @@ def run_case(case: Case) -> dict:
     return row
 
 
+def _level_floor(gyro, device, region, frames) -> dict:
+    """When the device first reached the fit's region (fastest possible; the plan's and
+    the baseline's runs), and the level floor no run or fit can beat
+    (:func:`schedsyn.design.level_floor_dph`, the walk starting with the log)."""
+    lo, hi = region
+    space = DesignSpace(lo, hi, lo, hi, device, max_cool_c_per_min=99.0, max_heat_c_per_min=99.0)
+    fastest = fastest_entry_min(space)
+    out = {"entry_fastest_min": fastest}
+    for tag, f in zip(("plan", "baseline"), frames, strict=True):
+        t = f["t_true_c"].to_numpy()
+        inside = np.flatnonzero((t >= lo) & (t <= hi))
+        out[f"{tag}_entry_min"] = float(f["time_s"].to_numpy()[inside[0]]) / 60.0
+    out["level_floor_dph"] = level_floor_dph(
+        gyro.bias_walk_dph_per_rt_h, gyro.white_noise_dph_per_rt_hz, fastest
+    )
+    return out
+
+
 def _name(fit) -> str:
     return str(fit.selection.loc[fit.selection["chosen"], "candidate"].iloc[0])
 
@@ -208,6 +230,21 @@ def summarise(cases: pd.DataFrame, designs: dict) -> pd.DataFrame:
                 "baseline_full_rms_dph_median": c["baseline_full_rms_dph"].median(),
                 "ratio_full_median": ratio_full.median(),
                 "ratio_full_le_half_share": float((ratio_full <= 0.5).mean()),
+                # the level floor (no programme, no fit beats it in mean square): over the
+                # gyros' RMS, what it leaves of target (a)
+                "entry_fastest_min_median": c["entry_fastest_min"].median(),
+                "plan_entry_min_median": c["plan_entry_min"].median(),
+                "baseline_entry_min_median": c["baseline_entry_min"].median(),
+                "level_floor_rms_dph": _rms(c["level_floor_dph"]),
+                "plan_full_rms_dph_rms": _rms(c["plan_full_rms_dph"]),
+                "baseline_full_rms_dph_rms": _rms(c["baseline_full_rms_dph"]),
+                "ratio_full_rms": _rms(c["plan_full_rms_dph"]) / _rms(c["baseline_full_rms_dph"]),
+                "floor_over_baseline_rms": (
+                    _rms(c["level_floor_dph"]) / _rms(c["baseline_full_rms_dph"])
+                ),
+                "floor_over_baseline_median": (
+                    c["level_floor_dph"] / c["baseline_full_rms_dph"]
+                ).median(),
                 "ratio_selected_median": ratio_sel.median(),
                 "selected_rms_dph_median_plan": c["plan_selected_rms_dph"].median(),
                 "selected_rms_dph_median_baseline": c["baseline_selected_rms_dph"].median(),
@@ -240,6 +277,8 @@ def markdown(summary: pd.DataFrame) -> str:
         "baseline_full_rms_dph_median": "(a) RMS baseline, °/h",
         "ratio_full_median": "(a) ratio (target <= 0.5)",
         "ratio_shape_median": "(a) ratio, offset removed",
+        "ratio_full_rms": "(a) ratio of RMS over gyros",
+        "floor_over_baseline_rms": "level floor / baseline, RMS over gyros (no plan can beat)",
         "holdout_tonly_over_full_median": "(b) T-only / full held out (target >= 2)",
         "holdout_measured_tonly_over_full_median": "(b) same, measured residuals",
         "tonly_selected_share_no_gradient": "(b) T-only chosen, no g terms (target >= 90 %)",
