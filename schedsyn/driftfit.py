@@ -1013,7 +1013,9 @@ class DriftFit:
     model : PolyFit
         The chosen (or requested) term set.
     reference : PolyFit
-        The T-only cubic (the reference model), fitted on the same samples.
+        The T-only cubic (the reference model), fitted on the same samples with every
+        sample weighted alike (ordinary least squares, as PX4's and ArduPilot's thermal
+        calibrations fit it; its standard errors still count the noise model).
     selection : DataFrame
         Cross-validation per candidate (``select_terms``); ``chosen`` marks the model.
     samples : Samples
@@ -1419,10 +1421,13 @@ def fit_drift(
         chosen = term_set_name(parse_terms(settings.terms))
         table["chosen"] = table["candidate"] == chosen
     start_s = float(np.asarray(log.time_s, dtype=float)[0])
-    model, reference = (
-        fit_samples(s, ts, coding, eiv=eiv, weighting=settings.weighting, walk_start_s=start_s)
-        for ts in (chosen, "t-only")
+    model = fit_samples(
+        s, chosen, coding, eiv=eiv, weighting=settings.weighting, walk_start_s=start_s
     )
+    # the reference as the tools labs know fit it (PX4, ArduPilot: every sample alike);
+    # weighted by a walk fitted to its own residuals, the T-only cubic of a gyro with
+    # gradient terms takes them for bias walk and follows them with its level
+    reference = fit_samples(s, "t-only", coding, eiv=eiv, weighting="ols", walk_start_s=start_s)
     if model.condition_number > 1e6:
         notes.append(
             f"the coded design is ill-conditioned (condition number {model.condition_number:.3g});"

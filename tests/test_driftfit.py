@@ -540,6 +540,21 @@ def test_selection_keeps_the_t_only_model_without_gradient_terms(tonly_fit):
     assert np.sqrt(np.mean(err**2)) < 0.02
 
 
+def test_t_only_reference_is_fitted_like_the_peers_fit_it(grad_fit):
+    """The T-only reference of a gyro with gradient terms is the cubic in T that every
+    sample fits alike (PX4, ArduPilot): checked against numpy's least squares on the
+    estimates (the errors-in-variables correction is tiny in T). Weighted by a walk
+    fitted to its own residuals it took the missing gradient terms for walk and its
+    constant moved by ~0.7 deg/h (issue found by a stress test)."""
+    _, _, fit = grad_fit
+    s, ref = fit.samples, fit.reference
+    assert ref.terms == TERM_SETS["t-only"]
+    x = np.vander(s.t_c - ref.coding.t_ref_c, 4, increasing=True)
+    lstsq = np.linalg.lstsq(x, s.drift_dph, rcond=None)[0]
+    assert np.allclose(ref.coefficients_dph, lstsq, rtol=0.02, atol=2e-3 * np.abs(lstsq).max())
+    assert abs(float(np.mean(s.drift_dph - ref.predict(s.t_c, s.g_c_per_min)))) < 1e-6
+
+
 def test_holdout_on_a_second_run(grad_fit):
     gyro, _, fit = grad_fit
     h = fit.holdout
