@@ -77,6 +77,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 import scipy.sparse as sp
+from scipy.ndimage import median_filter
 from scipy.optimize import brentq, minimize_scalar
 
 from .errors import LogFormatError, ParameterError, SchedsynError
@@ -98,6 +99,24 @@ from .terms import (
 ESTIMATORS = ("auto", "model", "kinematic")
 EIV_METHODS = ("als", "none")
 WEIGHTINGS = ("gls", "ols")
+OUTLIER_POLICIES = ("drop", "keep")
+#: A drift reading this many robust standard deviations from the running median of its
+#: neighbours is an outlier (a glitch, a sentinel such as 999.9); Gaussian noise gets
+#: there once in ~1e14 readings.
+OUTLIER_SIGMAS = 8.0
+#: The running median spans about this long (odd, 7..61 rows): blocks of glitches up to
+#: half of it are found; the drift's own curvature over it stays far below the limit.
+OUTLIER_WINDOW_S = 180.0
+#: The robust scale is at least this share of the drift's 5-95 % range (noise-free or
+#: coarsely quantised logs, where the median deviation is 0).
+OUTLIER_SCALE_FLOOR = 1e-3
+#: Glitches of up to this many consecutive readings are found by their jumps.
+OUTLIER_BLOCK = 5
+#: A reading this many interquartile ranges from the median of all readings is an outlier
+#: too (a block of sentinel values too long for the running median).
+OUTLIER_IQRS = 50.0
+#: More outliers than this share of the readings: the column is suspect, not a few glitches.
+OUTLIER_MAX_SHARE = 0.01
 
 
 @dataclass(frozen=True, slots=True)
@@ -131,6 +150,10 @@ class FitSettings:
         Grid of the compensation table, degC and degC/min (> 0).
     seed : int
         Seed of the error draws.
+    outliers : {"drop", "keep"}
+        ``drop`` (default): drift readings far from their neighbours (glitches, see
+        :func:`drift_outliers`) are left out of the fit and listed; more than
+        :data:`OUTLIER_MAX_SHARE` of them is an error. ``keep`` fits every reading.
     """
 
     terms: str = "auto"
@@ -143,8 +166,13 @@ class FitSettings:
     t_step_c: float = 1.0
     g_step_c_per_min: float = 0.05
     seed: int = 0
+    outliers: str = "drop"
 
     def __post_init__(self) -> None:
+        if self.outliers not in OUTLIER_POLICIES:
+            raise ParameterError(
+                f"outliers must be one of {OUTLIER_POLICIES}, got {self.outliers!r}"
+            )
         if self.terms != "auto":
             parse_terms(self.terms)  # validates
         if self.eiv not in EIV_METHODS:
@@ -984,7 +1012,8 @@ class Holdout:
 
     ``rms_dph`` and ``reference_rms_dph``: residual RMS of the model and of the T-only
     cubic, deg/h; ``mean_dph``: the model's mean residual (an offset between the runs,
-    e.g. the bias walk's level), deg/h.
+    e.g. the bias walk's level), deg/h. ``n_outliers_left_out``: drift readings far from
+    their neighbours, left out as in the fit (:func:`drift_outliers`).
     """
 
     source: str
@@ -993,6 +1022,7 @@ class Holdout:
     rms_dph: float
     reference_rms_dph: float
     mean_dph: float
+    n_outliers_left_out: int = 0
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -1035,6 +1065,10 @@ class DriftFit:
         Rows with no ``drift_dph`` reading (blank/NaN): those whose estimated T lies in
         the region, and all of them. They are used for the T and g estimates (which run
         over the whole log) but not fitted; the summary and ``coefficients.json`` say so.
+    outliers : tuple of (row, time_s, drift_dph, sigmas)
+        Drift readings far from their neighbours (:func:`drift_outliers`), left out of the
+        fit (``FitSettings.outliers = "drop"``): the log's row (from 0), its time, the
+        reading and how many robust standard deviations it lay from its neighbours.
     estimator_params, estimator_params_source : ThermalParams, str
         The model-based estimator's thermal model and where it comes from ("given",
         "identified from the log (...)", or nominal when that failed; see
@@ -1055,6 +1089,7 @@ class DriftFit:
     settings: FitSettings
     notes: tuple[str, ...] = field(default=())
     rows_without_drift: tuple[int, int] = (0, 0)
+    outliers: tuple[tuple[int, float, float, float], ...] = ()
     estimator_params: ThermalParams = field(default_factory=ThermalParams)
     estimator_params_source: str = "given"
 
@@ -1156,6 +1191,10 @@ class DriftFit:
                 "in_log": self.rows_without_drift[1],
                 "meaning": "blank/NaN drift_dph: used for the T and g estimates, not fitted",
             },
+            "outliers_left_out": [
+                {"row": r, "time_s": ts, "drift_dph": v, "robust_sigmas": z}
+                for r, ts, v, z in self.outliers
+            ],
             "residual_rms_dph": m.residual_rms_dph,
             "noise": {
                 "white_sigma_dph": m.white_sigma_dph,
@@ -1207,9 +1246,20 @@ class DriftFit:
 
     def _without_drift_lines(self) -> list[str]:
         in_region, in_log = self.rows_without_drift
+        lines = []
+        if self.outliers:
+            shown = ", ".join(
+                f"{v:.4g} °/h at {ts:g} s ({z:.0f} σ)" for _, ts, v, z in self.outliers[:5]
+            )
+            more = f" and {len(self.outliers) - 5} more" if len(self.outliers) > 5 else ""
+            lines.append(
+                f"left out {len(self.outliers)} drift_dph reading(s) far from their neighbours "
+                f"(more than {OUTLIER_SIGMAS:g} robust σ; glitches?): {shown}{more}; listed in "
+                "coefficients.json; --outliers keep fits them"
+            )
         if not in_log:
-            return []
-        return [
+            return lines
+        return lines + [
             f"{in_region} rows in the region ({in_log} in the log) have no drift_dph reading "
             "(blank/NaN): they were not fitted (their T and g estimates use them); fill them "
             "in if the drift was recorded"
@@ -1265,6 +1315,11 @@ class DriftFit:
                 f"held out {h.source}: RMS {h.rms_dph:.4g} °/h (T-only cubic "
                 f"{h.reference_rms_dph:.4g} °/h) over {h.n_in_domain} of {h.n_samples} samples "
                 "inside the fit's region and gradients"
+                + (
+                    f" ({h.n_outliers_left_out} outlying drift reading(s) left out)"
+                    if h.n_outliers_left_out
+                    else ""
+                )
             )
         lines += [f"note: {n}" for n in self.notes]
         return lines
@@ -1298,10 +1353,11 @@ def _samples_from_log(
     region: tuple[float, float],
     settings: FitSettings,
     params: ThermalParams | None,
-) -> tuple[Samples, GradientEstimate, str, tuple[int, int], ThermalParams, str]:
+) -> tuple[Samples, GradientEstimate, str, tuple[int, int], ThermalParams, str, tuple]:
     """Regression samples in the region, the gradient estimate, its method, the rows
-    without a drift reading ``(in the region, in the log)``, and the estimator's thermal
-    model with where it comes from (:func:`estimator_model`)."""
+    without a drift reading ``(in the region, in the log)``, the estimator's thermal
+    model with where it comes from (:func:`estimator_model`), and the outlying drift
+    readings left out (``DriftFit.outliers``)."""
     if log.drift_dph is None:
         raise LogFormatError(
             f"{log.source}: no drift_dph column; fitting needs the gyro's drift in °/h next to "
@@ -1316,6 +1372,29 @@ def _samples_from_log(
         else (np.zeros(log.n_rows),) * 3
     )
     t, g, d = est.t_est_c, est.g_est_c_per_min, np.asarray(log.drift_dph, dtype=float)
+    no_drift = ~np.isfinite(d)
+    outliers: tuple = ()
+    if settings.outliers == "drop":
+        time = np.asarray(log.time_s, dtype=float)
+        rows, z = drift_outliers(time, d)
+        n_finite = int((~no_drift).sum())
+        examples = ", ".join(f"{d[r]:.4g} °/h at {time[r]:g} s" for r in rows[:3])
+        if rows.size > OUTLIER_MAX_SHARE * n_finite:
+            raise ParameterError(
+                f"{log.source}: {rows.size} of {n_finite} drift_dph readings "
+                f"({rows.size / n_finite:.1%}) lie more than {OUTLIER_SIGMAS:g} robust σ from "
+                f"their neighbours or {OUTLIER_IQRS:g} interquartile ranges from the median "
+                f"reading (e.g. {examples}): that is not a few glitches; check the column's "
+                "content and units, blank the readings that are not real (empty cells are left "
+                "out of the fit and reported), or fit every reading with --outliers keep"
+            )
+        if rows.size:
+            outliers = tuple(
+                (int(r), float(time[r]), float(d[r]), float(zz))
+                for r, zz in zip(rows, z, strict=True)
+            )
+            d = d.copy()
+            d[rows] = np.nan
     lo, hi = region
     ok = np.isfinite(t) & np.isfinite(g) & np.isfinite(d)
     if not ok.any():
@@ -1328,7 +1407,6 @@ def _samples_from_log(
             f"never enters the region {lo:g} .. {hi:g} °C; choose --region inside what the "
             "run covered"
         )
-    no_drift = ~np.isfinite(d)
     in_region = np.isfinite(t) & np.isfinite(g) & (t >= lo) & (t <= hi)
     without_drift = (int((no_drift & in_region).sum()), int(no_drift.sum()))
     _bins_check(t[inside], region, settings.min_points_per_bin, log.source)
@@ -1342,7 +1420,61 @@ def _samples_from_log(
         cov_tg[idx],
         var_g[idx],
     )
-    return s, est, method, without_drift, params, model_source
+    return s, est, method, without_drift, params, model_source, outliers
+
+
+def drift_outliers(time_s: np.ndarray, drift_dph: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of ``drift_dph`` far from their neighbours, and how far in robust sigmas.
+
+    On the finite readings in time order: a reading (or up to :data:`OUTLIER_BLOCK`
+    consecutive ones) is a glitch when it jumps away from the previous reading and back
+    at the next, each jump more than :data:`OUTLIER_SIGMAS`
+    robust sigmas beyond the local trend (the differences' running median over about
+    :data:`OUTLIER_WINDOW_S`; sigma from their median absolute deviation, at least the
+    typical nonzero jump and :data:`OUTLIER_SCALE_FLOOR` of the drift's 5-95 % range, so
+    a noise-free or coarsely quantised log is not all outliers). A real step of the drift
+    jumps once and stays, a kink changes the trend once: neither is a glitch. A reading
+    more than :data:`OUTLIER_IQRS` interquartile ranges from the median of all readings is
+    one as well (a block of sentinel values, which the jumps find only at its ends). The
+    distance returned is in the jumps' robust sigmas.
+    """
+    d = np.asarray(drift_dph, dtype=float)
+    finite = np.flatnonzero(np.isfinite(d))
+    if finite.size < 7:
+        return np.zeros(0, dtype=int), np.zeros(0)
+    x = d[finite]
+    steps = np.diff(np.asarray(time_s, dtype=float)[finite])
+    step = float(np.median(steps))
+    width = int(np.clip(round(OUTLIER_WINDOW_S / max(step, 1e-9)), 7, 61)) | 1
+    jumps = np.diff(x)
+    r = jumps - median_filter(jumps, size=width, mode="mirror")
+    spread = float(np.percentile(x, 95) - np.percentile(x, 5))
+    nonzero = np.abs(r[r != 0.0])
+    scale = max(
+        1.4826 * float(np.median(np.abs(r - np.median(r)))),
+        float(np.median(nonzero)) if nonzero.size else 0.0,
+        OUTLIER_SCALE_FLOOR * spread,
+        1e-12,
+    )
+    # readings k .. k+L-1: the jump into the first (r[k-1]) and out of the last
+    # (r[k+L-1]), opposite and both large
+    # (the first and last readings have one neighbour: by half their one jump, since a
+    # run's start or end can change the trend abruptly)
+    into = np.concatenate([[-0.5 * r[0]], r])
+    out_of = np.concatenate([r, [-0.5 * r[-1]]])
+    glitch = np.zeros(x.size)
+    for length in range(1, OUTLIER_BLOCK + 1):
+        a, b = into[: x.size - length + 1], out_of[length - 1 :]
+        size = np.where(a * b < 0.0, np.minimum(np.abs(a), np.abs(b)), 0.0) / scale
+        hit = np.flatnonzero(size > OUTLIER_SIGMAS)
+        for j in range(length):
+            glitch[hit + j] = np.maximum(glitch[hit + j], size[hit])
+    middle = float(np.median(x))
+    iqr = max(float(np.percentile(x, 75) - np.percentile(x, 25)), 0.25 * spread, 1e-12)
+    far = np.abs(x - middle) > OUTLIER_IQRS * iqr
+    z = np.maximum(glitch, np.where(far, np.abs(x - middle) / scale, 0.0))
+    flagged = (glitch > OUTLIER_SIGMAS) | far
+    return finite[flagged], z[flagged]
 
 
 def _domain(s: Samples, region: tuple[float, float], t_step: float) -> pd.DataFrame:
@@ -1403,7 +1535,7 @@ def fit_drift(
     if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
         raise ParameterError(f"the region needs finite lo < hi, got {lo:g} .. {hi:g} °C")
     region = (lo, hi)
-    s, _est, method, without_drift, model_params, model_source = _samples_from_log(
+    s, _est, method, without_drift, model_params, model_source, outliers = _samples_from_log(
         log, region, settings, params
     )
     eiv = settings.eiv == "als"
@@ -1451,6 +1583,7 @@ def fit_drift(
         settings=settings,
         notes=tuple(notes),
         rows_without_drift=without_drift,
+        outliers=outliers,
         estimator_params=model_params,
         estimator_params_source=model_source,
     )
@@ -1472,6 +1605,12 @@ def evaluate_holdout(
     method = choose_estimator(log, fit.settings.estimator)
     est = _estimate(log, method, estimator_model(log, method, params)[0])
     d = np.asarray(log.drift_dph, dtype=float)
+    n_out = 0
+    if fit.settings.outliers == "drop":  # as in the fitted log (drift_outliers)
+        rows, _ = drift_outliers(np.asarray(log.time_s, dtype=float), d)
+        n_out = int(rows.size)
+        d = d.copy()
+        d[rows] = np.nan
     ok = np.isfinite(d) & fit.in_domain(est.t_est_c, est.g_est_c_per_min)
     if ok.sum() < 10:
         raise ParameterError(
@@ -1489,4 +1628,5 @@ def evaluate_holdout(
         rms_dph=float(np.sqrt(np.mean(r**2))),
         reference_rms_dph=float(np.sqrt(np.mean(r_ref**2))),
         mean_dph=float(np.mean(r)),
+        n_outliers_left_out=n_out,
     )

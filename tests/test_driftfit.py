@@ -21,6 +21,7 @@ from schedsyn.driftfit import (
     _normal_pieces,
     _walk_weighted,
     cross_validate,
+    drift_outliers,
     estimation_errors,
     estimator_model,
     fit_coefficients,
@@ -673,6 +674,21 @@ def test_cli_fit_terms_option_and_errors(logs_dir, tmp_path, capsys):
     assert main(["fit", str(logs_dir / "run1.csv"), "--region", "-50", "-21",
                  "--weighting", "wls", "--out", str(out)]) == 2  # fmt: skip
     assert "--weighting" in capsys.readouterr().err
+    assert main(["fit", str(logs_dir / "run1.csv"), "--region", "-50", "-21",
+                 "--outliers", "ignore", "--out", str(out)]) == 2  # fmt: skip
+    assert "--outliers" in capsys.readouterr().err
+    # a glitch: left out and said so; --outliers keep fits it
+    glitch = tmp_path / "glitch.csv"
+    frame = pd.read_csv(logs_dir / "run1.csv")
+    frame.loc[
+        frame.index[(frame["t_true_c"] > -40) & (frame["t_true_c"] < -30)][5], "drift_dph"
+    ] = 999.9
+    frame.to_csv(glitch, index=False)
+    assert main(["fit", str(glitch), "--region", "-50", "-21", "--out", str(tmp_path / "g1")]) == 0
+    assert "left out 1 drift_dph reading(s)" in capsys.readouterr().out
+    assert main(["fit", str(glitch), "--region", "-50", "-21", "--outliers", "keep",
+                 "--out", str(tmp_path / "g2")]) == 0  # fmt: skip
+    assert "left out" not in capsys.readouterr().out
     for argv, words in (
         (["--region", "30", "60"], "never enters"),
         (["--region", "-50", "-21", "--terms", "cubic"], "unknown term set"),
@@ -685,6 +701,62 @@ def test_cli_fit_terms_option_and_errors(logs_dir, tmp_path, capsys):
     assert main(["fit", str(no_drift), "--region", "-50", "-21", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "drift_dph" in err
+
+
+# -- glitches in drift_dph ------------------------------------------------------------------
+def test_drift_outliers_find_glitches_not_noise_steps_kinks_or_quantisation(rng):
+    """Spikes (20 sigma, either sign, single and paired) and a long block of sentinels
+    are found; Gaussian noise on a trend steeper than the noise per row, a real step, a
+    kink, a noise-free curve and a coarsely quantised series are not."""
+    n, sigma = 3000, 0.01
+    t_s = 10.0 * np.arange(n)
+    smooth = 0.3 * np.sin(t_s / 4000.0) + 0.02 * t_s / 60.0  # trend 3 sigma per row
+    smooth[1800:] += 0.5  # a real step
+    smooth[2200:] += 0.0004 * (t_s[2200:] - t_s[2200]) / 10.0  # a kink
+    assert drift_outliers(t_s, smooth)[0].size == 0  # noise-free
+    assert drift_outliers(t_s, np.round(smooth + rng.normal(0, sigma, n), 1))[0].size == 0
+    d = smooth + rng.normal(0, sigma, n)
+    assert drift_outliers(t_s, d)[0].size == 0
+    spikes = np.array([5, 700, 701, 1500, 2999])
+    d[spikes] += 20 * sigma * np.array([1, -1, -1, 1, -3])  # the last row: 16 sigma needed
+    d[2500:2540] = 999.9
+    rows, z = drift_outliers(t_s, d)
+    expected = np.concatenate([spikes, np.arange(2500, 2540)])
+    assert sorted(rows) == sorted(expected)
+    assert np.all(z > 8)
+    # NaN readings are skipped, not outliers, and the rows stay the log's
+    d2 = d.copy()
+    d2[::7] = np.nan
+    rows2, _ = drift_outliers(t_s, d2)
+    assert set(rows2) == set(rows) - set(range(0, n, 7))
+
+
+def test_fit_leaves_out_glitches_lists_them_and_refuses_a_bad_column(programme):
+    gyro = _gyro(GRAD_COEFS)
+    frame = gyro_log(programme, gyro, sample_s=20.0, seed=1)
+    inside = np.flatnonzero((frame["t_true_c"] > -45) & (frame["t_true_c"] < -25))
+    glitches = inside[[10, 200, 400]]
+    dirty = frame.copy()
+    dirty.loc[glitches, "drift_dph"] = 999.9
+    clean_fit = fit_drift(log_from_frame(frame, "clean"), REGION)
+    fit = fit_drift(log_from_frame(dirty, "dirty"), REGION)
+    assert [r for r, *_ in fit.outliers] == sorted(glitches)
+    assert clean_fit.outliers == ()
+    assert fit.terms == clean_fit.terms
+    se = fit.model.std_errors
+    assert np.all(np.abs(fit.model.coefficients_dph - clean_fit.model.coefficients_dph) < se)
+    assert any("left out 3 drift_dph reading(s)" in line for line in fit.summary_lines())
+    doc = fit.to_json_dict()
+    assert [o["row"] for o in doc["outliers_left_out"]] == sorted(glitches)
+    kept = fit_drift(log_from_frame(dirty, "dirty"), REGION, FitSettings(outliers="keep"))
+    assert kept.outliers == () and kept.model.residual_rms_dph > 10 * fit.model.residual_rms_dph
+    # a long block of sentinels is not a few glitches
+    block = frame.copy()
+    block.loc[inside[:60], "drift_dph"] = 1e6
+    with pytest.raises(ParameterError, match="not a few glitches"):
+        fit_drift(log_from_frame(block, "block"), REGION)
+    with pytest.raises(ParameterError, match="outliers must be one of"):
+        FitSettings(outliers="ignore")
 
 
 def test_cli_fit_never_overwrites_its_input(logs_dir, tmp_path, capsys):

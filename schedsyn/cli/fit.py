@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..driftfit import ESTIMATORS, WEIGHTINGS, FitSettings, fit_drift
+from ..driftfit import ESTIMATORS, OUTLIER_POLICIES, WEIGHTINGS, FitSettings, fit_drift
 from ..io import write_frame_atomic, write_json_atomic
 from ..logs import read_log
 from . import _common
@@ -58,6 +58,14 @@ def register(sub) -> None:
         "ols: every sample alike (for comparison)",
     )
     p.add_argument(
+        "--outliers",
+        choices=OUTLIER_POLICIES,
+        default="drop",
+        help="drop (default): leave out drift readings far from their neighbours (glitches, "
+        "more than 8 robust sigma from the running median) and list them; keep: fit every "
+        "reading",
+    )
+    p.add_argument(
         "--min-points-per-bin",
         type=int,
         default=5,
@@ -77,6 +85,7 @@ def run(args: argparse.Namespace) -> int:
         weighting=args.weighting,
         estimator=args.estimator,
         min_points_per_bin=args.min_points_per_bin,
+        outliers=args.outliers,
     )
     log = read_log(args.log)
     holdout = read_log(args.holdout) if args.holdout else None
