@@ -69,12 +69,15 @@ def fit_surface_plot(fit, ax=None, title: str | None = None):
     ax = _axes(ax, figsize=(7.5, 5))
     d = fit.domain
     t = np.asarray(d["t_c"], dtype=float)
-    g = np.linspace(float(d["g_min_c_per_min"].min()), float(d["g_max_c_per_min"].max()), 81)
+    g_min = np.asarray(d["g_min_c_per_min"], dtype=float)
+    g_max = np.asarray(d["g_max_c_per_min"], dtype=float)
+    if t.size < 2:  # a region narrower than the table's step: contour over its two edges
+        t = np.asarray(fit.region_c, dtype=float)
+        g_min, g_max = np.full(2, g_min.min()), np.full(2, g_max.max())
+    g = np.linspace(float(g_min.min()), float(g_max.max()), 81)
     tt, gg = np.meshgrid(t, g, indexing="ij")
     z = fit.predict(tt.ravel(), gg.ravel()).reshape(tt.shape)
-    inside = (gg >= np.asarray(d["g_min_c_per_min"])[:, None]) & (
-        gg <= np.asarray(d["g_max_c_per_min"])[:, None]
-    )
+    inside = (gg >= g_min[:, None]) & (gg <= g_max[:, None])
     z = np.where(inside, z, np.nan)
     s = fit.samples
     lo = float(np.nanmin([np.nanmin(z), np.percentile(s.drift_dph, 1)]))

@@ -703,6 +703,22 @@ def test_cli_fit_terms_option_and_errors(logs_dir, tmp_path, capsys):
     assert err.count("\n") == 1 and "drift_dph" in err
 
 
+def test_a_region_narrower_than_the_tables_step_still_plots(programme):
+    """One temperature in the compensation table: the surface plot contours over the
+    region's two edges (it raised TypeError inside matplotlib, after the table was
+    written)."""
+    from schedsyn import fitplots
+
+    frame = gyro_log(programme, _gyro(T_COEFS), sample_s=10.0, seed=4)
+    fit = fit_drift(log_from_frame(frame, "narrow"), (-36.0, -35.5))
+    assert len(fit.domain) == 1
+    ax = fitplots.fit_surface_plot(fit)
+    assert ax.collections  # the contours and the samples
+    import matplotlib.pyplot as plt
+
+    plt.close(ax.figure)
+
+
 # -- glitches in drift_dph ------------------------------------------------------------------
 def test_drift_outliers_find_glitches_not_noise_steps_kinks_or_quantisation(rng):
     """Spikes (20 sigma, either sign, single and paired) and a long block of sentinels
