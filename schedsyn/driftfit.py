@@ -1542,6 +1542,13 @@ def fit_drift(
     g_half = max(float(np.max(np.abs(s.g_c_per_min))), 0.05)
     coding = Coding(0.5 * (lo + hi), 0.5 * (hi - lo), g_half)
     notes: list[str] = []
+    if settings.estimator == "auto" and method == "kinematic" and log.tk_set_c is not None:
+        blank = int(np.isnan(np.asarray(log.tk_set_c, dtype=float)).sum())
+        notes.append(
+            f"tk_set_c is blank on {blank} of {log.n_rows} rows: the gradient is the "
+            "kinematic smoother's (the model-based one needs the setpoint on every row); "
+            "fill the column in, or pass --estimator kinematic to say so"
+        )
     if settings.terms == "auto":
         names = CANDIDATES
     else:

@@ -703,6 +703,17 @@ def test_cli_fit_terms_option_and_errors(logs_dir, tmp_path, capsys):
     assert err.count("\n") == 1 and "drift_dph" in err
 
 
+def test_a_partly_blank_setpoint_column_says_why_the_kinematic_smoother_is_used(programme):
+    frame = gyro_log(programme, _gyro(T_COEFS), sample_s=20.0, seed=5)
+    frame.loc[frame.index[100:140], "tk_set_c"] = np.nan
+    fit = fit_drift(log_from_frame(frame, "partial"), REGION)
+    assert fit.estimator == "kinematic"
+    assert any("tk_set_c is blank on 40 of" in n for n in fit.notes), fit.notes
+    assert any("tk_set_c is blank" in line for line in fit.summary_lines())
+    whole = fit_drift(log_from_frame(frame.drop(columns=["tk_set_c"]), "none"), REGION)
+    assert whole.estimator == "kinematic" and whole.notes == ()
+
+
 def test_a_region_narrower_than_the_tables_step_still_plots(programme):
     """One temperature in the compensation table: the surface plot contours over the
     region's two edges (it raised TypeError inside matplotlib, after the table was
