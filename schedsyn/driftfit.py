@@ -884,6 +884,67 @@ def _determined(samples: Samples, coding: Coding, terms: tuple[str, ...], eiv: b
     return True
 
 
+#: Lack of fit: the full cubic's BIC lowered by more than this by a flexible extension.
+LACK_OF_FIT_DELTA_BIC = 10.0
+#: Interior knots of the cubic spline in coded T, and of the kinks in coded g.
+LACK_OF_FIT_T_KNOTS = (-0.6, -0.2, 0.2, 0.6)
+LACK_OF_FIT_G_KINKS = (-0.5, 0.5)
+
+
+def lack_of_fit(samples: Samples, coding: Coding) -> dict[str, float]:
+    """How much a drift that is not a cubic shows: ``delta_bic_t`` and ``delta_bic_g``.
+
+    The full cubic against itself extended (a) by a cubic spline in T (truncated powers
+    at :data:`LACK_OF_FIT_T_KNOTS` of the coded T) and (b) by a step at g = 0 and kinks at
+    :data:`LACK_OF_FIT_G_KINKS` of the coded g (heating and cooling differ, e.g.
+    hysteresis), each by BIC under the white + random-walk noise model (as
+    :func:`select_terms`). A drop of more than :data:`LACK_OF_FIT_DELTA_BIC` says the
+    polynomial misses structure that repeats with T or g -- which the bias walk cannot,
+    so a fit without this check would call it walk.
+    """
+    x, y = coding.code(samples.t_c, samples.g_c_per_min)
+    full = monomials(x, y, parse_terms("full"))
+    if not np.all(np.isfinite(full)) or np.linalg.matrix_rank(full) < full.shape[1]:
+        return {"delta_bic_t": math.nan, "delta_bic_g": math.nan}  # the cubic itself is not
+
+    def bic(extra: list[np.ndarray]) -> float:
+        z = np.column_stack([full, *extra]) if extra else full
+        return noise_fit(samples.time_s, samples.drift_dph, z, reml=False, upper=False).bic
+
+    base = bic([])
+    return {
+        "delta_bic_t": bic([np.maximum(x - k, 0.0) ** 3 for k in LACK_OF_FIT_T_KNOTS]) - base,
+        "delta_bic_g": bic(
+            [(y > 0).astype(float)] + [np.maximum(y - k, 0.0) for k in LACK_OF_FIT_G_KINKS]
+        )
+        - base,
+    }
+
+
+def _lack_of_fit_note(found: dict[str, float]) -> str | None:
+    parts = []
+    if found["delta_bic_t"] < -LACK_OF_FIT_DELTA_BIC:
+        parts.append(
+            f"with T that a cubic does not follow (a cubic spline in T lowers the BIC by "
+            f"{-found['delta_bic_t']:.0f})"
+        )
+    if found["delta_bic_g"] < -LACK_OF_FIT_DELTA_BIC:
+        parts.append(
+            f"with g that the polynomial does not follow (a step at g = 0 -- heating and "
+            f"cooling differ, e.g. hysteresis -- and kinks lower the BIC by "
+            f"{-found['delta_bic_g']:.0f})"
+        )
+    if not parts:
+        return None
+    return (
+        "lack of fit: the drift varies "
+        + " and ".join(parts)
+        + "; the fitted bias walk may be this misfit and the compensation's error larger than "
+        "its standard errors say: check the residual plots, narrow --region, or model the "
+        "effect"
+    )
+
+
 def _cv_text(row) -> str:
     """``CV RMS ...`` of one candidate, saying how many folds it could be fitted on."""
     if row.cv_folds_fitted == 0:
@@ -1069,6 +1130,10 @@ class DriftFit:
         Drift readings far from their neighbours (:func:`drift_outliers`), left out of the
         fit (``FitSettings.outliers = "drop"``): the log's row (from 0), its time, the
         reading and how many robust standard deviations it lay from its neighbours.
+    lack_of_fit : dict
+        ``delta_bic_t``, ``delta_bic_g``: the full cubic's BIC change when extended by a
+        spline in T, by a step and kinks in g (:func:`lack_of_fit`); below
+        ``-LACK_OF_FIT_DELTA_BIC`` a note says the drift is not a polynomial.
     estimator_params, estimator_params_source : ThermalParams, str
         The model-based estimator's thermal model and where it comes from ("given",
         "identified from the log (...)", or nominal when that failed; see
@@ -1090,6 +1155,7 @@ class DriftFit:
     notes: tuple[str, ...] = field(default=())
     rows_without_drift: tuple[int, int] = (0, 0)
     outliers: tuple[tuple[int, float, float, float], ...] = ()
+    lack_of_fit: dict = field(default_factory=dict)
     estimator_params: ThermalParams = field(default_factory=ThermalParams)
     estimator_params_source: str = "given"
 
@@ -1235,6 +1301,13 @@ class DriftFit:
                 "attenuation_without_correction": self.attenuation,
             },
             "selection": self.selection.to_dict(orient="records"),
+            "lack_of_fit": {
+                **self.lack_of_fit,
+                "threshold": -LACK_OF_FIT_DELTA_BIC,
+                "meaning": "BIC of the full cubic extended by a spline in T (t) or a step "
+                "and kinks in g (g), minus the cubic's; below the threshold the drift is "
+                "not a polynomial there",
+            },
             "reference_t_only": {
                 "coefficients": dict(zip(ref.terms, map(float, ref.coefficients_dph), strict=True)),
                 "std_errors": dict(zip(ref.terms, map(float, ref.std_errors), strict=True)),
@@ -1542,6 +1615,10 @@ def fit_drift(
     g_half = max(float(np.max(np.abs(s.g_c_per_min))), 0.05)
     coding = Coding(0.5 * (lo + hi), 0.5 * (hi - lo), g_half)
     notes: list[str] = []
+    found = lack_of_fit(s, coding)
+    misfit = _lack_of_fit_note(found)
+    if misfit is not None:
+        notes.append(misfit)
     if settings.estimator == "auto" and method == "kinematic" and log.tk_set_c is not None:
         blank = int(np.isnan(np.asarray(log.tk_set_c, dtype=float)).sum())
         notes.append(
@@ -1591,6 +1668,7 @@ def fit_drift(
         notes=tuple(notes),
         rows_without_drift=without_drift,
         outliers=outliers,
+        lack_of_fit=found,
         estimator_params=model_params,
         estimator_params_source=model_source,
     )

@@ -13,6 +13,7 @@ from scipy.optimize import brentq
 from schedsyn import driftfit
 from schedsyn.cli import main
 from schedsyn.driftfit import (
+    LACK_OF_FIT_DELTA_BIC,
     WALK_UPPER_DELTA_M2LL,
     Coding,
     FitSettings,
@@ -701,6 +702,41 @@ def test_cli_fit_terms_option_and_errors(logs_dir, tmp_path, capsys):
     assert main(["fit", str(no_drift), "--region", "-50", "-21", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "drift_dph" in err
+
+
+@pytest.mark.parametrize(
+    "extra, axis",
+    [
+        (lambda t, g: 0.3 * np.tanh((t + 40.0) / 5.0), "t"),  # a knee in T
+        (lambda t, g: 0.15 * np.tanh(g / 0.05), "g"),  # heating and cooling differ
+        (None, None),
+    ],
+)
+def test_lack_of_fit_names_a_drift_that_is_not_a_polynomial(programme, extra, axis):
+    """A drift the cubic cannot follow is named (and in which variable) instead of being
+    taken for bias walk; a polynomial drift is not (nor the fixtures' gyros)."""
+    frame = gyro_log(programme, _gyro(GRAD_COEFS), sample_s=20.0, seed=6)
+    if extra is not None:
+        e = extra(frame["t_true_c"].to_numpy(), frame["g_true_c_per_min"].to_numpy())
+        frame["drift_dph"] += e
+    fit = fit_drift(log_from_frame(frame, "misfit"), REGION)
+    notes = [n for n in fit.notes if n.startswith("lack of fit")]
+    found = fit.lack_of_fit
+    if axis is None:
+        assert notes == [] and min(found.values()) > 0, found
+        return
+    assert len(notes) == 1, fit.notes
+    assert found[f"delta_bic_{axis}"] < -20, found
+    other = "g" if axis == "t" else "t"
+    assert found[f"delta_bic_{other}"] > -10, found
+    assert ("with T" in notes[0]) == (axis == "t") and ("with g" in notes[0]) == (axis == "g")
+    assert fit.to_json_dict()["lack_of_fit"]["delta_bic_" + axis] == found["delta_bic_" + axis]
+
+
+def test_polynomial_gyros_show_no_lack_of_fit(grad_fit, tonly_fit):
+    for _, _, fit in (grad_fit, tonly_fit):
+        assert min(fit.lack_of_fit.values()) > -LACK_OF_FIT_DELTA_BIC, fit.lack_of_fit
+        assert not any(n.startswith("lack of fit") for n in fit.notes)
 
 
 def test_a_partly_blank_setpoint_column_says_why_the_kinematic_smoother_is_used(programme):
