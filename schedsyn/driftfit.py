@@ -72,6 +72,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -900,35 +901,63 @@ def lack_of_fit(samples: Samples, coding: Coding) -> dict[str, float]:
     hysteresis), each by BIC under the white + random-walk noise model (as
     :func:`select_terms`). A drop of more than :data:`LACK_OF_FIT_DELTA_BIC` says the
     polynomial misses structure that repeats with T or g -- which the bias walk cannot,
-    so a fit without this check would call it walk.
+    so a fit without this check would call it walk. NaN where the run cannot tell: the
+    full cubic is not determined by its samples, or no extension column adds to it (a
+    run that only heats has no step at g = 0 to find).
     """
+    nan = {"delta_bic_t": math.nan, "delta_bic_g": math.nan}
+    full_terms = parse_terms("full")
+    if not _determined(samples, coding, full_terms, True):
+        return nan
     x, y = coding.code(samples.t_c, samples.g_c_per_min)
-    full = monomials(x, y, parse_terms("full"))
-    if not np.all(np.isfinite(full)) or np.linalg.matrix_rank(full) < full.shape[1]:
-        return {"delta_bic_t": math.nan, "delta_bic_g": math.nan}  # the cubic itself is not
+    full = monomials(x, y, full_terms)
 
-    def bic(extra: list[np.ndarray]) -> float:
-        z = np.column_stack([full, *extra]) if extra else full
-        return noise_fit(samples.time_s, samples.drift_dph, z, reml=False, upper=False).bic
+    def bic(z: np.ndarray) -> float:
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            try:
+                fit = noise_fit(samples.time_s, samples.drift_dph, z, reml=False, upper=False)
+            except (np.linalg.LinAlgError, ValueError):
+                return math.nan
+        return float(fit.bic) if math.isfinite(fit.bic) else math.nan
 
-    base = bic([])
-    return {
-        "delta_bic_t": bic([np.maximum(x - k, 0.0) ** 3 for k in LACK_OF_FIT_T_KNOTS]) - base,
-        "delta_bic_g": bic(
-            [(y > 0).astype(float)] + [np.maximum(y - k, 0.0) for k in LACK_OF_FIT_G_KINKS]
-        )
-        - base,
-    }
+    def extended(columns: list[np.ndarray]) -> np.ndarray | None:
+        # only the columns that add to what is there (scaled: ranks of unit columns)
+        z = full / np.maximum(np.abs(full).max(axis=0), 1e-300)
+        rank = np.linalg.matrix_rank(z)
+        added = False
+        for col in columns:
+            top = float(np.abs(col).max())
+            if top == 0.0:
+                continue
+            trial = np.column_stack([z, col / top])
+            r = np.linalg.matrix_rank(trial)
+            if r > rank:
+                z, rank, added = trial, r, True
+        return z if added else None
+
+    base = bic(full / np.maximum(np.abs(full).max(axis=0), 1e-300))
+    out = {}
+    for key, columns in (
+        ("delta_bic_t", [np.maximum(x - k, 0.0) ** 3 for k in LACK_OF_FIT_T_KNOTS]),
+        (
+            "delta_bic_g",
+            [(y > 0).astype(float)] + [np.maximum(y - k, 0.0) for k in LACK_OF_FIT_G_KINKS],
+        ),
+    ):
+        z = extended(columns)
+        out[key] = math.nan if z is None else bic(z) - base
+    return out
 
 
 def _lack_of_fit_note(found: dict[str, float]) -> str | None:
     parts = []
-    if found["delta_bic_t"] < -LACK_OF_FIT_DELTA_BIC:
+    if found.get("delta_bic_t", math.nan) < -LACK_OF_FIT_DELTA_BIC:
         parts.append(
             f"with T that a cubic does not follow (a cubic spline in T lowers the BIC by "
             f"{-found['delta_bic_t']:.0f})"
         )
-    if found["delta_bic_g"] < -LACK_OF_FIT_DELTA_BIC:
+    if found.get("delta_bic_g", math.nan) < -LACK_OF_FIT_DELTA_BIC:
         parts.append(
             f"with g that the polynomial does not follow (a step at g = 0 -- heating and "
             f"cooling differ, e.g. hysteresis -- and kinks lower the BIC by "
