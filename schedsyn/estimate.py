@@ -1640,13 +1640,39 @@ def estimate_gradient_model(
         corner_u = corner_inputs(log.time_s, tk, corners, model) if corners[0].size else None
     setup = _Setup(log.time_s, np.asarray(log.t_int_c, dtype=float), model, tk, corner_u=corner_u)
     tau = params.tau_min
+    # a measured chamber (the air) carries its own noise into g = (Tk + ...)/tau directly;
+    # the programme's setpoint carries none
+    var_tk = chamber_reading_noise_c(log.time_s, tk) ** 2 if chamber == "tk_air_c" else 0.0
 
     def grad(rows, x1, x2, p11, p12, p22):
-        # g = (Tk + dT0 - T)/tau + d ;  var g = P11/tau^2 - 2 P12/tau + P22
+        # g = (Tk + dT0 - T)/tau + d ;  var g = P11/tau^2 - 2 P12/tau + P22 (+ var Tk/tau^2)
         g = (tk[rows] + params.dt0_c - x1) / tau + x2
-        return g, p11 / tau**2 - 2.0 * p12 / tau + p22
+        return g, p11 / tau**2 - 2.0 * p12 / tau + p22 + var_tk / tau**2
 
     return _estimate(log, setup, q, r, quant_c, every_s, grad, "model", params, progress)
+
+
+def chamber_reading_noise_c(time_s: np.ndarray, tk_c: np.ndarray) -> float:
+    """Standard deviation of a measured chamber temperature's noise, degC.
+
+    Each interior reading against the straight line through its two neighbours (in
+    time): for white noise of std ``s`` on a locally linear signal the difference has
+    std ``s sqrt(1 + a^2 + b^2)`` (``a + b = 1`` the neighbours' weights), so ``s`` is
+    the median absolute difference x 1.4826 over that factor; the corners of a ramp
+    programme are few and do not move the median. At least the quantisation floor
+    ``step / sqrt(12)`` of the readings (:func:`quantisation_step`).
+    """
+    t = np.asarray(time_s, dtype=float)
+    y = np.asarray(tk_c, dtype=float)
+    ok = np.isfinite(y)
+    t, y = t[ok], y[ok]
+    if y.size < 5:
+        return 0.0
+    w = (t[1:-1] - t[:-2]) / (t[2:] - t[:-2])  # weight of the right neighbour
+    e = y[1:-1] - ((1.0 - w) * y[:-2] + w * y[2:])
+    factor = np.sqrt(1.0 + w**2 + (1.0 - w) ** 2)
+    s = 1.4826 * float(np.median(np.abs(e) / factor))
+    return max(s, quantisation_step(y) / math.sqrt(12.0))
 
 
 def finite_difference_gradient(time_s: np.ndarray, t_c: np.ndarray) -> np.ndarray:

@@ -15,6 +15,7 @@ from schedsyn.errors import LogFormatError, ParameterError
 from schedsyn.estimate import (
     MAX_ML_ROWS,
     N_DIFFUSE,
+    chamber_reading_noise_c,
     estimate_gradient,
     estimate_gradient_model,
     filter_smooth,
@@ -229,6 +230,24 @@ def test_model_based_with_wrong_model_falls_back_on_the_correction(synth10):
     assert wrong.log_likelihood < right.log_likelihood
     assert _rms(wrong.g_est_c_per_min - truth) < 0.005
     assert _rms(wrong.g_est_c_per_min - truth) < 2.5 * _rms(kin.g_est_c_per_min - truth)
+
+
+def test_model_driven_by_a_noisy_air_reading_counts_its_noise(synth10, rng):
+    """g = (Tk + dT0 - T)/tau + d takes the air reading's noise straight in: its stated
+    std must too (it ignored it: 4-20 % of errors within 2 sigma; stress test)."""
+    frame = synth10.copy()
+    truth = frame["g_true_c_per_min"].to_numpy()
+    for noise in (0.05, 0.2):
+        frame["tk_air_c"] = frame["tk_set_c"] + rng.normal(0.0, noise, len(frame))
+        log = log_from_frame(frame)
+        assert chamber_reading_noise_c(log.time_s, log.tk_air_c) == pytest.approx(noise, rel=0.1)
+        est = estimate_gradient_model(log, chamber="tk_air_c")
+        err = est.g_est_c_per_min - truth
+        assert np.mean(np.abs(err) <= 2.0 * est.g_std_c_per_min) > 0.9
+        assert 0.7 < _rms(err / est.g_std_c_per_min) < 1.3
+    # the programme's setpoint is exact (its corners are few): no noise to add
+    log = log_from_frame(synth10)
+    assert chamber_reading_noise_c(log.time_s, log.tk_set_c) < 0.01
 
 
 @pytest.mark.parametrize(("order", "nan_growth"), [(2, 1.1), (3, 1.01)])
