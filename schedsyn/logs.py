@@ -65,6 +65,9 @@ MAX_LOG_SPAN_S = 30 * 86_400.0
 MAX_MEDIAN_STEP_S = 900.0
 #: t_int_c changing faster than this, sustained, is refused (time_s in minutes), °C/min.
 MAX_DEVICE_RATE_C_PER_MIN = 30.0
+#: A log spanning less than this gets a warning (time_s in minutes makes a 20-min log
+#: span 20 "s"; no device's temperature tells that apart when it moves slowly), s.
+WARN_MIN_SPAN_S = 120.0
 #: Faster than this, sustained, gets a warning in the log report: no chamber drives a
 #: device this fast (a bench heater can), °C/min.
 WARN_DEVICE_RATE_C_PER_MIN = 5.0
@@ -405,6 +408,11 @@ def _check_time_unit(
             f"t_int_c changes by {rate:.3g} °C/min between {a_s:g} and {b_s:g} s, faster "
             f"than a chamber drives a device (> {WARN_DEVICE_RATE_C_PER_MIN:g} °C/min); if "
             "time_s holds minutes, write seconds (minutes x 60)",
+        )
+    if time_s.size > 1 and span_s < WARN_MIN_SPAN_S:
+        return (
+            f"the log spans only {span_s:.4g} s ({time_s.size} rows, median step "
+            f"{median_step_s:.3g} s); if time_s holds minutes, write seconds (minutes x 60)",
         )
     return ()
 

@@ -144,6 +144,17 @@ def test_diagnose_names_the_unit_not_an_internal_parameter(tmp_path, capsys):
     assert len(err.splitlines()) == 1 and "milliseconds" in err and "tau_s" not in err
 
 
+def test_a_log_of_seconds_only_is_a_warning():
+    """A 20-min log with time_s in minutes spans 20 "s": a slow device cannot tell, so the
+    span says it (it went through silently; stress test)."""
+    t_min = np.arange(0.0, 20.0, 1.0 / 6.0)  # 10-s rows, written as minutes
+    temp = 20.0 + 0.05 * t_min
+    short = log_from_frame(pd.DataFrame({"time_s": t_min, "t_int_c": temp}))
+    assert any("spans only 19.83 s" in w for w in short.report.warnings), short.report.warnings
+    longer = log_from_frame(pd.DataFrame({"time_s": 60.0 * t_min, "t_int_c": temp}))
+    assert longer.report.warnings == ()
+
+
 def test_a_fast_but_possible_rate_is_a_warning_and_a_glitch_is_nothing():
     # a bench heater (TCLab) heats at ~20 °C/min: possible, but not a chamber's pace
     t = np.arange(900.0)
