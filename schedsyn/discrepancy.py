@@ -1011,17 +1011,58 @@ def _air_cycling(t_s: np.ndarray, a: np.ndarray) -> tuple[float, float, float, f
     return amp, 1.0 / freq, math.atan2(coef[2], coef[1]), tstat
 
 
+def _first_order_response(t_s: np.ndarray, x: np.ndarray, tau_s: float) -> np.ndarray:
+    """Exact response of a first-order lag (time constant ``tau_s``) to ``x``, linear
+    between samples, settled at ``x[0]`` at the start: over a step ``h`` with slope
+    ``s``, ``y' = x_k + s (h - tau) + (y - x_k + s tau) e``, ``e = exp(-h/tau)``."""
+    h = np.diff(t_s)
+    e = np.exp(-h / tau_s)
+    slope = np.diff(x) / h
+    c = x[:-1] + slope * (h - tau_s) - (x[:-1] - slope * tau_s) * e
+    y = np.empty_like(x, dtype=float)
+    y[0] = x[0]
+    prev = float(x[0])
+    for k, (ek, ck) in enumerate(zip(e.tolist(), c.tolist(), strict=True)):
+        prev = ek * prev + ck
+        y[k + 1] = prev
+    return y
+
+
+def _fit_air_lag(t_s: np.ndarray, air: np.ndarray, sp: np.ndarray) -> tuple[float, np.ndarray]:
+    """``(tau_c, residual)`` of the air as the setpoint through a first-order lag (plus
+    an offset), ``tau_c`` by a log-spaced grid on 1..3600 s refined by a bounded search."""
+
+    def resid(log_tau: float) -> np.ndarray:
+        r = air - _first_order_response(t_s, sp, math.exp(log_tau))
+        return r - r.mean()
+
+    def cost(log_tau: float) -> float:
+        return float(np.mean(resid(log_tau) ** 2))
+
+    grid = np.linspace(0.0, math.log(3600.0), 25)
+    k = int(np.argmin([cost(v) for v in grid]))
+    lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
+    best = optimize.minimize_scalar(cost, bounds=(lo, hi), method="bounded")
+    log_tau = float(best.x) if best.success else float(grid[k])
+    return math.exp(log_tau), resid(log_tau)
+
+
 def air_channel_findings(
     log, data: _Data, base: CandidateFit, fits: Mapping[str, CandidateFit], noise_c: float
 ) -> tuple[AirFinding, ...]:
     """Effects the chamber air (``tk_air_c``) shows against the setpoint, at full rate.
 
     The air residual ``a = tk_air_c - tk_set_c`` is examined directly (so cycling faster
-    than the fit's blocks is not missed): a first-order chamber lag ``a = -tau_c dS/dt``
-    (least squares on the setpoint slope), then the strongest sinusoid in what is left
-    (:func:`_air_cycling`). The fitted air-channel candidates (chamber lag, rate limit,
-    cycling) that halve the air gap are added when not found directly. Each finding
-    says what the effect does to the device (:func:`_device_shift`) against ``noise_c``.
+    than the fit's blocks is not missed): a first-order chamber lag (the setpoint through
+    the exact first-order response, :func:`_fit_air_lag`), then the strongest sinusoid in
+    what is left (:func:`_air_cycling`). Where the fitted rate limit explains the air far
+    better than that lag, the lag was its shadow: it is dropped and the sinusoid is
+    sought in what the rate limit leaves (a lagging or slow chamber's air follows the
+    programme's sweeps, and what a worse model leaves of it looked like cycling at their
+    period). The fitted air-channel candidates (chamber lag, rate limit, cycling) that
+    halve the air gap, and explain the air no worse than the direct lag, are added when
+    not found directly. Each finding says what the effect does to the device
+    (:func:`_device_shift`) against ``noise_c``.
     """
     t_s = np.asarray(log.time_s, dtype=float)
     air = np.asarray(log.tk_air_c, dtype=float)
@@ -1046,16 +1087,14 @@ def air_channel_findings(
             tail = f"moves the device by up to {shift:.2g} °C (sensor noise {noise_c:.2g} °C)"
         return f"{lead}, {tail}", below
 
-    # chamber lag: A = S - tau_c dS/dt for ramps slower than 1/tau_c
+    # chamber lag: the setpoint through an exact first-order lag (a static regression
+    # a = -tau_c dS/dt is biased on short ramps, and what it leaves looked like cycling)
     slope = np.gradient(sp, t_s)  # degC/s
-    x = np.column_stack((np.ones_like(slope), -slope))
-    coef, *_ = np.linalg.lstsq(x, a, rcond=None)
-    res = a - x @ coef
-    s_x = float(np.sqrt(np.sum((slope - slope.mean()) ** 2)))
-    sigma = float(np.std(res))
-    tau_c = float(coef[1])
-    t_lag = tau_c * s_x / sigma if sigma > 0 and s_x > 0 else 0.0
-    share = 1.0 - float(np.var(res)) / float(np.var(a)) if np.var(a) > 0 else 0.0
+    tau_c, res = _fit_air_lag(t_s, air, sp)
+    var_a, var_res = float(np.var(a)), float(np.var(res))
+    share = 1.0 - var_res / var_a if var_a > 0 else 0.0
+    # likelihood ratio of one parameter (the lag) against none, as a t-statistic squared
+    t_lag = math.sqrt(max(a.size * math.log(var_a / var_res), 0.0)) if var_res > 0 else 0.0
     a_rest = a
     if tau_c > 1.0 and t_lag > 6.0 and share > 0.1:
         spec = ModelSpec(
@@ -1080,6 +1119,27 @@ def air_channel_findings(
             )
         )
         a_rest = res
+    # a fitted rate limit that explains the air far better than the direct lag: the lag
+    # found was its shadow, and the cycling test runs on what the rate limit leaves
+    rl = fits.get("chamber_rate_limit")
+    lag_gap = math.sqrt(var_res) if out else math.inf
+    if (
+        rl is not None
+        and rl.rms_air_c is not None
+        and base.rms_air_c is not None
+        and base.rms_air_c > 3.0 * air_noise
+        and rl.rms_air_c <= 0.5 * base.rms_air_c
+        and rl.rms_air_c < 0.5 * min(lag_gap, math.sqrt(var_a))
+    ):
+        origin = float(np.asarray(log.time_s, dtype=float)[0])
+        tm = (t_s - origin) / 60.0
+        _, air_rl = rl.model.predict_channels(
+            data.programme, tm, tm, t0_c=rl.t0_c, grid_min=min(data.step_min, 1.0 / 3.0)
+        )
+        if air_rl is not None:
+            a_rest = air - air_rl
+            out = [f for f in out if f.effect != "chamber_lag"]
+            lag_gap = math.inf
     cyc = _air_cycling(t_s - t_s[0], a_rest)
     if cyc is not None:
         amp, period, phase, _ = cyc
@@ -1097,6 +1157,13 @@ def air_channel_findings(
     base_air = base.rms_air_c
     for name in ("chamber_lag", "chamber_rate_limit", "chamber_cycling"):
         fit = fits.get(name)
+        if (
+            fit is not None
+            and fit.rms_air_c is not None
+            and name != "chamber_lag"
+            and fit.rms_air_c > lag_gap
+        ):
+            continue  # the direct lag explains the air better (a lagging chamber's ramps)
         if (
             name in found
             or fit is None

@@ -458,6 +458,28 @@ def test_air_lag_is_measured_from_the_air_channel():
     assert f.parameters["tau_chamber_s"] == pytest.approx(20.0, rel=0.15)
 
 
+@pytest.mark.parametrize(
+    ("prog", "effect", "params"),
+    [
+        ("cold", "chamber_lag", {"tau_chamber_s": 480.0}),
+        ("warm", "chamber_lag", {"tau_chamber_s": 180.0}),
+        ("cold", "chamber_rate_limit", {"max_cool_rate_c_per_min": 0.5,
+                                        "max_heat_rate_c_per_min": 99.0}),
+    ],
+)  # fmt: skip
+def test_a_lagging_or_slow_chamber_is_not_also_called_cycling(prog, effect, params):
+    """The air of a lagging (or rate-limited) chamber follows the programme's sweeps:
+    what a static regression left of the lag passed the cycling test as a period of the
+    sweeps, and a rate limit also showed as a lag (stress test). One finding, the right
+    one, with the lag measured by the exact first-order response."""
+    d = diagnose_frame(_effect_frame(prog, effect, params, air=True))
+    assert d.effect == effect
+    assert [f.effect for f in d.air_findings] == [effect], [f.text for f in d.air_findings]
+    if effect == "chamber_lag":
+        (f,) = d.air_findings
+        assert f.parameters["tau_chamber_s"] == pytest.approx(params["tau_chamber_s"], rel=0.03)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_clean_air_shows_nothing(seed):
     d = diagnose_frame(_effect_frame("cold", "none", {}, air=True, seed=seed))
