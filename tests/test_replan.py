@@ -166,6 +166,33 @@ def test_a_rival_that_fits_as_well_and_ends_incomplete_takes_the_promise_back(pl
     assert ReplanResult(req, "keep", "test", unchanged, unchanged).trusted_complete
 
 
+def test_doubts_are_judged_on_the_fit_the_rest_is_planned_with(plan):
+    """A material effect's model plans the rest: whether the log pins the device down is
+    that fit's question, not the base fit's (a chamber lag's base fit read dT0 -0.27 ±
+    6.44 °C, a loud 'guess' and exit code 1, while the lag fit was exact; stress test)."""
+    lagged = ModelSpec(2400.0, 3.0, "second_time_constant", {"tau2_s": 600.0})
+    req = prepare_replan(log_from_frame(effect_log(lagged, seed=1), "lag"), plan, 240.0)
+    assert req.effect.material
+    vague = replace(req.identified, dt0_c=-0.27, dt0_std_c=6.44)
+    req = replace(req, identified=vague)
+    assert vague.doubts() and req.doubts() == ()
+    fit = req.planning_fit()
+    assert (fit.tau_s, fit.dt0_c) == (req.model.tau_s, req.model.dt0_c)
+    assert fit.dt0_std_c == pytest.approx(req.effect.stderr["dt0_c"] * vague.inflation)
+    unchanged = predict_run(req, plan.programme)
+    result = ReplanResult(req, "keep", "test", unchanged, unchanged)
+    assert "does not pin the device down" not in result.summary()
+    assert result.to_json_dict()["identification_doubts"] == []
+    assert result.trusted_complete == unchanged.complete
+    # with the base model in use, the base fit's doubts stand
+    base = replace(req, effect=replace(req.effect, material=False), model=vague.model)
+    assert base.doubts() == vague.doubts() and base.planning_fit() is vague
+    assert (
+        "does not pin the device down"
+        in ReplanResult(base, "keep", "test", unchanged, unchanged).summary()
+    )
+
+
 def test_a_material_effect_is_kept_and_a_clean_log_keeps_the_base_model(plan):
     lagged = ModelSpec(2400.0, 3.0, "second_time_constant", {"tau2_s": 600.0})
     req = prepare_replan(log_from_frame(effect_log(lagged, seed=1), "lag"), plan, 240.0)
