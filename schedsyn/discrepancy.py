@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 from scipy import optimize, stats
-from scipy.signal import lombscargle
+from scipy.signal import lfilter, lombscargle
 
 from .effects import EFFECTS, Effect, LinearEffectModel, ModelSpec
 from .errors import LogFormatError, ParameterError, SolverFailedError
@@ -1021,6 +1021,10 @@ def _first_order_response(t_s: np.ndarray, x: np.ndarray, tau_s: float) -> np.nd
     c = x[:-1] + slope * (h - tau_s) - (x[:-1] - slope * tau_s) * e
     y = np.empty_like(x, dtype=float)
     y[0] = x[0]
+    if h.size and np.allclose(h, h[0], rtol=1e-9, atol=0.0):  # even steps: one filter
+        e0 = float(e[0])
+        y[1:] = lfilter([1.0], [1.0, -e0], c, zi=[e0 * float(x[0])])[0]
+        return y
     prev = float(x[0])
     for k, (ek, ck) in enumerate(zip(e.tolist(), c.tolist(), strict=True)):
         prev = ek * prev + ck

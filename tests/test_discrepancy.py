@@ -458,6 +458,28 @@ def test_air_lag_is_measured_from_the_air_channel():
     assert f.parameters["tau_chamber_s"] == pytest.approx(20.0, rel=0.15)
 
 
+@pytest.mark.parametrize("even", [True, False])
+def test_first_order_response_matches_an_ode_solver(even, rng):
+    from scipy.integrate import solve_ivp
+
+    from schedsyn.discrepancy import _first_order_response
+
+    n = 120
+    t = np.cumsum(np.full(n, 10.0) if even else rng.uniform(5.0, 20.0, n)) - 10.0
+    x = np.cumsum(rng.normal(0.0, 0.5, n))
+    tau = 200.0
+    sol = solve_ivp(
+        lambda s, y: [(np.interp(s, t, x) - y[0]) / tau],
+        (t[0], t[-1]),
+        [x[0]],
+        t_eval=t,
+        rtol=1e-10,
+        atol=1e-10,
+        max_step=1.0,
+    )
+    np.testing.assert_allclose(_first_order_response(t, x, tau), sol.y[0], atol=1e-6)
+
+
 @pytest.mark.parametrize(
     ("prog", "effect", "params"),
     [
