@@ -101,12 +101,12 @@ ESTIMATORS = ("auto", "model", "kinematic")
 EIV_METHODS = ("als", "none")
 WEIGHTINGS = ("gls", "ols")
 OUTLIER_POLICIES = ("drop", "keep")
-#: A drift reading this many robust standard deviations from the running median of its
-#: neighbours is an outlier (a glitch, a sentinel such as 999.9); Gaussian noise gets
-#: there once in ~1e14 readings.
+#: A drift reading (or a short block) whose jumps in and out, beyond the local trend,
+#: both exceed this many robust standard deviations is a glitch (a sentinel such as
+#: 999.9; :func:`drift_outliers`); Gaussian noise gets there once in ~1e14 readings.
 OUTLIER_SIGMAS = 8.0
-#: The running median spans about this long (odd, 7..61 rows): blocks of glitches up to
-#: half of it are found; the drift's own curvature over it stays far below the limit.
+#: The local trend of the jumps is their running median over about this long (odd,
+#: 7..61 rows); the drift's own curvature over it stays far below the limit.
 OUTLIER_WINDOW_S = 180.0
 #: The robust scale is at least this share of the drift's 5-95 % range (noise-free or
 #: coarsely quantised logs, where the median deviation is 0).

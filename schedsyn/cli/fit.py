@@ -10,7 +10,14 @@ from __future__ import annotations
 
 import argparse
 
-from ..driftfit import ESTIMATORS, OUTLIER_POLICIES, WEIGHTINGS, FitSettings, fit_drift
+from ..driftfit import (
+    ESTIMATORS,
+    OUTLIER_POLICIES,
+    OUTLIER_SIGMAS,
+    WEIGHTINGS,
+    FitSettings,
+    fit_drift,
+)
 from ..io import write_frame_atomic, write_json_atomic
 from ..logs import read_log
 from . import _common
@@ -61,9 +68,9 @@ def register(sub) -> None:
         "--outliers",
         choices=OUTLIER_POLICIES,
         default="drop",
-        help="drop (default): leave out drift readings far from their neighbours (glitches, "
-        "more than 8 robust sigma from the running median) and list them; keep: fit every "
-        "reading",
+        help="drop (default): leave out drift readings that jump away from their neighbours "
+        f"and back (glitches, more than {OUTLIER_SIGMAS:g} robust sigma) and list them; keep: "
+        "fit every reading",
     )
     p.add_argument(
         "--min-points-per-bin",
