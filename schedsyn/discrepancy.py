@@ -1590,6 +1590,17 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
                 "has the wrong gain or phase at that frequency (e.g. a missing time "
                 "constant) than a chamber controller cycling"
             )
+    if chosen == "selfheat_slope":
+        # dT0 = dt0 + s (T - 20) is a gain 1/(1-s) with tau/(1-s): so is a sensor that
+        # reads G (T - 20) off around 20 degC with the device's own tau (stress test)
+        slope = chosen_fit.model.parameters["dt0_slope_c_per_c"]
+        gain = 1.0 / (1.0 - slope)
+        warnings.append(
+            f"a temperature sensor whose gain is off by {gain - 1.0:+.2%} (reading "
+            f"20 + {gain:.4f} (T - 20) °C), with tau {chosen_fit.model.tau_s * gain:.0f} s, "
+            "gives exactly the same readings as this self-heating slope: a reference "
+            "thermometer at two temperatures tells them apart"
+        )
     # full-resolution predictions and residual reports
     p_before = _full_prediction(base.model, base.t0_c, data.programme, t_ok)
     p_after = _full_prediction(chosen_fit.model, chosen_fit.t0_c, data.programme, t_ok)

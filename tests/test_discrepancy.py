@@ -458,6 +458,20 @@ def test_air_lag_is_measured_from_the_air_channel():
     assert f.parameters["tau_chamber_s"] == pytest.approx(20.0, rel=0.15)
 
 
+def test_a_sensor_gain_error_is_named_as_its_exact_twin_with_a_warning():
+    """A sensor reading 20 + G (T - 20) is, in a first-order lag, exactly a self-heating
+    slope s = 1 - 1/G with tau/G: the diagnosis names the one in its library and says
+    which sensor error would read the same (it said nothing; stress test)."""
+    frame = _effect_frame("cold", "none", {}, air=False)
+    gain = 1.03
+    frame["t_int_c"] = 20.0 + gain * (frame["t_int_c"] - 20.0)
+    d = diagnose_frame(frame)
+    assert d.effect == "selfheat_slope"
+    assert d.parameters["dt0_slope_c_per_c"] == pytest.approx(1.0 - 1.0 / gain, rel=0.02)
+    (w,) = [w for w in d.warnings if "sensor whose gain" in w]
+    assert "+3.0" in w and "with tau 2400 s" in w, w
+
+
 @pytest.mark.parametrize("even", [True, False])
 def test_first_order_response_matches_an_ode_solver(even, rng):
     from scipy.integrate import solve_ivp
