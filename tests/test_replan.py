@@ -881,24 +881,23 @@ def test_the_run_is_checked_at_the_corners_of_the_identified_box_as_scipy_counts
     assert not box.complete_everywhere and "re-plan again" in box.line()
 
 
-def test_a_start_at_a_bin_edge_counts_no_pass_the_device_never_made(tmp_path):
-    """The device starts at exactly 20 degC, a bin edge inside the region, and heats: the
-    true run never enters [19, 20). The smoothed first reading lies either side of 20 by
-    the noise; a start below the edge must not count a level there (it made the re-plan
-    ask for a level too few). Truth: scipy's solve_ivp of the first-order lag; passes by
-    the plain loop :func:`own_passes`."""
-    prog = Programme(np.array([30.0, 60.0, 30.0, 60.0]), np.array([1.0, 0.0, -1.0, 0.0]))
-    path = write_plan_dir(tmp_path / "edge", prog)
+#: The small region of the bin-edge tests, degC.
+EDGE_REGION = (15.0, 25.0)
+
+
+def _edge_case(tmp_path, name, prog, t0_c, m, tau_min=40.0, dt0_c=3.0):
+    """A plan over :data:`EDGE_REGION` running ``prog``, and the levels of the closed
+    passes the true device (solve_ivp of the first-order lag from ``t0_c``) has made by
+    minute ``m``, per bin (passes by the plain loop :func:`own_passes`)."""
+    path = write_plan_dir(tmp_path / name, prog)
     meta = json.loads((path / "plan.json").read_text())
-    lo, hi = 15.0, 25.0
+    lo, hi = EDGE_REGION
     meta["spec"].update(working_lo_c=lo, working_hi_c=hi, approx_lo_c=5.0, approx_hi_c=35.0)
     (path / "plan.json").write_text(json.dumps(meta))
-    plan = read_plan_dir(path)
-    tau_min, dt0_c, m = 40.0, 3.0, 60.0
     sol = solve_ivp(
         lambda t, y: [(prog.chamber_at(np.array([t]))[0] + dt0_c - y[0]) / tau_min],
         (0.0, m),
-        [20.0],
+        [t0_c],
         dense_output=True,
         rtol=1e-10,
         atol=1e-10,
@@ -908,10 +907,25 @@ def test_a_start_at_a_bin_edge_counts_no_pass_the_device_never_made(tmp_path):
     t_true = sol.sol(tt)[0]
     g_true = (prog.chamber_at(tt) + dt0_c - t_true) / tau_min
     found = own_passes(t_true, g_true, lo, hi)
-    true_levels = [
-        distinct_levels([g for k, g, closed in found if k == b and closed], DELTA)
-        for b in range(int(hi - lo))
-    ]
+    levels = np.array(
+        [
+            distinct_levels([g for k, g, closed in found if k == b and closed], DELTA)
+            for b in range(int(hi - lo))
+        ]
+    )
+    return read_plan_dir(path), levels
+
+
+def test_a_start_at_a_bin_edge_counts_no_pass_the_device_never_made(tmp_path):
+    """The device starts at exactly 20 degC, a bin edge inside the region, and heats: the
+    true run never enters [19, 20). The smoothed first reading lies either side of 20 by
+    the noise; a start below the edge must not count a level there (it made the re-plan
+    ask for a level too few). Truth: scipy's solve_ivp of the first-order lag; passes by
+    the plain loop :func:`own_passes`."""
+    prog = Programme(np.array([30.0, 60.0, 30.0, 60.0]), np.array([1.0, 0.0, -1.0, 0.0]))
+    tau_min, dt0_c, m = 40.0, 3.0, 60.0
+    plan, true_levels = _edge_case(tmp_path, "edge", prog, 20.0, m, tau_min, dt0_c)
+    lo = EDGE_REGION[0]
     assert true_levels[int(19 - lo)] == 0  # the device never was in [19, 20)
     below_edge = 0
     for seed in range(8):
@@ -931,32 +945,8 @@ def test_a_device_soaking_on_a_bin_edge_counts_no_level_from_the_noise(tmp_path)
     claimed 73.3 % where the device made 70 %). Truth: solve_ivp of the lag, passes by
     the plain loop :func:`own_passes` (closed passes, as the re-plan counts)."""
     prog = Programme(np.array([60.0, 30.0, 60.0]), np.array([0.0, 1.0, 0.0]))
-    path = write_plan_dir(tmp_path / "soak", prog)
-    meta = json.loads((path / "plan.json").read_text())
-    lo, hi = 15.0, 25.0
-    meta["spec"].update(working_lo_c=lo, working_hi_c=hi, approx_lo_c=5.0, approx_hi_c=35.0)
-    (path / "plan.json").write_text(json.dumps(meta))
-    plan = read_plan_dir(path)
     tau_min, dt0_c, m = 40.0, 3.0, 55.0
-    sol = solve_ivp(
-        lambda t, y: [(prog.chamber_at(np.array([t]))[0] + dt0_c - y[0]) / tau_min],
-        (0.0, m),
-        [20.0 + dt0_c],
-        dense_output=True,
-        rtol=1e-10,
-        atol=1e-10,
-        max_step=0.5,
-    )
-    tt = np.arange(0.0, m + 1e-9, 0.1)
-    t_true = sol.sol(tt)[0]
-    g_true = (prog.chamber_at(tt) + dt0_c - t_true) / tau_min
-    found = own_passes(t_true, g_true, lo, hi)
-    true_levels = np.array(
-        [
-            distinct_levels([g for k, g, closed in found if k == b and closed], DELTA)
-            for b in range(int(hi - lo))
-        ]
-    )
+    plan, true_levels = _edge_case(tmp_path, "soak", prog, 20.0 + dt0_c, m, tau_min, dt0_c)
     assert not true_levels.any()  # still soaking at M: no pass has ended
     for seed in range(8):
         f = synth_effect_log(prog, ModelSpec(60 * tau_min, dt0_c), seed=seed, t0_c=20 + dt0_c)
