@@ -30,12 +30,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 from scipy import optimize, stats
-from scipy.signal import lfilter, lombscargle
+from scipy.signal import lombscargle
 
 from .effects import EFFECTS, Effect, LinearEffectModel, ModelSpec
 from .errors import LogFormatError, ParameterError, SolverFailedError
 from .logs import thin_log
-from .model import affine_response, lag_foh
+from .model import affine_response, lag_foh, lag_ramp, lag_step
 from .programme import Programme
 
 #: Chamber-side effects that only the chamber-air channel can tell from device-side ones.
@@ -1013,20 +1013,18 @@ def _air_cycling(t_s: np.ndarray, a: np.ndarray) -> tuple[float, float, float, f
 
 def _first_order_response(t_s: np.ndarray, x: np.ndarray, tau_s: float) -> np.ndarray:
     """Exact response of a first-order lag (time constant ``tau_s``) to ``x``, linear
-    between samples, settled at ``x[0]`` at the start: over a step ``h`` with slope
-    ``s``, ``y' = x_k + s (h - tau) + (y - x_k + s tau) e``, ``e = exp(-h/tau)``."""
-    h = np.diff(t_s)
-    e = np.exp(-h / tau_s)
-    slope = np.diff(x) / h
-    c = x[:-1] + slope * (h - tau_s) - (x[:-1] - slope * tau_s) * e
+    between samples, settled at ``x[0]`` at the start: :func:`~schedsyn.model.lag_foh`
+    where the steps are even, else its step ``y' = e y + S(h) x_k + s R(h)`` row by row
+    (``S``, ``R`` the lag's step and ramp responses, ``s`` the input's slope)."""
+    h_min = np.diff(t_s) / 60.0
+    tau_min = tau_s / 60.0
+    if h_min.size and np.allclose(h_min, h_min[0], rtol=1e-9, atol=0.0):
+        return lag_foh(x, float(x[0]), tau_min, float(h_min[0]))
+    step = lag_step(h_min, tau_min)
+    c = step * x[:-1] + np.diff(x) / h_min * lag_ramp(h_min, tau_min)
     y = np.empty_like(x, dtype=float)
-    y[0] = x[0]
-    if h.size and np.allclose(h, h[0], rtol=1e-9, atol=0.0):  # even steps: one filter
-        e0 = float(e[0])
-        y[1:] = lfilter([1.0], [1.0, -e0], c, zi=[e0 * float(x[0])])[0]
-        return y
-    prev = float(x[0])
-    for k, (ek, ck) in enumerate(zip(e.tolist(), c.tolist(), strict=True)):
+    y[0] = prev = float(x[0])
+    for k, (ek, ck) in enumerate(zip((1.0 - step).tolist(), c.tolist(), strict=True)):
         prev = ek * prev + ck
         y[k + 1] = prev
     return y
