@@ -911,6 +911,7 @@ def lack_of_fit(samples: Samples, coding: Coding) -> dict[str, float]:
         return nan
     x, y = coding.code(samples.t_c, samples.g_c_per_min)
     full = monomials(x, y, full_terms)
+    full = full / np.maximum(np.abs(full).max(axis=0), 1e-300)  # unit columns for the ranks
 
     def bic(z: np.ndarray) -> float:
         with np.errstate(all="ignore"), warnings.catch_warnings():
@@ -922,8 +923,8 @@ def lack_of_fit(samples: Samples, coding: Coding) -> dict[str, float]:
         return float(fit.bic) if math.isfinite(fit.bic) else math.nan
 
     def extended(columns: list[np.ndarray]) -> np.ndarray | None:
-        # only the columns that add to what is there (scaled: ranks of unit columns)
-        z = full / np.maximum(np.abs(full).max(axis=0), 1e-300)
+        # only the columns that add to what is there
+        z = full
         rank = np.linalg.matrix_rank(z)
         added = False
         for col in columns:
@@ -936,7 +937,7 @@ def lack_of_fit(samples: Samples, coding: Coding) -> dict[str, float]:
                 z, rank, added = trial, r, True
         return z if added else None
 
-    base = bic(full / np.maximum(np.abs(full).max(axis=0), 1e-300))
+    base = bic(full)
     out = {}
     for key, columns in (
         ("delta_bic_t", [np.maximum(x - k, 0.0) ** 3 for k in LACK_OF_FIT_T_KNOTS]),
