@@ -148,27 +148,36 @@ def plan_continuation(
     best: tuple | None = None
     notes: list[str] = []
     models: Sequence[LinearThermalModel] = [model]
+
+    def candidate(search: Search) -> tuple | None:
+        """``(key, programme, margins, margin, search, check)`` of the search's best
+        (polished), or of its over-long structure cut to end in time (no search then);
+        None when it has neither."""
+        if search.best is not None:
+            u, mg, mt = polish(search.ctx, search.best[0])
+        elif (cut := _cut(search, limits)) is not None:
+            u, mg, mt = cut.u, 0.0, 0.0
+        else:
+            return None
+        durations = search.ctx.responses.durations[: u.size]
+        programme = continuation_programme(u, durations, continuation, limits)
+        check = check_continuation(programme, spec, limits, params, model, continuation)
+        key = (check[0].complete and not check[2], check[0].coverage, check[0].min_levels)
+        return key, programme, mg, mt, search if search.best is not None else None, check
+
     for k in range(need, min(need + 2, spec.levels_required) + 1):
         if progress:
             progress(f"continuation from minute {continuation.at_min:g}: {k} new sweep(s)")
         search = synthesise(
             spec, [params], limits, models, progress, stats, continuation=continuation, n_sweeps=k
         )
-        if search.best is not None:
-            u, mg, mt = polish(search.ctx, search.best[0])
-            durations = search.ctx.responses.durations[: u.size]
-        elif (cut := _cut(search, limits)) is not None:
-            u, mg, mt = cut.u, 0.0, 0.0
-            durations = search.ctx.responses.durations[: u.size]
-        else:
+        found = candidate(search)
+        if found is None:
             notes.append(f"{k} new sweep(s) do not fit: {'; '.join(search.reasons[:2])}")
             continue
-        programme = continuation_programme(u, durations, continuation, limits)
-        check = check_continuation(programme, spec, limits, params, model, continuation)
-        key = (check[0].complete and not check[2], check[0].coverage, check[0].min_levels)
-        if best is None or key > best[0]:
-            best = (key, programme, mg, mt, search if search.best else None, check)
-        if key[0]:
+        if best is None or found[0] > best[0]:
+            best = found
+        if found[0][0]:
             break
     sub_note = ""
     if best is None or not best[0][0]:
@@ -195,13 +204,9 @@ def plan_continuation(
                         f"continuation: sweeps for the sub-region [{sub.working_lo_c:g}, "
                         f"{sub.working_hi_c:g}] °C fit"
                     )
-                u, mg, mt = polish(search.ctx, search.best[0])
-                durations = search.ctx.responses.durations[: u.size]
-                programme = continuation_programme(u, durations, continuation, limits)
-                check = check_continuation(programme, spec, limits, params, model, continuation)
-                key = (check[0].complete and not check[2], check[0].coverage, check[0].min_levels)
-                if best is None or key > best[0]:
-                    best = (key, programme, mg, mt, search, check)
+                found = candidate(search)
+                if found is not None and (best is None or found[0] > best[0]):
+                    best = found
                     sub_note = (
                         f"sweeps designed for the sub-region [{sub.working_lo_c:g}, "
                         f"{sub.working_hi_c:g}] °C (the full region did not fit in time)"
@@ -219,20 +224,20 @@ def plan_continuation(
         for k in range(need - 1, 0, -1):
             if progress:
                 progress(f"continuation from minute {continuation.at_min:g}: {k} new sweep(s)")
-            search = synthesise(
-                spec, [params], limits, models, None, stats, continuation=continuation, n_sweeps=k
+            best = candidate(
+                synthesise(
+                    spec,
+                    [params],
+                    limits,
+                    models,
+                    None,
+                    stats,
+                    continuation=continuation,
+                    n_sweeps=k,
+                )
             )
-            if search.best is not None:
-                u, mg, mt = polish(search.ctx, search.best[0])
-            elif (cut := _cut(search, limits)) is not None:
-                u, mg, mt = cut.u, 0.0, 0.0
-            else:
+            if best is None:
                 continue
-            durations = search.ctx.responses.durations[: u.size]
-            programme = continuation_programme(u, durations, continuation, limits)
-            check = check_continuation(programme, spec, limits, params, model, continuation)
-            key = (check[0].complete and not check[2], check[0].coverage, check[0].min_levels)
-            best = (key, programme, mg, mt, search if search.best else None, check)
             notes.append(
                 f"only {k} new sweep(s) fit, of the {need} the bins need: the rest cannot "
                 "complete every bin"
