@@ -220,7 +220,9 @@ def plan_continuation(
         # not even sweeps for a sub-region fit: the most sweeps that do, fewer than the
         # bins need -- an incomplete rest still adds levels (red team: a device 3 degC
         # hotter and 50 % slower than the plan's model, re-planned at minute 180 of W1:
-        # 6 sweeps did not fit, 5 took the run from 10 % of the bins to 50 %)
+        # 6 sweeps did not fit, 4 passed every bin 4 times where the plan unchanged left 5
+        # bins unreached). Sweeps of the whole region only: a sub-region's would
+        # complete more bins and leave the rest with none
         for k in range(need - 1, 0, -1):
             if progress:
                 progress(f"continuation from minute {continuation.at_min:g}: {k} new sweep(s)")
