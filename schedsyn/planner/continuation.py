@@ -150,9 +150,9 @@ def plan_continuation(
     models: Sequence[LinearThermalModel] = [model]
 
     def candidate(search: Search) -> tuple | None:
-        """``(key, programme, margins, margin, search, check)`` of the search's best
-        (polished), or of its over-long structure cut to end in time (no search then);
-        None when it has neither."""
+        """``(key, programme, band margin, edge margin, search, check)`` of the search's
+        best (polished), or of its over-long structure cut to end in time (no search
+        then); None when it has neither."""
         if search.best is not None:
             u, mg, mt = polish(search.ctx, search.best[0])
         elif (cut := _cut(search, limits)) is not None:
