@@ -64,6 +64,7 @@ from schedsyn.driftfit import (
 from schedsyn.errors import ParameterError
 from schedsyn.gyro import gyro_log, random_gyro
 from schedsyn.io import write_frame_atomic, write_text_atomic
+from schedsyn.programme import read_step_meta
 from schedsyn.sweep import run_map
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -340,6 +341,20 @@ def main() -> None:
         plan = schedsyn.read_steps(plan_csv)
         working = (spec.working_lo_c, spec.working_hi_c)
         approx = (spec.approx_lo_c, spec.approx_hi_c)
+        # the regions are the paper campaign's: a table planned for others would be
+        # benched against the wrong ones
+        meta = read_step_meta(plan_csv)
+        if meta is not None and (
+            (meta.working_lo_c, meta.working_hi_c) != working
+            or (meta.approx_lo_c, meta.approx_hi_c) != approx
+        ):
+            raise SystemExit(
+                f"{plan_csv}: planned for working {meta.working_lo_c:g} .. "
+                f"{meta.working_hi_c:g}, approximation {meta.approx_lo_c:g} .. "
+                f"{meta.approx_hi_c:g} °C; this benchmark's {spec.name} is {working[0]:g} .. "
+                f"{working[1]:g}, {approx[0]:g} .. {approx[1]:g} °C "
+                "(data/paper_campaign.toml): plan that campaign's regions"
+            )
         base = paper_like_programme(*working, *approx, plan.total_min)
         space = DesignSpace(*working, *approx)
         designs[spec.name] = {
