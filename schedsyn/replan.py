@@ -52,7 +52,9 @@ What :func:`replan_run` then decides:
 * The best of the plan unchanged and the continuations tried is chosen
   (:meth:`RunPrediction.preference`: within limits, complete, coverage, lowest level
   count, fewest levels missing), the plan unchanged on a tie or when no continuation
-  fits; every attempt is kept (``planner_attempts`` in ``replan.json``).
+  fits -- unless that plan is predicted to take the device past its limits: then the
+  chamber goes straight home (:func:`safe_return`); every attempt is kept
+  (``planner_attempts`` in ``replan.json``).
 """
 
 from __future__ import annotations
@@ -507,6 +509,44 @@ def run_series(
         np.concatenate((tm, rest)),
         np.concatenate((tt, t_rest)),
         np.concatenate((tg, g_rest)),
+    )
+
+
+def device_excess_c(run: RunPrediction, limits: Any) -> float:
+    """How far past the device's limits the run is predicted to take it, degC (0 within)."""
+    return max(0.0, limits.device_min_c - run.device_min_c, run.device_max_c - limits.device_max_c)
+
+
+def safe_return(request: ReplanRequest, start_min: float) -> Programme | None:
+    """The plan's steps up to ``start_min``, then the chamber straight back to the end
+    temperature at the fastest rate the model allows and held there to the time limit;
+    None when the ramp does not end in time.
+
+    What a re-plan falls back on when no continuation fits and the plan unchanged is
+    predicted to take the device past its limits: the device's excess is then the least
+    a chamber turned round at once can give (red team: W4 at minute 240, a device 3 degC
+    hotter and 25 % faster than the model, heading for 68.9 degC with the plan; 63.2 this
+    way, its limit 62).
+    """
+    plan = request.plan
+    limits = request.model.planner_limits(plan.limits)
+    prefix = cut_programme(plan.programme, start_min)
+    delta = plan.limits.end_c - prefix.end_c
+    rate = limits.rate_max_c_per_min if delta > 0 else limits.rate_min_c_per_min
+    ramp_min = float(math.ceil(abs(delta) / abs(rate) - 1e-9)) if abs(delta) > 1e-9 else 0.0
+    hold_min = plan.limits.duration_max_min - start_min - ramp_min
+    if hold_min < 0:
+        return None
+    steps = [(ramp_min, delta / ramp_min if ramp_min else 0.0), (hold_min, 0.0)]
+    steps = [(d, r) for d, r in steps if d > 0]
+    # the new steps rounded as a continuation's are (whole minutes, 0.1 degC)
+    new = Programme(
+        np.array([d for d, _ in steps]), np.array([r for _, r in steps]), prefix.end_c
+    ).rounded(plan.limits, exact_start=True)
+    return Programme(
+        np.concatenate((prefix.durations_min, new.durations_min)),
+        np.concatenate((prefix.rates_c_per_min, new.rates_c_per_min)),
+        prefix.start_c,
     )
 
 
@@ -1181,7 +1221,24 @@ def replan_run(
         if best is not None:
             planned = best[1]
         new = None if best is None else best[0]
-        if (
+        excess = device_excess_c(unchanged, plan.limits)
+        safe = None
+        if new is None and excess > 0:
+            start = request.at_min + float(lead_min)
+            programme = (
+                safe_return(request, start) if start < plan.limits.duration_max_min else None
+            )
+            safe = None if programme is None else predict_run(request, programme)
+        if safe is not None and device_excess_c(safe, plan.limits) < excess - 0.05:
+            choice, chosen, new_from = "new", safe, request.at_min + float(lead_min)
+            reason = (
+                f"no continuation fits ({error}) and the plan unchanged is predicted to take "
+                f"the device {excess:.1f} °C past its limit: the chamber goes straight back "
+                f"to {plan.limits.end_c:g} °C from minute {new_from:g} (the device "
+                f"{device_excess_c(safe, plan.limits):.1f} °C past, the least a chamber "
+                f"turned round at once can give; {safe.coverage.coverage:.0%} of the bins)"
+            )
+        elif (
             new is not None
             and best_key is not None
             and best_key > unchanged_key

@@ -32,6 +32,7 @@ from schedsyn.replan import (
     predict_rivals,
     predict_run,
     prepare_replan,
+    replan_run,
     rest_of_programme,
     run_series,
     sweep_end_min,
@@ -1217,3 +1218,63 @@ def test_replan_cli_refuses_a_lead_that_is_not_whole_minutes(tmp_path, capsys):
         err = capsys.readouterr().err
         assert "lead_min" in err and "whole number of minutes" in err and err.count("\n") == 1
     assert not out.exists()
+
+
+def _device_peak_c(programme: Programme, truth: ModelSpec) -> float:
+    """The device's highest temperature over the run: scipy's integration of the lag on
+    ``truth`` (first-order, its tau and dT0) over the programme's chamber path."""
+    tau = truth.tau_s / 60.0
+    sol = solve_ivp(
+        lambda s, y: [(programme.chamber_at([s])[0] + truth.dt0_c - y[0]) / tau],
+        (0.0, programme.total_min),
+        [20.0],
+        max_step=0.5,
+        rtol=1e-9,
+        atol=1e-9,
+    )
+    return float(sol.y[0].max())
+
+
+def test_with_no_continuation_and_the_plan_overheating_the_device_the_chamber_turns_home(
+    tmp_path, monkeypatch
+):
+    """The device runs 4 degC hotter than the plan's model, and its limit is 32 degC: the
+    plan's hold at 30 degC will take it past; nothing else fits (the planner is made to
+    fail). The rest brings the chamber straight back to 20 degC at the fastest rate
+    (red team, W4: the plan unchanged was kept heading 6.9 degC past the limit). The
+    device's peak, integrated by scipy on the truth, is lower than with the plan and
+    within what replan predicts; the folder is written."""
+    import schedsyn.planner as planner_module
+
+    prog = Programme(np.array([10.0, 60.0, 10.0, 80.0]), np.array([1.0, 0.0, -1.0, 0.0]))
+    plan_dir = write_plan_dir(tmp_path / "plan", programme=prog)
+    meta = json.loads((plan_dir / "plan.json").read_text())
+    meta["limits"]["device_max_c"] = 32.0
+    meta["limits"]["duration_max_min"] = 170.0
+    (plan_dir / "plan.json").write_text(json.dumps(meta))
+    truth = ModelSpec(2400.0, 7.0)
+    frame = synth_effect_log(prog, truth, sample_s=10.0, noise_c=0.01, seed=3)
+    frame = frame.drop(columns=["t_true_c", "g_true_c_per_min"])
+    log = log_from_frame(frame[frame["time_s"] <= 30 * 60.0].reset_index(drop=True), "hot")
+
+    def fails(*args, **kwargs):
+        raise InfeasiblePlanError("made to fail", best_coverage=0.0)
+
+    monkeypatch.setattr(planner_module, "plan_experiment", fails)
+    res = replan_run(log, read_plan_dir(plan_dir), 30.0, find_effect=False)
+    assert res.choice == "new" and "straight back" in res.reason, res.reason
+    new = res.prediction.programme
+    np.testing.assert_allclose(
+        new.chamber_at(np.arange(0, 30.5, 0.5)), prog.chamber_at(np.arange(0, 30.5, 0.5))
+    )
+    peak_new, peak_old = _device_peak_c(new, truth), _device_peak_c(prog, truth)
+    assert peak_old > 33.0 and peak_new < peak_old - 1.0, (peak_new, peak_old)
+    assert res.prediction.device_max_c == pytest.approx(peak_new, abs=0.1)
+    # at the fastest cooling the chamber allows (-1 degC/min), no faster: 30 -> 20 degC
+    # over minutes 30..40, then held
+    ramp = np.diff(new.chamber_at(np.arange(30.0, 41.0, 1.0)))
+    np.testing.assert_allclose(ramp, -1.0, atol=1e-9)
+    assert new.chamber_at([new.total_min])[0] == pytest.approx(20.0)
+    assert new.total_min <= 170.0 + 1e-9
+    write_replan_dir(tmp_path / "re", res)
+    assert (tmp_path / "re" / "steps.csv").exists()
