@@ -1103,7 +1103,10 @@ def replan_run(
     predicted complete, from ``M`` itself (:func:`continuation_starts`,
     :func:`planner_request`); each whole run it returns is predicted the same way; the
     best (:meth:`RunPrediction.preference`) is chosen, the unchanged plan on a tie or when
-    no continuation fits (the planner's reasons are kept in the result).
+    no continuation fits (the planner's reasons are kept in the result) -- unless it is
+    predicted to take the device past its limits, when :func:`safe_return` brings the
+    chamber straight home (whatever ``new_only_if_complete`` and ``new_min_coverage``
+    say: the device's limits come first).
 
     Parameters
     ----------
