@@ -543,10 +543,22 @@ def safe_return(request: ReplanRequest, start_min: float) -> Programme | None:
     new = Programme(
         np.array([d for d, _ in steps]), np.array([r for _, r in steps]), prefix.end_c
     ).rounded(plan.limits, exact_start=True)
+    # the plan's metadata (regions, limits: what simulate, compare and a later re-plan
+    # read), with the model the rest was predicted with; its end soak is not known
+    meta = plan.programme.meta
+    if meta is not None:
+        meta = dataclasses.replace(
+            meta,
+            tau_s=request.model.tau_s,
+            dt0_c=request.model.dt0_c,
+            end_soak_min=None,
+            end_soak_included_min=None,
+        )
     return Programme(
         np.concatenate((prefix.durations_min, new.durations_min)),
         np.concatenate((prefix.rates_c_per_min, new.rates_c_per_min)),
         prefix.start_c,
+        meta,
     )
 
 

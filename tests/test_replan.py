@@ -22,7 +22,7 @@ from schedsyn.effects import ModelSpec
 from schedsyn.errors import InfeasiblePlanError, LogFormatError, ParameterError
 from schedsyn.logs import log_from_frame
 from schedsyn.monitor import read_plan_dir
-from schedsyn.programme import Programme
+from schedsyn.programme import Programme, StepTableMeta, read_step_meta
 from schedsyn.replan import (
     ReplanResult,
     check_uncertainty,
@@ -1247,6 +1247,7 @@ def test_with_no_continuation_and_the_plan_overheating_the_device_the_chamber_tu
     import schedsyn.planner as planner_module
 
     prog = Programme(np.array([10.0, 60.0, 10.0, 80.0]), np.array([1.0, 0.0, -1.0, 0.0]))
+    prog = prog.with_meta(StepTableMeta(experiment="T1", working_lo_c=-5.0, working_hi_c=5.0))
     plan_dir = write_plan_dir(tmp_path / "plan", programme=prog)
     meta = json.loads((plan_dir / "plan.json").read_text())
     meta["limits"]["device_max_c"] = 32.0
@@ -1277,4 +1278,7 @@ def test_with_no_continuation_and_the_plan_overheating_the_device_the_chamber_tu
     assert new.chamber_at([new.total_min])[0] == pytest.approx(20.0)
     assert new.total_min <= 170.0 + 1e-9
     write_replan_dir(tmp_path / "re", res)
-    assert (tmp_path / "re" / "steps.csv").exists()
+    # the table keeps the plan's metadata (simulate, compare and a later re-plan read it)
+    meta = read_step_meta(tmp_path / "re" / "steps.csv")
+    assert meta is not None and (meta.working_lo_c, meta.working_hi_c) == (-5.0, 5.0)
+    assert meta.dt0_c == pytest.approx(7.0, abs=0.3)
