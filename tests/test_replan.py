@@ -14,6 +14,7 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 import pytest
+from independent import table_check
 from scipy.integrate import solve_ivp
 from test_monitor import DELTA, LEVELS, REGION, own_passes, plan_programme, write_plan_dir
 
@@ -1220,19 +1221,12 @@ def test_replan_cli_refuses_a_lead_that_is_not_whole_minutes(tmp_path, capsys):
     assert not out.exists()
 
 
-def _device_peak_c(programme: Programme, truth: ModelSpec) -> float:
-    """The device's highest temperature over the run: scipy's integration of the lag on
-    ``truth`` (first-order, its tau and dT0) over the programme's chamber path."""
-    tau = truth.tau_s / 60.0
-    sol = solve_ivp(
-        lambda s, y: [(programme.chamber_at([s])[0] + truth.dt0_c - y[0]) / tau],
-        (0.0, programme.total_min),
-        [20.0],
-        max_step=0.5,
-        rtol=1e-9,
-        atol=1e-9,
-    )
-    return float(sol.y[0].max())
+def _device_peak_c(programme: Programme, truth: ModelSpec, tmp_path) -> float:
+    """The device's highest temperature over the run: the table as exported, integrated
+    by scipy on ``truth`` (first-order, its tau and dT0; tests/independent.py)."""
+    path = tmp_path / "peak.csv"
+    programme.to_csv(path)
+    return table_check(path, REGION, LEVELS, truth.tau_s, truth.dt0_c)["device_max_c"]
 
 
 def test_with_no_continuation_and_the_plan_overheating_the_device_the_chamber_turns_home(
@@ -1268,7 +1262,8 @@ def test_with_no_continuation_and_the_plan_overheating_the_device_the_chamber_tu
     np.testing.assert_allclose(
         new.chamber_at(np.arange(0, 30.5, 0.5)), prog.chamber_at(np.arange(0, 30.5, 0.5))
     )
-    peak_new, peak_old = _device_peak_c(new, truth), _device_peak_c(prog, truth)
+    peak_new = _device_peak_c(new, truth, tmp_path)
+    peak_old = _device_peak_c(prog, truth, tmp_path)
     assert peak_old > 33.0 and peak_new < peak_old - 1.0, (peak_new, peak_old)
     assert res.prediction.device_max_c == pytest.approx(peak_new, abs=0.1)
     # at the fastest cooling the chamber allows (-1 degC/min), no faster: 30 -> 20 degC
