@@ -95,7 +95,7 @@ from .monitor import (
     predict_from_state,
     with_plan_setpoint,
 )
-from .params import DT0_ABS_MAX_C, TAU_MAX_S
+from .params import DT0_ABS_MAX_C, TAU_MAX_S, Limits
 from .programme import Programme
 from .simulate import dense_times
 
@@ -512,7 +512,7 @@ def run_series(
     )
 
 
-def device_excess_c(run: RunPrediction, limits: Any) -> float:
+def device_excess_c(run: RunPrediction, limits: Limits) -> float:
     """How far past the device's limits the run is predicted to take it, degC (0 within)."""
     return max(0.0, limits.device_min_c - run.device_min_c, run.device_max_c - limits.device_max_c)
 
@@ -1238,13 +1238,16 @@ def replan_run(
         new = None if best is None else best[0]
         excess = device_excess_c(unchanged, plan.limits)
         safe = None
-        if new is None and excess > 0:
+        if new is None and excess > PREDICTED_DEVICE_TOL_C:
             start = request.at_min + float(lead_min)
             programme = (
                 safe_return(request, start) if start < plan.limits.duration_max_min else None
             )
             safe = None if programme is None else predict_run(request, programme)
-        if safe is not None and device_excess_c(safe, plan.limits) < excess - 0.05:
+        if (
+            safe is not None
+            and device_excess_c(safe, plan.limits) < excess - PREDICTED_DEVICE_TOL_C
+        ):
             choice, chosen, new_from = "new", safe, request.at_min + float(lead_min)
             reason = (
                 f"no continuation fits ({error}) and the plan unchanged is predicted to take "
