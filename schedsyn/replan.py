@@ -1115,10 +1115,13 @@ def replan_run(
     predicted complete, from ``M`` itself (:func:`continuation_starts`,
     :func:`planner_request`); each whole run it returns is predicted the same way; the
     best (:meth:`RunPrediction.preference`) is chosen, the unchanged plan on a tie or when
-    no continuation fits (the planner's reasons are kept in the result) -- unless it is
-    predicted to take the device past its limits, when :func:`safe_return` brings the
-    chamber straight home (whatever ``new_only_if_complete`` and ``new_min_coverage``
-    say: the device's limits come first).
+    no continuation fits (the planner's reasons are kept in the result).
+
+    The device's limits come first, whatever ``keep_if_complete``,
+    ``new_only_if_complete`` and ``new_min_coverage`` say: a plan predicted to take the
+    device past them is not kept as complete; a continuation that breaks them less (or
+    not at all) is taken over it; and when every run at hand breaks them,
+    :func:`safe_return` brings the chamber straight home if that breaks them less.
 
     Parameters
     ----------
@@ -1184,7 +1187,7 @@ def replan_run(
     worst_text = " at its worst over the model used and the rivals" if rivals else ""
     planned, error, planner_s, new_from = None, None, 0.0, None
     attempts: list[PlannerAttempt] = []
-    if keep_if_complete and unchanged_key[1]:
+    if keep_if_complete and unchanged_key[0] and unchanged_key[1]:
         choice = "keep"
         reason = (
             "the plan's own rest is predicted to complete every bin with the identified "
@@ -1192,7 +1195,11 @@ def replan_run(
         )
         chosen = unchanged
     else:
-        before = "completes" if unchanged_key[1] else f"reaches {unchanged_key[2]:.0%}{worst_text}"
+        before = (
+            ("completes" if unchanged_key[0] else "completes but breaks a limit")
+            if unchanged_key[1]
+            else f"reaches {unchanged_key[2]:.0%}{worst_text}"
+        )
         best: tuple[RunPrediction, Any, float] | None = None
         best_key = None
         # new steps for the rival that disagrees most only: several rivals (4 on a W4 log
@@ -1219,9 +1226,9 @@ def replan_run(
                 key = judged(run)
                 if best_key is None or key > best_key:
                     best, best_key = (run, attempt.plan, start), key
-                if best_key[1]:
-                    break  # a later start cannot do better than complete
-            if best_key is not None and best_key[1]:
+                if best_key[0] and best_key[1]:
+                    break  # a later start cannot do better than complete within limits
+            if best_key is not None and best_key[0] and best_key[1]:
                 break
         if not attempts:
             error = (
@@ -1236,25 +1243,52 @@ def replan_run(
         if best is not None:
             planned = best[1]
         new = None if best is None else best[0]
+        # the device's limits come first (before --only-if-complete and the coverage
+        # floor): when every run at hand breaks them, the chamber goes straight home if
+        # that breaks them less; a new rest within them is taken over a plan that is not
         excess = device_excess_c(unchanged, plan.limits)
+        new_excess = math.inf if new is None else device_excess_c(new, plan.limits)
+        least = min(excess, new_excess)
         safe = None
-        if new is None and excess > PREDICTED_DEVICE_TOL_C:
+        if least > PREDICTED_DEVICE_TOL_C:
             start = request.at_min + float(lead_min)
             programme = (
                 safe_return(request, start) if start < plan.limits.duration_max_min else None
             )
             safe = None if programme is None else predict_run(request, programme)
-        if (
-            safe is not None
-            and device_excess_c(safe, plan.limits) < excess - PREDICTED_DEVICE_TOL_C
-        ):
+        if safe is not None and device_excess_c(safe, plan.limits) < least - PREDICTED_DEVICE_TOL_C:
             choice, chosen, new_from = "new", safe, request.at_min + float(lead_min)
+            why = (
+                f"no continuation fits ({error}) and the plan unchanged is predicted to "
+                f"take the device {excess:.1f} °C past its limit"
+                if new is None
+                else "the planner's best continuation is predicted to take the device "
+                f"{new_excess:.1f} °C past its limit, the plan unchanged {excess:.1f} °C"
+            )
             reason = (
-                f"no continuation fits ({error}) and the plan unchanged is predicted to take "
-                f"the device {excess:.1f} °C past its limit: the chamber goes straight back "
+                f"{why}: the chamber goes straight back "
                 f"to {plan.limits.end_c:g} °C from minute {new_from:g} (the device "
                 f"{device_excess_c(safe, plan.limits):.1f} °C past, the least a chamber "
                 f"turned round at once can give; {safe.coverage.coverage:.0%} of the bins)"
+            )
+        elif (
+            new is not None
+            and best_key is not None
+            and excess > PREDICTED_DEVICE_TOL_C
+            and new_excess < excess - PREDICTED_DEVICE_TOL_C
+        ):
+            choice, chosen, new_from = "new", new, best[2]  # type: ignore[index]
+            reason = (
+                f"the plan unchanged is predicted to take the device {excess:.1f} °C past "
+                "its limit, the planner's continuation "
+                + (
+                    f"{new_excess:.1f} °C"
+                    if new_excess > PREDICTED_DEVICE_TOL_C
+                    else "keeps it within its limits"
+                )
+                + f"; it reaches "
+                f"{best_key[2]:.0%} (min {best_key[3]} levels){worst_text} in "
+                f"{new.programme.total_min:g} min"
             )
         elif (
             new is not None

@@ -1277,3 +1277,85 @@ def test_with_no_continuation_and_the_plan_overheating_the_device_the_chamber_tu
     meta = read_step_meta(tmp_path / "re" / "steps.csv")
     assert meta is not None and (meta.working_lo_c, meta.working_hi_c) == (-5.0, 5.0)
     assert meta.dt0_c == pytest.approx(7.0, abs=0.3)
+
+
+@pytest.mark.parametrize("hold_min", [45.0, 20.0])
+def test_a_continuation_is_judged_first_by_the_device_limit(tmp_path, monkeypatch, hold_min):
+    """A device 7 degC warmer than its model (dT0 7, not 3) holds at 30 degC with a
+    30 degC limit; the plan unchanged takes it to 33.9. The planner's only continuation
+    (an incomplete one) holds ``hold_min`` at 30 before turning home. 45 min: it breaks
+    the limit less than the plan, but far more than the chamber turned round at once,
+    which is taken (before, the continuation was, for its coverage: the straight-home
+    fallback was only for when nothing fitted). 20 min: within the limit, it is taken
+    even with new steps only when complete (the plan broke the limit). Peaks by scipy
+    on the truth."""
+    import schedsyn.replan as replan_module
+
+    prog = Programme(np.array([10.0, 60.0, 10.0, 80.0]), np.array([1.0, 0.0, -1.0, 0.0]))
+    prog = prog.with_meta(StepTableMeta(experiment="T1", working_lo_c=-5.0, working_hi_c=5.0))
+    plan_dir = write_plan_dir(tmp_path / "plan", programme=prog)
+    meta = json.loads((plan_dir / "plan.json").read_text())
+    meta["limits"]["device_max_c"] = 30.0
+    meta["limits"]["duration_max_min"] = 170.0
+    (plan_dir / "plan.json").write_text(json.dumps(meta))
+    truth = ModelSpec(2400.0, 7.0)
+    frame = synth_effect_log(prog, truth, sample_s=10.0, noise_c=0.01, seed=3)
+    frame = frame.drop(columns=["t_true_c", "g_true_c_per_min"])
+    log = log_from_frame(frame[frame["time_s"] <= 30 * 60.0].reset_index(drop=True), "hot")
+    late = Programme(
+        np.array([10.0, hold_min, 10.0, 150.0 - hold_min]),
+        np.array([1.0, 0.0, -1.0, 0.0]),
+        meta=prog.meta,
+    )
+
+    def late_turn(rq, start, progress, say, label="identified"):
+        return replan_module.PlannerAttempt(start, None, predict_run(rq, late), None, 0.0, label)
+
+    monkeypatch.setattr(replan_module, "_plan_from", late_turn)
+    res = replan_run(
+        log, read_plan_dir(plan_dir), 30.0, find_effect=False, new_only_if_complete=True
+    )
+    assert res.choice == "new", res.reason
+    peak_new = _device_peak_c(res.prediction.programme, truth, tmp_path)
+    peak_late = _device_peak_c(late, truth, tmp_path)
+    peak_old = _device_peak_c(prog, truth, tmp_path)
+    assert peak_new < 30.0 + 0.1 and res.prediction.device_max_c == pytest.approx(peak_new, abs=0.1)
+    if hold_min > 30:
+        assert "straight back" in res.reason and "best continuation" in res.reason, res.reason
+        assert 31.0 < peak_late < peak_old - 1.0, (peak_late, peak_old)
+        assert peak_new < peak_late - 1.0, (peak_new, peak_late)
+    else:
+        assert "keeps it within its limits" in res.reason, res.reason
+        assert res.prediction.programme.to_frame().equals(late.to_frame())
+        assert peak_old > 33.0
+
+
+def test_a_complete_plan_past_the_device_limit_is_not_kept(tmp_path):
+    """The plan's rest passes every bin, but the device, 1 degC warmer than the model,
+    would run 0.5 degC past its 29.5 degC limit in the hour at 30 degC: the plan used to
+    be kept as "predicted to complete every bin". The planner's rest keeps the device
+    within its limit (scipy on the truth), and is taken even with new steps only when
+    complete (the device's limits come first)."""
+    plan_dir = write_plan_dir(tmp_path / "plan")
+    meta = json.loads((plan_dir / "plan.json").read_text())
+    meta["limits"]["device_max_c"] = 29.5
+    (plan_dir / "plan.json").write_text(json.dumps(meta))
+    truth = ModelSpec(2400.0, 4.0)
+    res = replan_run(
+        log_from_frame(
+            effect_log(truth, seed=4).query("time_s <= 3600").reset_index(drop=True), "warm"
+        ),
+        read_plan_dir(plan_dir),
+        60.0,
+        find_effect=False,
+        new_only_if_complete=True,
+    )
+    assert res.unchanged.coverage.complete and res.unchanged.device_max_c > 29.8, (
+        res.unchanged.device_max_c
+    )
+    assert res.choice == "new", res.reason
+    peak_new = _device_peak_c(res.prediction.programme, truth, tmp_path)
+    assert peak_new < 29.5 + 0.1, peak_new
+    new = res.prediction.programme
+    minutes = np.arange(0.0, 60.5, 0.5)
+    np.testing.assert_allclose(new.chamber_at(minutes), plan_programme().chamber_at(minutes))
