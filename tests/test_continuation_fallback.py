@@ -66,6 +66,10 @@ def test_when_not_even_sub_region_sweeps_fit_the_most_sweeps_that_do_are_planned
     plan = plan_experiment(spec, params, limits, continuation=cont)
     assert not plan.complete
     assert any("only 2 new sweep(s) fit, of the 3" in n for n in plan.notes), plan.notes
+    # why three do not fit: each reason once, and a horizon past the limit said to be one
+    (why,) = [n for n in plan.notes if "do not fit" in n]
+    reasons = why.split(": ", 1)[1].split("; ")
+    assert len(reasons) == len(set(reasons)) and "the 140-min limit" in why, why
     prog = plan.programme
     assert prog.total_min <= 140.0 + 1e-9
     assert not [p for p in prog.violations(limits) if "starts at" not in p]

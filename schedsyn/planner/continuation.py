@@ -173,7 +173,8 @@ def plan_continuation(
         )
         found = candidate(search)
         if found is None:
-            notes.append(f"{k} new sweep(s) do not fit: {'; '.join(search.reasons[:2])}")
+            why = "; ".join(list(dict.fromkeys(search.reasons))[:2])
+            notes.append(f"{k} new sweep(s) do not fit: {why}")
             continue
         if best is None or found[0] > best[0]:
             best = found

@@ -708,9 +708,16 @@ def greedy(
                     break
         if res is None:
             where = "cooling" if d < 0 else "heating"
+            horizon_min = float(ctx.responses.edges_min[max_seg])
+            beyond = (
+                f" (the search looks past the {limits.duration_max_min:g}-min limit for "
+                "plans it can shorten)"
+                if horizon_min > limits.duration_max_min + 1e-9
+                else ""
+            )
             return None, (
                 f"sweep {k + 1} of {len(directions)} ({where}, gradient band {band.rank}) "
-                f"does not fit before minute {ctx.responses.edges_min[max_seg]:g}"
+                f"does not fit before minute {horizon_min:g}{beyond}"
             )
         u_new, win = res
         u_fixed = np.concatenate(
