@@ -166,13 +166,18 @@ def test_the_effort_limit_counts_lp_work_not_time():
 def test_the_same_request_gets_the_same_answer_on_a_slower_machine(monkeypatch):
     """The effort limit cuts the graded search at the same place whatever the clocks say:
     a machine (or a load) that makes every CPU second count ten times gives the same
-    plan, with the same levels and the same steps."""
+    plan, with the same levels and the same steps. Planned without the timetable stage:
+    the effort limit is the band search's (the stage, after it, has no effort limit and
+    counts its work in LP solves; here it found nothing in half a minute of LPs per run,
+    and the plan was the band search's either way). The limit must bite in both runs:
+    the first run's note is asserted, the slow run's must be the same."""
     spec = dataclasses.replace(SPEC, levels_required=5)
-    first = plan_experiment(spec, limits=LIMITS, effort_s=5.0)
+    first = plan_experiment(spec, limits=LIMITS, effort_s=5.0, timetable=False)
     clocks = {"process_time": time.process_time, "perf_counter": time.perf_counter}
     monkeypatch.setattr(core.time, "process_time", lambda: 10.0 * clocks["process_time"]())
     monkeypatch.setattr(core.time, "perf_counter", lambda: 10.0 * clocks["perf_counter"]())
-    slow = plan_experiment(spec, limits=LIMITS, effort_s=5.0)
+    slow = plan_experiment(spec, limits=LIMITS, effort_s=5.0, timetable=False)
+    assert any("effort limit" in n for n in first.notes), first.notes  # the limit bit
     assert slow.levels_planned == first.levels_planned
     assert slow.programme.to_frame().equals(first.programme.to_frame())
     assert [n for n in slow.notes if "effort" in n] == [n for n in first.notes if "effort" in n]

@@ -58,24 +58,25 @@ def test_an_impossible_step_limit_is_reported_not_hidden():
 
 
 def test_a_request_too_short_for_its_levels_gets_the_most_levels_every_bin_can_have(tmp_path):
-    """Graded partial plan: a budget the bound proves too short for 6 and for 5 levels,
-    not for 4. The plan gives every bin as many levels as the fewer-level plan it found
+    """Graded partial plan: a budget the bound proves too short for 4 and for 3 levels,
+    not for 2. The plan gives every bin as many levels as the fewer-level plan it found
     (re-checked independently) where, without graded plans, nothing would come back; and
-    it says so."""
-    spec = ExperimentSpec("G", -12.0, -4.0, -20.0, 4.0, levels_required=6)
-    limits = Limits(duration_max_min=195.0)
-    for levels in (6, 5):  # proven impossible
+    it says so. (A 4-degC region: [-12, -4] degC asked for 6 levels in 195 min is the
+    same case, with searches three times as long.)"""
+    spec = ExperimentSpec("G", -8.0, -4.0, -16.0, 4.0, levels_required=4)
+    limits = Limits(duration_max_min=110.0)
+    for levels in (4, 3):  # proven impossible
         fewer = dataclasses.replace(spec, levels_required=levels)
-        assert duration_lower_bound(fewer, limits=limits).lower_bound_min > 195.0
+        assert duration_lower_bound(fewer, limits=limits).lower_bound_min > 110.0
     plan = plan_experiment(spec, limits=limits)
     assert not plan.complete and plan.levels_planned is not None
-    assert plan.levels_planned >= 4
+    assert plan.levels_planned == 2  # 3 proven impossible
     assert any(n.startswith("GRADED") for n in plan.notes)
-    # proven impossible, 6 levels are not searched at all (the graded search starts below)
-    assert any("6 levels were not searched" in n for n in plan.notes)
-    check = table_check(plan.programme.to_csv(tmp_path / "g.csv"), (-12.0, -4.0), 6)
+    # proven impossible, 4 levels are not searched at all (the graded search starts below)
+    assert any("4 levels were not searched" in n for n in plan.notes)
+    check = table_check(plan.programme.to_csv(tmp_path / "g.csv"), (-8.0, -4.0), 4)
     assert check["min_levels"] >= plan.levels_planned == plan.coverage.min_levels
-    # without graded plans nothing at all comes back: no 6-sweep programme fits
+    # without graded plans nothing at all comes back: no 4-sweep programme fits
     with pytest.raises(InfeasiblePlanError, match="no programme covers any part"):
         plan_experiment(spec, limits=limits, graded=False)
 
