@@ -30,11 +30,15 @@ pytestmark = [
     pytest.mark.slow,
 ]
 
-# [-10, 10] degC, 2 levels: one 20-degC experiment needs at least 94.8 min (proven
-# bound; the timetable stage plans it in 105), so within 93 min the range takes two
-RANGE = (-10.0, 10.0)
+# [-5, 5] degC, 2 levels: one 10-degC experiment needs at least 79.5 min (proven bound),
+# so within 78 min the range takes two (the split: [-5, -1] in 76 min, [-1, 5] in 74; four
+# plans of about 8 s, where [-10, 10] within 93 min took five of 12-15 s)
+RANGE = (-5.0, 5.0)
 LEVELS = 2
-LIMITS = dataclasses.replace(Limits(), duration_max_min=93.0)
+LIMITS = dataclasses.replace(Limits(), duration_max_min=78.0)
+# approximation regions 3 degC wider than the working ones (the paper's 10 would reach past
+# both ends of so short a range from every region, and the rule would be seen clipped only)
+MARGIN = 3.0
 
 
 #: How split_range plans each probe (no effort limit, not graded: "is there a complete
@@ -52,8 +56,10 @@ def _split(out) -> int:
     """The split, remembering the planner's own answer to each probe it plans, so that a
     test asking about the very same request (equal spec but for its name, params, limits,
     and split's keywords) reads that answer instead of repeating a search of 10 s."""
-    argv = ["split", "--range", "-10", "10", "--levels", str(LEVELS)]
-    argv += ["--duration-max-min", "93", "--backend", "serial", "--out", str(out), "--quiet"]
+    argv = ["split", "--range", *(f"{x:g}" for x in RANGE), "--levels", str(LEVELS)]
+    argv += ["--duration-max-min", f"{LIMITS.duration_max_min:g}"]
+    argv += ["--approx-margin-c", f"{MARGIN:g}"]
+    argv += ["--backend", "serial", "--out", str(out), "--quiet"]
     real = split_module.plan_experiment
 
     def record(spec, params, limits, **kw):
@@ -96,7 +102,7 @@ def test_split_covers_the_range_with_no_gap_each_plan_complete_by_separate_code(
     rc, out = split_out
     assert rc == 0
     frame = pd.read_csv(out / "split.csv")
-    assert len(frame) >= 2  # one experiment cannot do it in 93 min (see below)
+    assert len(frame) >= 2  # one experiment cannot do it in 78 min (see below)
     lo = frame["working_lo_c"].to_numpy()
     hi = frame["working_hi_c"].to_numpy()
     assert lo[0] == RANGE[0] and hi[-1] == RANGE[1]
@@ -119,8 +125,11 @@ def test_approximation_regions_follow_the_paper_rule_inside_the_range(split_out)
     _, out = split_out
     frame = pd.read_csv(out / "split.csv")
     for _, row in frame.iterrows():
-        assert row["approx_lo_c"] == max(row["working_lo_c"] - 10.0, RANGE[0])
-        assert row["approx_hi_c"] == min(row["working_hi_c"] + 10.0, RANGE[1])
+        assert row["approx_lo_c"] == max(row["working_lo_c"] - MARGIN, RANGE[0])
+        assert row["approx_hi_c"] == min(row["working_hi_c"] + MARGIN, RANGE[1])
+    # both sides seen inside the range, not only clipped to its ends
+    assert (frame["approx_lo_c"] > RANGE[0]).any() and (frame["approx_hi_c"] < RANGE[1]).any()
+    assert SplitSettings().approx_margin_c == 10.0  # the paper's, by default
 
 
 def test_each_region_but_the_last_is_the_widest_the_planner_completes(split_out):
@@ -130,7 +139,8 @@ def test_each_region_but_the_last_is_the_widest_the_planner_completes(split_out)
     params = ThermalParams()
     for _, row in frame.iloc[:-1].iterrows():
         a, b = row["working_lo_c"], row["working_hi_c"] + 1.0  # one degree wider
-        spec = ExperimentSpec("wider", a, b, max(a - 10, RANGE[0]), min(b + 10, RANGE[1]), LEVELS)
+        approx = (max(a - MARGIN, RANGE[0]), min(b + MARGIN, RANGE[1]))
+        spec = ExperimentSpec("wider", a, b, *approx, LEVELS)
         assert not _plans_complete(spec, params), (a, b)
     # and the whole range in one experiment does not fit either
     whole = ExperimentSpec("whole", *RANGE, *RANGE, levels_required=LEVELS)
@@ -174,7 +184,8 @@ def test_proven_minimum_is_a_lower_bound_on_every_split_brute_force():
     """Brute force: the fewest consecutive regions (whole degrees) each of which the bound
     does not exclude. Any split the planner could verify is one of these, so the proven
     minimum must not exceed it; with the bound monotone in the width they are equal."""
-    lo, hi, budget = -40, -28, 200.0
+    # 6 degC (21 regions) where each experiment reaches 2 degC: three needed
+    lo, hi, budget = -40, -34, 175.0
     n, jumps = proven_minimum(
         lo, hi, None, dataclasses.replace(Limits(), duration_max_min=budget), {}
     )
