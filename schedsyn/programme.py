@@ -494,6 +494,31 @@ class Programme:
         rates = np.diff(tk) / dur
         return Programme(dur, rates, float(tk[0]), self.meta).merged(rate_tol_c_per_min=1e-9)
 
+    def ending_at(self, end_c: float, limits: Limits) -> Programme:
+        """The programme with the chamber's last temperature moved onto ``end_c``.
+
+        A plan may end anywhere within ``limits.end_tol_c`` of the end temperature; the
+        table an operator types should say the end temperature itself. The last ramp is
+        steered onto it (the holds after it move with it); unchanged when it already ends
+        there, when it has no ramp, or when the steered ramp would break the rate limits.
+        The caller re-checks coverage and limits (the device's path changes at the end).
+        """
+        gap = float(end_c) - self.end_c
+        if abs(gap) < 1e-9:
+            return self
+        rates = self.rates_c_per_min.copy()
+        ramps = np.flatnonzero(np.abs(rates) > 1e-12)
+        if ramps.size == 0:
+            return self
+        k = int(ramps[-1])
+        rate = float(rates[k] + gap / self.durations_min[k])
+        if not (limits.rate_min_c_per_min - 1e-9 <= rate <= limits.rate_max_c_per_min + 1e-9):
+            return self
+        rates[k] = rate
+        return Programme(self.durations_min.copy(), rates, self.start_c, self.meta).merged(
+            rate_tol_c_per_min=1e-9
+        )
+
     # -- step table --------------------------------------------------------------------
     def to_frame(self) -> pd.DataFrame:
         """Step table as a DataFrame (one row per segment)."""

@@ -184,3 +184,28 @@ def test_operator_columns_that_disagree_with_the_numbers_are_refused(
     frame["duration_hhmm"] = ["0:40:00", "", "00:40"]
     frame.to_csv(path, index=False)
     assert read_steps(path).total_min == pytest.approx(110.0)
+
+
+def test_ending_at_steers_the_last_ramp_onto_the_end_temperature():
+    """A plan may end within end_tol_c of 20 degC (fuzzing: a timetable table ending at
+    20.1); ending_at moves the last ramp's end onto 20, the holds after it with it, and
+    leaves everything before that ramp as it was (compared on the chamber's path)."""
+    limits = Limits(rate_min_c_per_min=-3.0)
+    # 20 -> 0 -> 22 -> 20.1 then a 30-min hold
+    prog = Programme(np.array([20.0, 11.0, 1.0, 30.0]), np.array([-1.0, 2.0, -1.9, 0.0]))
+    assert prog.end_c == pytest.approx(20.1)
+    out = prog.ending_at(20.0, limits)
+    assert out.end_c == pytest.approx(20.0, abs=1e-12)
+    assert out.total_min == prog.total_min
+    before = np.linspace(0.0, 31.0, 63)  # up to the start of the last ramp
+    np.testing.assert_allclose(out.chamber_at(before), prog.chamber_at(before), atol=1e-12)
+    assert out.chamber_at(np.array([32.0]))[0] == pytest.approx(20.0)  # the ramp, steered
+    np.testing.assert_allclose(out.chamber_at(np.linspace(32.0, 62.0, 31)), 20.0)  # the hold
+    assert not out.violations(limits)
+    # already at 20: the very same programme; a ramp that would break the rate limit
+    # (22 -> 20 in 1 min under a -1.95 degC/min limit): left as it was
+    assert out.ending_at(20.0, limits) is out
+    slow = Limits(rate_min_c_per_min=-1.95)
+    assert prog.ending_at(20.0, slow) is prog
+    hold_only = Programme(np.array([10.0]), np.array([0.0]), 20.3)
+    assert hold_only.ending_at(20.0, limits) is hold_only

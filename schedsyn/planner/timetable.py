@@ -735,9 +735,12 @@ def _programme(su: _Setup, x, nu: int, end_min: int) -> Programme | None:
         d.append(rest)
         r.append(u[min(full, nu - 1)])
     try:
-        return Programme(np.array(d, float), np.array(r), lim.start_c).rounded(lim)
+        prog = Programme(np.array(d, float), np.array(r), lim.start_c).rounded(lim)
     except (SchedsynError, ValueError):
         return None
+    # the SLP ends anywhere within end_tol_c of end_c; the table says end_c itself
+    # (fuzzing: a table ending at 20.1 degC); _verify checks the steered ramp
+    return prog.ending_at(lim.end_c, lim)
 
 
 def _verify(su: _Setup, prog: Programme) -> tuple[bool, CoverageReport | None]:
