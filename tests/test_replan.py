@@ -553,6 +553,25 @@ def _plan_each_start_once(monkeypatch) -> None:
     monkeypatch.setattr(planner_module, "plan_experiment", plan_once)
 
 
+def _prepare_each_log_once(monkeypatch) -> None:
+    """Work out the state, model and levels at ``M`` (replan.prepare_replan) once per test
+    for the same log, plan and options: re-plans of one log at one minute that differ only
+    in which rest they take read the same (frozen) request; a call with other arguments
+    is prepared again, and bad arguments still raise."""
+    import schedsyn.replan as replan_module
+
+    real = replan_module.prepare_replan
+    prepared: dict[tuple, object] = {}
+
+    def prepare_once(log, plan, at_min, **kwargs):
+        key = (id(log), id(plan), at_min, tuple(sorted(kwargs.items(), key=lambda kv: kv[0])))
+        if key not in prepared:
+            prepared[key] = (log, plan, real(log, plan, at_min, **kwargs))
+        return prepared[key][2]
+
+    monkeypatch.setattr(replan_module, "prepare_replan", prepare_once)
+
+
 def _short_plan_dir(tmp_path):
     """A 158-min plan (cool, hold, heat, hold) whose limit leaves little room: 170 min."""
     prog = Programme(np.array([29.0, 60.0, 29.0, 40.0]), np.array([-1.0, 0.0, 1.0, 0.0]))
@@ -572,6 +591,8 @@ def test_an_incomplete_new_rest_is_taken_only_when_allowed(tmp_path, monkeypatch
     # the options below change only which rest is taken, not what the planner is asked
     # (a continuation is never graded): each planner request is answered once (about 13 s)
     _plan_each_start_once(monkeypatch)
+    # nor the log up to M: its state, model and levels are worked out once (about 1 s a run)
+    _prepare_each_log_once(monkeypatch)
     prog, plan_dir = _short_plan_dir(tmp_path)
     plan = read_plan_dir(plan_dir)
     frame = synth_effect_log(prog, ModelSpec(2400.0, 5.5), sample_s=10.0, noise_c=0.01, seed=1)
@@ -634,9 +655,11 @@ def test_replan_cli_says_how_far_an_incomplete_rest_falls_short_and_exits_1(tmp_
     meta["limits"]["duration_max_min"] = 450.0  # the plan lasts 440 min
     (plan_dir / "plan.json").write_text(json.dumps(meta))
     truth = ModelSpec(3000.0, 6.0)
-    log = _write_log(effect_log(truth, seed=2), tmp_path / "log.csv", 400.0)
+    # 20 min before the limit (from 400 min the planner took 7 s to find no sweep fits in
+    # 50; in 20 it finds so in 3, and the short bins are the same)
+    log = _write_log(effect_log(truth, seed=2), tmp_path / "log.csv", 430.0)
     out = tmp_path / "re"
-    rc = main(["replan", str(log), str(plan_dir), "--at-min", "400", "--out", str(out)])
+    rc = main(["replan", str(log), str(plan_dir), "--at-min", "430", "--out", str(out)])
     assert rc == 1
     meta = json.loads((out / "replan.json").read_text())
     assert meta["complete"] is False and meta["choice"] == "keep"
@@ -1229,6 +1252,24 @@ def _device_peak_c(programme: Programme, truth: ModelSpec, tmp_path) -> float:
     return table_check(path, REGION, LEVELS, truth.tau_s, truth.dt0_c)["device_max_c"]
 
 
+def _hot_hold_run(tmp_path, device_max_c):
+    """20 -> 30 degC, held an hour, back to 20 (170-min limit), and the log of its first
+    30 min on a device 7 degC warmer than the plan's model (dT0 7, not 3), whose limit is
+    ``device_max_c``: (programme, plan folder, truth, log)."""
+    prog = Programme(np.array([10.0, 60.0, 10.0, 80.0]), np.array([1.0, 0.0, -1.0, 0.0]))
+    prog = prog.with_meta(StepTableMeta(experiment="T1", working_lo_c=-5.0, working_hi_c=5.0))
+    plan_dir = write_plan_dir(tmp_path / "plan", programme=prog)
+    meta = json.loads((plan_dir / "plan.json").read_text())
+    meta["limits"]["device_max_c"] = device_max_c
+    meta["limits"]["duration_max_min"] = 170.0
+    (plan_dir / "plan.json").write_text(json.dumps(meta))
+    truth = ModelSpec(2400.0, 7.0)
+    frame = synth_effect_log(prog, truth, sample_s=10.0, noise_c=0.01, seed=3)
+    frame = frame.drop(columns=["t_true_c", "g_true_c_per_min"])
+    log = log_from_frame(frame[frame["time_s"] <= 30 * 60.0].reset_index(drop=True), "hot")
+    return prog, plan_dir, truth, log
+
+
 def test_with_no_continuation_and_the_plan_overheating_the_device_the_chamber_turns_home(
     tmp_path, monkeypatch
 ):
@@ -1240,17 +1281,7 @@ def test_with_no_continuation_and_the_plan_overheating_the_device_the_chamber_tu
     within what replan predicts; the folder is written."""
     import schedsyn.planner as planner_module
 
-    prog = Programme(np.array([10.0, 60.0, 10.0, 80.0]), np.array([1.0, 0.0, -1.0, 0.0]))
-    prog = prog.with_meta(StepTableMeta(experiment="T1", working_lo_c=-5.0, working_hi_c=5.0))
-    plan_dir = write_plan_dir(tmp_path / "plan", programme=prog)
-    meta = json.loads((plan_dir / "plan.json").read_text())
-    meta["limits"]["device_max_c"] = 32.0
-    meta["limits"]["duration_max_min"] = 170.0
-    (plan_dir / "plan.json").write_text(json.dumps(meta))
-    truth = ModelSpec(2400.0, 7.0)
-    frame = synth_effect_log(prog, truth, sample_s=10.0, noise_c=0.01, seed=3)
-    frame = frame.drop(columns=["t_true_c", "g_true_c_per_min"])
-    log = log_from_frame(frame[frame["time_s"] <= 30 * 60.0].reset_index(drop=True), "hot")
+    prog, plan_dir, truth, log = _hot_hold_run(tmp_path, device_max_c=32.0)
 
     def fails(*args, **kwargs):
         raise InfeasiblePlanError("made to fail", best_coverage=0.0)
@@ -1291,17 +1322,7 @@ def test_a_continuation_is_judged_first_by_the_device_limit(tmp_path, monkeypatc
     on the truth."""
     import schedsyn.replan as replan_module
 
-    prog = Programme(np.array([10.0, 60.0, 10.0, 80.0]), np.array([1.0, 0.0, -1.0, 0.0]))
-    prog = prog.with_meta(StepTableMeta(experiment="T1", working_lo_c=-5.0, working_hi_c=5.0))
-    plan_dir = write_plan_dir(tmp_path / "plan", programme=prog)
-    meta = json.loads((plan_dir / "plan.json").read_text())
-    meta["limits"]["device_max_c"] = 30.0
-    meta["limits"]["duration_max_min"] = 170.0
-    (plan_dir / "plan.json").write_text(json.dumps(meta))
-    truth = ModelSpec(2400.0, 7.0)
-    frame = synth_effect_log(prog, truth, sample_s=10.0, noise_c=0.01, seed=3)
-    frame = frame.drop(columns=["t_true_c", "g_true_c_per_min"])
-    log = log_from_frame(frame[frame["time_s"] <= 30 * 60.0].reset_index(drop=True), "hot")
+    prog, plan_dir, truth, log = _hot_hold_run(tmp_path, device_max_c=30.0)
     late = Programme(
         np.array([10.0, hold_min, 10.0, 150.0 - hold_min]),
         np.array([1.0, 0.0, -1.0, 0.0]),
