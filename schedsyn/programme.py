@@ -499,25 +499,31 @@ class Programme:
 
         A plan may end anywhere within ``limits.end_tol_c`` of the end temperature; the
         table an operator types should say the end temperature itself. The last ramp is
-        steered onto it (the holds after it move with it); unchanged when it already ends
-        there, when it has no ramp, or when the steered ramp would break the rate limits.
+        steered onto it (the holds after it move with it); where that would break the
+        rate limits, a short ramp onto it is appended (whole minutes, if the duration
+        limit has room). Unchanged when it already ends there, or when neither fits.
         The caller re-checks coverage and limits (the device's path changes at the end).
         """
         gap = float(end_c) - self.end_c
         if abs(gap) < 1e-9:
             return self
-        rates = self.rates_c_per_min.copy()
+        lo, hi = limits.rate_min_c_per_min, limits.rate_max_c_per_min
+        durations, rates = self.durations_min.copy(), self.rates_c_per_min.copy()
         ramps = np.flatnonzero(np.abs(rates) > 1e-12)
-        if ramps.size == 0:
-            return self
-        k = int(ramps[-1])
-        rate = float(rates[k] + gap / self.durations_min[k])
-        if not (limits.rate_min_c_per_min - 1e-9 <= rate <= limits.rate_max_c_per_min + 1e-9):
-            return self
-        rates[k] = rate
-        return Programme(self.durations_min.copy(), rates, self.start_c, self.meta).merged(
-            rate_tol_c_per_min=1e-9
-        )
+        k = int(ramps[-1]) if ramps.size else -1
+        rate = float(rates[k] + gap / durations[k]) if k >= 0 else math.inf
+        if lo - 1e-9 <= rate <= hi + 1e-9:
+            rates[k] = rate
+        else:
+            fastest = hi if gap > 0 else -lo
+            if fastest <= 0:
+                return self
+            extra = float(max(1, math.ceil(abs(gap) / fastest - 1e-9)))
+            if self.total_min + extra > limits.duration_max_min + 1e-9:
+                return self
+            durations = np.append(durations, extra)
+            rates = np.append(rates, gap / extra)
+        return Programme(durations, rates, self.start_c, self.meta).merged(rate_tol_c_per_min=1e-9)
 
     # -- step table --------------------------------------------------------------------
     def to_frame(self) -> pd.DataFrame:

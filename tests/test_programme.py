@@ -202,10 +202,22 @@ def test_ending_at_steers_the_last_ramp_onto_the_end_temperature():
     assert out.chamber_at(np.array([32.0]))[0] == pytest.approx(20.0)  # the ramp, steered
     np.testing.assert_allclose(out.chamber_at(np.linspace(32.0, 62.0, 31)), 20.0)  # the hold
     assert not out.violations(limits)
-    # already at 20: the very same programme; a ramp that would break the rate limit
-    # (22 -> 20 in 1 min under a -1.95 degC/min limit): left as it was
+    # already at 20: the very same programme
     assert out.ending_at(20.0, limits) is out
-    slow = Limits(rate_min_c_per_min=-1.95)
-    assert prog.ending_at(20.0, slow) is prog
+    # a steered ramp that would break the rate limit (22 -> 20 in 1 min under a
+    # -1.95 degC/min limit): a 1-min ramp 20.1 -> 20 appended after the hold instead, if
+    # the duration limit has room; a hold-only programme likewise
+    slow = Limits(rate_min_c_per_min=-1.95, duration_max_min=63.0)
+    out = prog.ending_at(20.0, slow)
+    assert out.total_min == prog.total_min + 1 and out.end_c == pytest.approx(20.0, abs=1e-12)
+    np.testing.assert_allclose(
+        out.chamber_at(np.linspace(0.0, 62.0, 125)),
+        prog.chamber_at(np.linspace(0.0, 62.0, 125)),
+        atol=1e-12,
+    )
+    assert not out.violations(slow)
+    full = Limits(rate_min_c_per_min=-1.95, duration_max_min=62.0)
+    assert prog.ending_at(20.0, full) is prog  # no room: left as it was
     hold_only = Programme(np.array([10.0]), np.array([0.0]), 20.3)
-    assert hold_only.ending_at(20.0, limits) is hold_only
+    out = hold_only.ending_at(20.0, limits)
+    assert out.end_c == pytest.approx(20.0) and out.total_min == 11.0
