@@ -31,15 +31,7 @@ from .physics import LIMIT_FRACTION
 from .polish import honour_step_limits, merge_small_changes, polish, step_runs
 from .request import Continuation, ExperimentSpec, check_request
 from .robust import box_note, box_scenarios, held_note, search_robust, verify_robust
-from .search import (
-    SPLIT_NOTE_PREFIX,
-    Search,
-    Structure,
-    split_note,
-    subregions,
-    synthesise,
-    truncate,
-)
+from .search import Search, Structure, split_note, subregions, synthesise, truncate
 
 #: Rates closer than this are one step of the exported table, degC/min.
 MERGE_TOL_C_PER_MIN = 1e-6
@@ -327,10 +319,8 @@ def plan_experiment(
         When the band search ends without a complete plan (and the proven bound fits the
         budget), try the timetable stage (:mod:`.timetable`: rates and bin-boundary
         crossing times by sequential LP, at most ``timetable.MAX_LPS`` LP solves) and
-        return its plan if it is complete; also when the band search's complete plan
-        has a level-split structure (a level repeated: its fallback for stuck requests,
-        often much longer than the stage's), the shorter of the two. One model, no robust
-        box, no continuation, objective ``shortest``. Default True.
+        return its plan if it is complete. One model, no robust box, no continuation,
+        objective ``shortest``. Default True.
     shorten : bool
         Also give a *complete* plan of the band search to the timetable stage (same
         conditions) and return the shorter of the two: the stage searches rates and
@@ -400,12 +390,7 @@ def plan_experiment(
     if not try_timetable or (stop is not None and stop()):
         return plan
     if plan.complete:
-        # a level-split structure (one sweep more than the levels, a level repeated) is
-        # the band search's fallback when the usual structures get stuck; the timetable
-        # stage, searching crossing times directly, often plans such a request much
-        # shorter (a ceiling 2 degC above [56, 60] degC: 281 min, not 384), so it gets
-        # the chance it gets under shorten
-        if not shorten and not any(n.startswith(SPLIT_NOTE_PREFIX) for n in plan.notes):
+        if not shorten:
             return plan
         shorter = _timetable_plan(spec, params, limits, model, progress, plan, tic, shorten=True)
         if shorter is None or shorter.duration_min >= plan.duration_min:

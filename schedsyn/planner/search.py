@@ -248,15 +248,11 @@ def level_splits(
     return [split for _, split in out]
 
 
-#: How the note of a level-split structure begins (:func:`split_note`).
-SPLIT_NOTE_PREFIX = "structure: "
-
-
 def split_note(levels_by_dir: dict[int, int], n_sweeps: int) -> str:
     """The plan note of a level-split structure: how its levels are shared."""
     heat, cool = levels_by_dir[+1], levels_by_dir[-1]
     return (
-        f"{SPLIT_NOTE_PREFIX}{n_sweeps} sweeps for {heat + cool} levels -- {heat} heating and "
+        f"structure: {n_sweeps} sweeps for {heat + cool} levels -- {heat} heating and "
         f"{cool} cooling levels, the other {n_sweeps - heat - cool} sweeps repeat a level "
         "(one direction is too constrained for an even share)"
     )
