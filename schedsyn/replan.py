@@ -1286,7 +1286,7 @@ def replan_run(
                     if new_excess > PREDICTED_DEVICE_TOL_C
                     else "keeps it within its limits"
                 )
-                + f"; it reaches "
+                + "; it reaches "
                 f"{best_key[2]:.0%} (min {best_key[3]} levels){worst_text} in "
                 f"{new.programme.total_min:g} min"
             )
