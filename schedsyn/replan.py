@@ -35,8 +35,8 @@ What :func:`replan_run` then decides:
   ``M`` joined with the identified model's prediction from the state at ``M``, counted by
   the coverage metric (a pass straddling ``M`` is one pass), checked against the plan's
   limits. The plan's own rest and the planner's continuation are judged the same way.
-* **The plan is kept** when its own rest is predicted to complete every bin: nothing new
-  to type in.
+* **The plan is kept** when its own rest is predicted to complete every bin within the
+  device's limits: nothing new to type in.
 * **Otherwise the planner is asked for new steps, first from where the sweep in
   progress ends** (:func:`sweep_end_min`): the first whole minute from ``M`` at which the
   device, going on with the plan, is beyond the working region by the plan's edge margin
@@ -52,9 +52,10 @@ What :func:`replan_run` then decides:
 * The best of the plan unchanged and the continuations tried is chosen
   (:meth:`RunPrediction.preference`: within limits, complete, coverage, lowest level
   count, fewest levels missing), the plan unchanged on a tie or when no continuation
-  fits -- unless that plan is predicted to take the device past its limits: then the
-  chamber goes straight home (:func:`safe_return`); every attempt is kept
-  (``planner_attempts`` in ``replan.json``).
+  fits; every attempt is kept (``planner_attempts`` in ``replan.json``). The device's
+  limits come first: a continuation that breaks them less than the plan is taken
+  whatever the coverage options say, and when every run at hand breaks them the chamber
+  goes straight home (:func:`safe_return`) if that breaks them less.
 """
 
 from __future__ import annotations
