@@ -78,3 +78,27 @@ def test_when_not_even_sub_region_sweeps_fit_the_most_sweeps_that_do_are_planned
     levels = _levels(prog, params, tmp_path)
     assert min(levels) >= 2, levels
     assert plan.coverage.min_levels == min(levels)
+
+
+def test_a_sweep_count_that_does_not_fit_gives_each_reason_once(monkeypatch):
+    """The search repeats a reason once per candidate structure it rejects (the W4 red
+    team's note said the same sentence twice per sweep count); the note names each reason
+    once, in the order found. No search runs: every search is a stub that finds nothing,
+    so the continuation fails and its error carries the notes."""
+    from types import SimpleNamespace
+
+    from schedsyn.errors import InfeasiblePlanError
+    from schedsyn.planner import continuation as cont_mod
+
+    reasons = ["the sweep overruns by 12 min", "the sweep overruns by 12 min", "floor"]
+    stub = SimpleNamespace(best=None, reasons=reasons)
+    monkeypatch.setattr(cont_mod, "synthesise", lambda *a, **k: stub)
+    monkeypatch.setattr(cont_mod, "_cut", lambda *a, **k: None)
+    spec = ExperimentSpec("C", -10.0, 0.0, -20.0, 10.0, levels_required=3)
+    prefix = Programme(np.array([30.0]), np.array([-0.5]))
+    cont = Continuation(prefix, tuple(np.zeros(0) for _ in range(spec.grid.n_bins)))
+    with pytest.raises(InfeasiblePlanError) as err:
+        plan_experiment(spec, ThermalParams(), Limits(duration_max_min=140.0), continuation=cont)
+    msg = str(err.value)
+    assert "3 new sweep(s) do not fit: the sweep overruns by 12 min; floor" in msg, msg
+    assert "12 min; the sweep overruns" not in msg, msg
