@@ -75,3 +75,45 @@ def test_cli_quiet_silences_progress_and_default_shows_it(tmp_path, capsys):
     err = capsys.readouterr().err.splitlines()
     assert err and all(STAMP.match(ln) for ln in err), err  # stderr is not a terminal here
     assert err[-1].endswith("5/5 done (0 s)") or re.search(r"5/5 done \(\d+ s\)$", err[-1])
+
+
+def test_a_search_silent_for_long_says_where_it_is(monkeypatch):
+    """A search that places no sweep for HEARTBEAT_S says what it is scanning (a robust
+    box's first sweep was searched 25 min without a line); the beat goes through the
+    same progress and resets its clock, and only speaks when the last line is old."""
+    from schedsyn.planner import search
+
+    now = [0.0]
+    lines: list[str] = []
+    heart = search.Heartbeat(lines.append, lambda: now[0])
+    heart.beat(lambda: "early")
+    now[0] = search.HEARTBEAT_S - 0.1
+    heart.beat(lambda: "still early")
+    assert lines == []
+    now[0] = search.HEARTBEAT_S
+    heart.beat(lambda: "late")
+    heart.beat(lambda: "again")  # the clock was reset by the line just written
+    heart("sweep placed")
+    now[0] += search.HEARTBEAT_S - 0.1
+    heart.beat(lambda: "too soon after a line")
+    assert lines == ["late", "sweep placed"]
+
+
+def test_the_heartbeat_names_the_design_and_the_scan(monkeypatch):
+    """Through the planner, every scan step beats (HEARTBEAT_S 0): the line names the
+    band design, the first direction and how far the turnaround scan has got."""
+    from schedsyn import Limits, ThermalParams
+    from schedsyn.planner import ExperimentSpec, plan_experiment, search
+
+    monkeypatch.setattr(search, "HEARTBEAT_S", 0.0)
+    lines: list[str] = []
+    spec = ExperimentSpec("H", -4.0, 0.0, -6.0, 2.0, levels_required=2)
+    plan_experiment(spec, ThermalParams(), Limits(duration_max_min=200.0), progress=lines.append)
+    beats = [ln for ln in lines if ln.startswith("still searching (")]
+    assert beats, lines
+    assert re.search(
+        r"still searching \((guided|classic) bands, (cooling|heating) first, \d+ sweeps.*\): "
+        r"a (cooling|heating) sweep in band \d+ after minute [\d.]+, turnaround [\d.]+ of "
+        r"[\d.]+ min scanned; \d+ LPs so far",
+        beats[0],
+    ), beats[0]

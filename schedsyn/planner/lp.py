@@ -348,6 +348,11 @@ class Context:
         self.size = {"variables": 0, "constraints": 0}
         #: placements of single sweeps already searched (see :func:`.search.greedy`)
         self.sweep_memo: dict[tuple, tuple[Any, int]] = {}
+        #: where the search is, for :attr:`beat` (set by :func:`.search.synthesise`)
+        self.where = ""
+        #: ``beat(text)``: a progress line saying the search is still at work, when the
+        #: last one is long ago (:class:`.search.Heartbeat`); None without progress
+        self.beat: Callable[[Callable[[], str]], None] | None = None
 
     @property
     def robust(self) -> bool:

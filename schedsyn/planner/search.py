@@ -13,8 +13,10 @@ structure at the limit.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 
@@ -49,6 +51,29 @@ from .lp import (
 from .request import Continuation, ExperimentSpec, Scenario, first_directions, sweep_directions
 
 Progress = Callable[[str], None] | None
+
+#: A search that has reported nothing for this long says where it is (a robust box's
+#: first sweep can be searched for minutes without one being placed), s.
+HEARTBEAT_S = 30.0
+
+
+class Heartbeat:
+    """``progress`` passed through, remembering when it last spoke; :meth:`beat` speaks
+    only when that is :data:`HEARTBEAT_S` ago (the text is built only then). Only the
+    progress lines depend on the clock, never the search."""
+
+    def __init__(self, progress: Callable[[str], None], clock: Callable[[], float]):
+        self.progress, self.clock = progress, clock
+        self.last_s = clock()
+
+    def __call__(self, message: str) -> None:
+        self.progress(message)
+        self.last_s = self.clock()
+
+    def beat(self, text: Callable[[], str]) -> None:
+        if self.clock() - self.last_s >= HEARTBEAT_S:
+            self(text())
+
 
 #: Longest transition (turnaround) searched before a sweep, min.
 MAX_TRANSITION_MIN = 150.0
@@ -484,10 +509,20 @@ def place_sweep(
     # depends on where they fall between the rate changes: every start is tried
     step = 1 if every_sample or pinned else seg_samples
     stats = ctx.stats
+
+    def scan_note(x: int, last: int) -> str:
+        return (
+            f"still searching ({ctx.where}): a {'heating' if d > 0 else 'cooling'} sweep in "
+            f"band {band.rank} after minute {r.edges_min[u_fixed.size]:g}, turnaround "
+            f"{x * SAMPLE_MIN:g} of {last * SAMPLE_MIN:g} min scanned; {stats.solves} LPs so far"
+        )
+
     prev, found, last_x, capped = -1, None, hi_x, False
     for x in range(0, hi_x + 1, step):
         if x > last_x:
             break
+        if ctx.beat is not None:
+            ctx.beat(partial(scan_note, x, min(last_x, hi_x)))
         solved = stats.solves - stats.infeasible_by_bounds
         res = attempt(x)
         if res is not None:
@@ -787,6 +822,9 @@ def synthesise(
     scenarios = [Scenario(p, m) for p, m in zip(params_list, models, strict=True)]
     responses = Responses(scenarios, ext_seg, seg, limits, continuation)
     ctx = Context(spec, limits, responses, stats)
+    if progress is not None:
+        heart = progress if isinstance(progress, Heartbeat) else Heartbeat(progress, time.monotonic)
+        progress, ctx.beat = heart, heart.beat
     search = Search(None, None, ctx, [])
     start_t = None
     if continuation is not None:  # where the device is when the new steps begin
@@ -812,6 +850,10 @@ def synthesise(
         the number of sweeps (the level-split family); the sweeps beyond a direction's
         levels get its transit band."""
         directions = sweep_directions(spec, first, n_sweeps if split is None else split[1])
+        ctx.where = (
+            f"{type(candidate).__name__.lower()} bands, {'heating' if first > 0 else 'cooling'} "
+            f"first, {len(directions)} sweeps" + (", slow timings" if slow_retry else "")
+        )
         n_by_dir = {d: directions.count(d) for d in (+1, -1)}
         levels_by_dir = n_by_dir if split is None else split[0]
         # robust plans use the same bands: each scenario gets its own windows
