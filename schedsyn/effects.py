@@ -266,7 +266,10 @@ def _rate_limited_step(a: float, s0: float, s1: float, h: float, c: float, r: fl
 
 
 def rate_limited(
-    setpoint_c: np.ndarray, h_min: float, max_cool_c_per_min: float, max_heat_c_per_min: float
+    setpoint_c: np.ndarray,
+    h_min: float | np.ndarray,
+    max_cool_c_per_min: float,
+    max_heat_c_per_min: float,
 ) -> np.ndarray:
     """Chamber air that follows the setpoint at bounded rates, exactly for a setpoint
     linear between grid points.
@@ -275,10 +278,15 @@ def rate_limited(
     the limiting rate (``-c`` above, ``+r`` below) and, on meeting ``S`` at ``t*`` inside a
     step, tracks it (or moves on at the limit if ``S`` is faster than the limit).
     Vectorised by runs (tracking / cooling at the limit / heating at the limit).
+    ``h_min``: the step, or each step's length (a grid with the setpoint's corners on it:
+    a corner between grid points would cut its peak off, and the limited air would carry
+    the cut through the whole run at the limit).
     """
     s = np.asarray(setpoint_c, dtype=float)
-    c, r, h = float(max_cool_c_per_min), float(max_heat_c_per_min), float(h_min)
+    c, r = float(max_cool_c_per_min), float(max_heat_c_per_min)
     n = s.size
+    h = np.broadcast_to(np.asarray(h_min, dtype=float), (max(n - 1, 0),))
+    tt = np.concatenate(([0.0], np.cumsum(h)))
     out = np.empty(n)
     out[0] = s[0]
     slope = np.diff(s) / h
@@ -290,17 +298,17 @@ def rate_limited(
             j = k + (int(fast[0]) if fast.size else n - 1 - k)
             out[k + 1 : j + 1] = s[k + 1 : j + 1]
             if j < n - 1:
-                out[j + 1] = _rate_limited_step(out[j], s[j], s[j + 1], h, c, r)
+                out[j + 1] = _rate_limited_step(out[j], s[j], s[j + 1], float(h[j]), c, r)
             k = j + 1
             continue
         rate = -c if a > s[k] else r
-        line = a + rate * h * np.arange(1, n - k)  # at k+1, k+2, ...
+        line = a + rate * (tt[k + 1 :] - tt[k])  # at k+1, k+2, ...
         met = np.flatnonzero(line < s[k + 1 :]) if rate < 0 else np.flatnonzero(line > s[k + 1 :])
         m = int(met[0]) if met.size else n - 1 - k  # the step k+m meets the setpoint
         out[k + 1 : k + m + 1] = line[:m]
         j = k + m
         if j < n - 1:
-            out[j + 1] = _rate_limited_step(out[j], s[j], s[j + 1], h, c, r)
+            out[j + 1] = _rate_limited_step(out[j], s[j], s[j + 1], float(h[j]), c, r)
         k = j + 1
     return out
 
@@ -455,7 +463,7 @@ class ModelSpec:
         end = max(float(t.max()), programme.total_min)
         h = grid_min if grid_min is not None else min(1.0 / 6.0, end / 2000.0)
         grid = uniform_grid_min(end, h)
-        air, temp = self._simulate_grid(programme, grid, h, t0_c)
+        air, temp, limited_at = self._simulate_grid(programme, grid, h, t0_c, t)
         v = air + self.dt0_c
         tau = self._tau_grid_min(v, temp)
         grad = (v - temp) / tau
@@ -464,8 +472,8 @@ class ModelSpec:
             air_t = programme.chamber_at(t) + p["amplitude_c"] * np.sin(
                 2.0 * np.pi * t * 60.0 / p["period_s"] + p["phase_rad"]
             )
-        elif self.effect == "chamber_rate_limit":
-            air_t = np.interp(t, grid, air)
+        elif limited_at is not None:  # the limited air at the samples, exactly
+            air_t = limited_at
         else:  # the chamber follows its setpoint
             air_t = programme.chamber_at(t)
         return Prediction(t, np.interp(t, grid, temp), np.interp(t, grid, grad), air_t)
@@ -518,14 +526,35 @@ class ModelSpec:
         return np.full(v.shape, self.tau_s / 60.0)
 
     def _simulate_grid(
-        self, programme: Programme, grid: np.ndarray, h: float, t0_c: float
-    ) -> tuple[np.ndarray, np.ndarray]:
+        self,
+        programme: Programme,
+        grid: np.ndarray,
+        h: float,
+        t0_c: float,
+        sample_min: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Air and internal temperature on the uniform ``grid``; the rate-limited air also
+        at ``sample_min`` (else None)."""
         p = self.parameters
         setpoint = programme.chamber_at(grid)
+        limited_at = None
         if self.effect == "chamber_rate_limit":
-            air = rate_limited(
-                setpoint, h, p["max_cool_rate_c_per_min"], p["max_heat_rate_c_per_min"]
+            # the limiter on the grid with the setpoint's corners (and the samples) added:
+            # exact there; a corner between grid points would cut off its peak
+            corners = np.cumsum(programme.durations_min)
+            extra = [corners] if sample_min is None else [corners, np.ravel(sample_min)]
+            fine = np.union1d(grid, np.concatenate(extra))
+            fine = fine[fine >= grid[0]]
+            fine = fine[np.concatenate(([True], np.diff(fine) > 1e-9 * max(h, 1.0)))]
+            air_fine = rate_limited(
+                programme.chamber_at(fine),
+                np.diff(fine),
+                p["max_cool_rate_c_per_min"],
+                p["max_heat_rate_c_per_min"],
             )
+            air = np.interp(grid, fine, air_fine)
+            if sample_min is not None:
+                limited_at = np.interp(sample_min, fine, air_fine)
         elif self.effect == "chamber_cycling":
             # A = S + amp sin(2 pi t/P + phi)
             air = setpoint + p["amplitude_c"] * np.sin(
@@ -540,7 +569,7 @@ class ModelSpec:
             temp = lag_foh_tau_of_t(v, t0_c, self.tau_s / 60.0, p["tau_slope_per_c"], h)
         else:
             temp = lag_foh(v, t0_c, self.tau_s / 60.0, h)
-        return air, temp
+        return air, temp, limited_at
 
     # -- files ---------------------------------------------------------------------------
     def to_json_dict(self) -> dict:

@@ -137,6 +137,50 @@ def test_rate_limit_matches_ode():
     assert np.min(np.diff(pred.tk_air_c) / np.diff(times)) >= -0.5 - 1e-9
 
 
+@pytest.mark.parametrize("grid_min", [1.0 / 3.0, 0.3306])
+def test_rate_limit_is_exact_with_the_setpoints_corners_between_grid_points(grid_min):
+    """A +2 degC/min ramp turning at minute 10.1 into -1 degC/min under a 0.4 degC/min
+    cooling limit: the air leaves the setpoint at the peak and descends at the limit. On a
+    1/3-min grid the peak falls between grid points; sampled there, the limiter cut it off
+    and carried the cut through the whole descent (red team: 0.19 degC in the air, 0.13 in
+    the device). Truth: the stiff saturated follower through scipy, piece by piece."""
+    prog = Programme([10.1, 30.7, 47.3], [2.0, -1.0, 0.25], 20.0)
+    spec = ModelSpec(
+        2400.0,
+        3.0,
+        "chamber_rate_limit",
+        {"max_cool_rate_c_per_min": 0.4, "max_heat_rate_c_per_min": 3.0},
+    )
+    edges = np.concatenate(([0.0], np.cumsum(prog.durations_min)))
+    k = 1e4
+
+    def rhs(t, x):
+        sp = float(prog.chamber_at(np.array([t]))[0])
+        return [min(max(k * (sp - x[0]), -0.4), 3.0), (x[0] + 3.0 - x[1]) / 40.0]
+
+    times = np.arange(0.0, prog.total_min, 0.5)
+    x, ref = np.array([20.0, 19.0]), []
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        m = (times >= a) & (times < b)
+        sol = solve_ivp(
+            rhs,
+            (a, b),
+            x,
+            method="LSODA",
+            rtol=1e-10,
+            atol=1e-10,
+            max_step=0.02,
+            dense_output=True,
+        )
+        ref.append(sol.sol(times[m]))
+        x = sol.y[:, -1]
+    ref_air, ref_t = np.concatenate(ref, axis=1)
+    pred = spec.predict(prog, times, t0_c=19.0, grid_min=grid_min)
+    assert ref_air.max() > 40.0  # the peak (40.2 at 10.1 min) less 0.4 min at the limit
+    np.testing.assert_allclose(pred.tk_air_c, ref_air, atol=2e-3)
+    np.testing.assert_allclose(pred.t_c, ref_t, atol=2e-3)
+
+
 def test_cycling_and_asymmetric_match_ode():
     cyc = ModelSpec(
         2400.0, 3.0, "chamber_cycling", {"amplitude_c": 1.0, "period_s": 600.0, "phase_rad": 0.3}
