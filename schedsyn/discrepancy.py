@@ -423,6 +423,12 @@ def _residuals(spec: ModelSpec, t0: float, data: _Data) -> tuple[np.ndarray, np.
     return temp - data.t_c, air - data.air_c
 
 
+#: Evaluations of one least-squares run of a candidate's fit, and how many more runs
+#: (each from where the last stopped) a fit that ran out of them gets.
+FIT_MAX_NFEV = 60
+FIT_MORE_ROUNDS = 6
+
+
 def _fit(
     effect: str,
     starts: Sequence[np.ndarray],
@@ -456,25 +462,39 @@ def _fit(
     if len(x0s) > n_refine:
         costs = [float(np.sum(fun(x) ** 2)) for x in x0s]
         x0s = [x0s[i] for i in np.argsort(costs)[:n_refine]]
-    best: optimize.OptimizeResult | None = None
-    for x0 in x0s:
+
+    def solve(x0: np.ndarray) -> optimize.OptimizeResult:
         try:
-            res = optimize.least_squares(
+            return optimize.least_squares(
                 fun,
                 x0,
                 bounds=(lo[free_idx], hi[free_idx]),
                 x_scale="jac",
                 method="trf",
                 diff_step=1e-4,
-                max_nfev=60,
+                max_nfev=FIT_MAX_NFEV,
                 xtol=1e-6,
                 ftol=1e-6,
             )
         except (ValueError, np.linalg.LinAlgError) as exc:  # pragma: no cover - defensive
             raise SolverFailedError(f"fitting {effect} failed: {exc}") from exc
+
+    best: optimize.OptimizeResult | None = None
+    for x0 in x0s:
+        res = solve(x0)
         if best is None or res.cost < best.cost:
             best = res
     assert best is not None  # x0s is never empty
+    # out of evaluations before converging (status 0): go on from there while it gains
+    # (red team: asymmetric time constants stopped 6-14 % short of the truth, which
+    # scored better in this very objective, with standard errors taken at that point)
+    for _ in range(FIT_MORE_ROUNDS):
+        if best.status != 0:
+            break
+        more = solve(best.x)
+        if not more.cost < best.cost * (1.0 - 1e-9):
+            break
+        best = more
     theta = full(best.x)
     r = best.fun
     n = r.size
