@@ -502,11 +502,7 @@ def _fit(
     k = len(free_idx)
     # cov = s^2 (J^T J)^-1, s^2 = SSE/(N - k)
     jac = best.jac
-    try:
-        cov = np.linalg.pinv(jac.T @ jac) * sse / max(n - k, 1)
-        se_free = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    except np.linalg.LinAlgError:  # pragma: no cover - defensive
-        se_free = np.full(k, np.nan)
+    se_free = _stderr(np.asarray(jac, dtype=float), sse / max(n - k, 1))
     se = dict.fromkeys(_BASE_NAMES + names, 0.0)
     for j, i in enumerate(free_idx):
         se[(_BASE_NAMES + names)[i]] = float(se_free[j])
@@ -526,6 +522,34 @@ def _fit(
         rms_c=float(np.sqrt(np.mean(r_t**2))),
         rms_air_c=None if r_a is None else float(np.sqrt(np.mean(r_a**2))),
     )
+
+
+#: A direction of the parameters whose singular value (columns scaled to unit norm) is
+#: below this share of the largest is not determined by the log.
+NULL_SV_SHARE = 1e-9
+
+
+def _stderr(jac: np.ndarray, s2: float) -> np.ndarray:
+    """Standard errors ``sqrt(diag(s2 (J'J)^-1))``, with the columns scaled to unit norm
+    first; a parameter the log does not determine (a zero column, or a share of a
+    direction with no singular value to speak of) gets ``inf``, not the pseudo-inverse's
+    zero (red team: a soak at equilibrium reported tau 10630 +- 5e-11 s)."""
+    k = jac.shape[1]
+    try:
+        norm = np.linalg.norm(jac, axis=0)
+        out = np.full(k, np.inf)
+        ok = norm > 0.0
+        if not ok.any():
+            return out
+        _, sv, vt = np.linalg.svd(jac[:, ok] / norm[ok], full_matrices=False)
+        null = sv <= NULL_SV_SHARE * sv[0]
+        inv = np.where(null, 0.0, 1.0 / np.where(null, 1.0, sv) ** 2)
+        var = (vt.T**2) @ inv * s2 / norm[ok] ** 2
+        loose = (vt[null] ** 2).sum(axis=0) > 1e-6  # has a share of a null direction
+        out[ok] = np.where(loose, np.inf, np.sqrt(var))
+        return out
+    except np.linalg.LinAlgError:  # pragma: no cover - defensive
+        return np.full(k, np.nan)
 
 
 def _base_bounds(data: _Data) -> tuple[np.ndarray, np.ndarray]:
@@ -1447,8 +1471,34 @@ class Diagnosis:
 #: The chosen effect leaves more than this many times the sensor noise (and residuals
 #: that are not white): it does not explain the whole mismatch, and the diagnosis says so.
 GAP_NOISE_FACTOR = 3.0
-#: A fitted parameter within this share of its search range from an end is "at the edge".
+#: A fitted parameter within this share of its search range from an end is "at the edge"
+#: (of the logarithm of the range when it spans ``LOG_RANGE_RATIO`` or more: a lag of
+#: 16 s in [0.001, 20000] s is not at an edge, red team).
 EDGE_SHARE = 1e-3
+LOG_RANGE_RATIO = 100.0
+
+
+def undetermined(fit: CandidateFit) -> list[str]:
+    """Warnings for the fit's parameters that the log does not determine: an unbounded
+    standard error, or one over half the value of a parameter that is positive by nature
+    (a time constant, a period; e.g. the time constant of a log that never leaves
+    equilibrium)."""
+    positive = {"tau_s"}
+    if fit.effect != "none":
+        eff = EFFECTS[fit.effect]
+        positive |= {n for n, (a, _) in zip(eff.param_names, eff.bounds, strict=True) if a > 0}
+    out = []
+    for name, se in fit.stderr.items():
+        v = fit.values.get(name)
+        if name == "t0_c" or v is None:
+            continue
+        if not math.isfinite(se) or (name in positive and se > 0.5 * abs(v)):
+            out.append(
+                f"{name} = {v:.4g} is not determined by this log (standard error "
+                f"{se:.3g}: the log hardly moves it, e.g. the device never leaves "
+                "equilibrium); do not use this value"
+            )
+    return out
 
 
 def _doubts(fit: CandidateFit, data: _Data, after: ResidualReport, noise_c: float) -> list[str]:
@@ -1462,7 +1512,11 @@ def _doubts(fit: CandidateFit, data: _Data, after: ResidualReport, noise_c: floa
         v = fit.values[name]
         if name == "t0_c" or not math.isfinite(v) or v == NOT_BINDING_C_PER_MIN:
             continue  # (a rate limit that never binds is reported as none, on purpose)
-        if min(v - a, b - v) <= EDGE_SHARE * (b - a):
+        if a > 0.0 and b / a >= LOG_RANGE_RATIO:  # a range of decades: on a log scale
+            near = min(math.log(v / a), math.log(b / v)) <= EDGE_SHARE * math.log(b / a)
+        else:
+            near = min(v - a, b - v) <= EDGE_SHARE * (b - a)
+        if near:
             out.append(
                 f"{fit.effect}: {name} = {v:.4g} is at the edge of its search range "
                 f"[{a:.4g}, {b:.4g}]: the fit found no optimum inside it, so the effect "
@@ -1577,7 +1631,8 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
         for c in ranked:
             if c.effect in (chosen, *ambiguous):
                 continue
-            if c.score - fits[chosen].score < settings.ambiguity_bic:
+            # a candidate scoring better was tried and not taken (said above), not "almost"
+            if 0.0 <= c.score - fits[chosen].score < settings.ambiguity_bic:
                 ambiguous.append(c.effect)
                 warnings.append(
                     f"{c.effect} fits almost as well as {chosen} "
@@ -1631,6 +1686,7 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
         data.t_c,
         data.programme,
     )
+    warnings.extend(undetermined(chosen_fit))
     if chosen != "none":
         warnings.extend(_doubts(chosen_fit, data, res_after, sensor_noise_c(log.t_int_c)))
     if chosen == "none" and not res_before.white:

@@ -606,3 +606,48 @@ def test_an_asymmetric_fit_that_runs_out_of_evaluations_goes_on_to_the_optimum()
         z = (d.parameters[name] - value) / d.stderr[name]
         assert abs(z) <= 3.0, (name, d.parameters[name], d.stderr[name])
     assert _main_error("asymmetric_tau", truth, d.parameters) < 0.05, d.parameters
+
+
+def test_a_short_lag_is_not_at_the_edge_of_a_range_of_decades():
+    """A 16-s second time constant (tau2_s searched in [0.001, 20000] s) was flagged as
+    at the edge of its range, on a linear scale (red team); on the range's logarithm it is
+    far inside, and the fit finds it."""
+    truth = ModelSpec(2400.0, 3.0, "second_time_constant", {"tau2_s": 16.0})
+    prog = blind_programmes()[sorted(blind_programmes())[0]]
+    frame = synth_effect_log(prog, truth, sample_s=10.0, noise_c=0.003, seed=3, with_air=False)
+    d = diagnose_frame(frame, SETTINGS)
+    assert d.effect == "second_time_constant", d.summary()
+    assert d.parameters["tau2_s"] == pytest.approx(16.0, abs=3 * d.stderr["tau2_s"])
+    assert not [w for w in d.warnings if "edge of its search range" in w], d.warnings
+
+
+def test_standard_errors_of_parameters_the_log_does_not_determine_are_unbounded():
+    """The pseudo-inverse gave an undetermined parameter a standard error of zero (a zero
+    column) or next to it; scaled columns and the null directions give it inf, and leave
+    a determined problem's errors as the textbook formula's."""
+    from schedsyn.discrepancy import _stderr
+
+    rng = np.random.default_rng(0)
+    jac = rng.normal(size=(200, 3)) * [1.0, 1e3, 1e-2]
+    want = np.sqrt(np.diag(np.linalg.inv(jac.T @ jac)) * 0.5)
+    np.testing.assert_allclose(_stderr(jac, 0.5), want, rtol=1e-9)
+    zero = jac.copy()
+    zero[:, 1] = 0.0
+    se = _stderr(zero, 0.5)
+    assert np.isinf(se[1]) and np.isfinite(se[[0, 2]]).all()
+    twin = jac.copy()
+    twin[:, 2] = 3.0 * twin[:, 0]  # only their sum is seen
+    se = _stderr(twin, 0.5)
+    assert np.isinf(se[[0, 2]]).all() and np.isfinite(se[1])
+
+
+def test_a_soak_at_equilibrium_says_its_time_constant_is_not_determined():
+    """Four hours at 20 degC with the device settled 3 degC above: tau moves nothing. It was
+    reported as 10630 +- 5e-11 s (red team); now its standard error is at least half its
+    value and a warning says not to use it."""
+    t = np.arange(0.0, 14400.0, 10.0)
+    noise = np.random.default_rng(1).normal(0.0, 0.02, t.size)
+    frame = pd.DataFrame({"time_s": t, "t_int_c": 23.0 + noise, "tk_set_c": 20.0})
+    d = diagnose_frame(frame, SETTINGS)
+    assert d.stderr["tau_s"] > 0.5 * d.model.tau_s, (d.model.tau_s, d.stderr)
+    assert any(w.startswith("tau_s = ") and "not determined" in w for w in d.warnings), d.warnings
