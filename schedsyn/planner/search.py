@@ -295,6 +295,12 @@ MARGIN_SEPARATIONS = (0.04, 0.02, 0.0)
 SUBREGION_CUTS = (2, 4, 7)
 SUBREGION_CUTS_BOTH = (4, 7)
 SUBREGION_WIDE_SHARES = (0.3, 0.45)
+#: ... and, where none of those fits, the widest sub-region per side whose proven lower
+#: bound is at most each of these shares of the duration limit (the greedy's plans take
+#: about 1.2-1.3x their bound). Red team: [-51, 19] degC with 3 levels in 200 min (bound
+#: 384 min) was refused as "no programme covers any part" although [10, 19] plans
+#: complete in 144 min: the shares above cut at most 31 of its 70 bins.
+SUBREGION_BOUND_SHARES = (0.8, 0.6)
 
 
 @dataclass(slots=True)
@@ -1002,6 +1008,36 @@ def truncate(ctx: Context, structure: Structure, max_seg: int) -> Structure | No
     return None
 
 
+def _bound_cut(
+    cut_spec: Callable[[str, int], ExperimentSpec],
+    side: str,
+    n_bins: int,
+    params: ThermalParams,
+    limits: Limits,
+    share: float,
+) -> int | None:
+    """The fewest bins cut from ``side`` for which the proven lower bound of the
+    sub-region is at most ``share`` of the duration limit (bisection: a narrower region
+    never needs longer); None when not even one bin is left within it."""
+    from .bound import duration_lower_bound
+
+    target = share * limits.duration_max_min
+
+    def fits(cut: int) -> bool:
+        return duration_lower_bound(cut_spec(side, cut), params, limits).lower_bound_min <= target
+
+    lo, hi = 0, n_bins - 1  # a cut of n_bins - 1 leaves one bin
+    if not fits(hi):
+        return None
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if fits(mid):
+            hi = mid
+        else:
+            lo = mid
+    return hi
+
+
 def subregions(
     spec: ExperimentSpec,
     params_list: list[ThermalParams],
@@ -1020,19 +1056,33 @@ def subregions(
     remaining searches are skipped.
     """
     n = spec.grid.n_bins
+
+    def cut_spec(side: str, cut: int) -> ExperimentSpec:
+        a = {"low": cut, "high": 0, "both": cut // 2}[side]
+        return replace(
+            spec, working_lo_c=spec.working_lo_c + a, working_hi_c=spec.working_hi_c - (cut - a)
+        )
+
     for side in ("low", "high", "both"):
         wide = tuple(round(share * n) for share in SUBREGION_WIDE_SHARES)
         cuts = SUBREGION_CUTS if side != "both" else SUBREGION_CUTS_BOTH
-        for cut in sorted(set(cuts) | {c for c in wide if c > max(SUBREGION_CUTS)}):
-            if cut >= n - 1:
-                break
+        usual = sorted(set(cuts) | {c for c in wide if c > max(SUBREGION_CUTS)})
+        usual = [c for c in usual if c < n - 1]
+
+        def side_cuts(side: str = side, usual: list[int] = usual) -> Iterator[int]:
+            yield from usual
+            # none of those fitted: the widest sub-regions the bound leaves room for
+            done = usual[-1] if usual else 0
+            for share in SUBREGION_BOUND_SHARES:
+                cut = _bound_cut(cut_spec, side, n, params_list[0], limits, share)
+                if cut is not None and cut > done:
+                    yield cut
+                    done = cut
+
+        for cut in side_cuts():
             if stop is not None and stop():
                 return
-            a = {"low": cut, "high": 0, "both": cut // 2}[side]
-            b = cut - a
-            sub = replace(
-                spec, working_lo_c=spec.working_lo_c + a, working_hi_c=spec.working_hi_c - b
-            )
+            sub = cut_spec(side, cut)
             search = synthesise(sub, params_list, limits, models, None, stats, max_candidates=1)
             if search.best is not None:
                 if progress:
