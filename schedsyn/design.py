@@ -206,11 +206,14 @@ class DesignSpace:
         working_lo_c: float, working_hi_c: float, limits: Limits | None = None
     ) -> tuple[float, float]:
         """The paper's approximation region: 10 degC wider on each side, within the device
-        limits (W1 = [-50, -30] gives [-52, -20])."""
+        limits (W1 = [-50, -30] gives [-52, -20]), but never inside the working region: a
+        working region past the device limits is refused for that, by name
+        (:func:`~schedsyn.planner.request.check_request`), not for an approximation
+        region clipped inside it."""
         limits = Limits() if limits is None else limits
         return (
-            max(working_lo_c - 10.0, limits.device_min_c),
-            min(working_hi_c + 10.0, limits.device_max_c),
+            min(max(working_lo_c - 10.0, limits.device_min_c), working_lo_c),
+            max(min(working_hi_c + 10.0, limits.device_max_c), working_hi_c),
         )
 
     def gradient_band(self, t_c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -133,6 +133,15 @@ def test_a_nonlinear_model_file_is_refused(tmp_path, capsys):
         # a chamber that cannot cool (or heat) crashed the planner (ZeroDivisionError)
         (["--working", "0", "10", "--rate-min-c-per-min", "0"], ["both cool and heat"]),
         (["--working", "0", "10", "--rate-max-c-per-min", "0"], ["both cool and heat"]),
+        # a region past the device limits was refused for an approximation region the
+        # user never gave ("[60, 62] must contain [70, 90]"): the default one had been
+        # clipped to the limits, inside the working region (red team)
+        (
+            ["--working", "70", "90", "--chamber-max-c", "100"],
+            ["outside its limits -52 .. 62 °C", "--device-max-c"],
+        ),
+        (["--working", "-60", "-45"], ["outside its limits -52 .. 62 °C", "--device-min-c"]),
+        (["--working", "0", "10", "--device-min-c", "70"], ["device_min_c must be <"]),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, words):
@@ -193,6 +202,19 @@ def test_default_approximation_region_follows_the_paper_rule(tmp_path):
     args.working = [0.0, 30.0]
     spec = build_spec(args, Limits())
     assert (spec.approx_lo_c, spec.approx_hi_c) == (-10.0, 40.0)
+
+
+def test_the_devices_own_limits_are_options_and_the_plan_keeps_them(tmp_path, capsys):
+    """A device rated to 85 degC (the default limit is 62): --device-max-c lets the lab plan
+    [66, 70] degC; the table records the limit, and scipy's integration of it keeps the
+    device below 85 degC while passing every bin three times."""
+    out = tmp_path / "hot"
+    argv = ["plan", "--working", "66", "70", "--chamber-max-c", "100", "--device-max-c", "85"]
+    assert main([*argv, "--levels", "3", "--out", str(out), "--quiet"]) == 0
+    text = (out / "steps.csv").read_text()
+    assert "# device_max_c: 85.0" in text
+    truth = table_check(out / "steps.csv", (66.0, 70.0), 3)
+    assert truth["coverage"] == 1.0 and 70.0 < truth["device_max_c"] <= 85.0 + 1e-6
 
 
 def test_help_lists_plan_and_campaign(capsys):

@@ -130,6 +130,33 @@ def add_limit_options(p: argparse.ArgumentParser) -> None:
     )
 
 
+def add_device_options(p: argparse.ArgumentParser) -> None:
+    """The device's own temperature limits (its rating): the planner keeps the internal
+    temperature within them."""
+    p.add_argument(
+        "--device-min-c",
+        type=float,
+        default=None,
+        help="lowest internal temperature the device may reach, °C (default -52)",
+    )
+    p.add_argument(
+        "--device-max-c",
+        type=float,
+        default=None,
+        help="highest internal temperature the device may reach, °C (default 62)",
+    )
+
+
+def device_limits(args: argparse.Namespace, base: Limits) -> Limits:
+    """``base`` with ``--device-min-c`` / ``--device-max-c`` where given."""
+    changes = {
+        k: getattr(args, k)
+        for k in ("device_min_c", "device_max_c")
+        if getattr(args, k, None) is not None
+    }
+    return dataclasses.replace(base, **changes)
+
+
 def limits(args: argparse.Namespace, base: Limits | None = None) -> Limits:
     base = Limits() if base is None else base
     changes = {
@@ -137,7 +164,7 @@ def limits(args: argparse.Namespace, base: Limits | None = None) -> Limits:
         for k in ("chamber_min_c", "chamber_max_c")
         if getattr(args, k, None) is not None
     }
-    return dataclasses.replace(base, **changes)
+    return device_limits(args, dataclasses.replace(base, **changes))
 
 
 # ---------------------------------------------------------------------------------------

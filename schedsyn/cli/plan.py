@@ -141,6 +141,7 @@ def register(sub) -> None:
         help="chamber air ceiling, °C (default 80); several values: coverage vs "
         "ceiling in chamber.csv",
     )
+    _common.add_device_options(p)
     p.add_argument(
         "--robust-tau-s",
         default=None,
@@ -551,11 +552,6 @@ def design_lines(plan: Plan) -> list[str]:
 
 
 # ---------------------------------------------------------------------------------------
-def _default_approx(lo: float, hi: float, limits: Limits) -> tuple[float, float]:
-    # the paper's rule: 10 degC wider on each side, but not beyond the device limits
-    return max(lo - 10.0, limits.device_min_c), min(hi + 10.0, limits.device_max_c)
-
-
 def _robust(text: str | None, name: str):
     if text is None:
         return None
@@ -584,7 +580,10 @@ def _model(args, params: ThermalParams, limits: Limits):
 
 def build_spec(args, limits: Limits) -> ExperimentSpec:
     lo, hi = args.working
-    alo, ahi = args.approx if args.approx is not None else _default_approx(lo, hi, limits)
+    from ..design import DesignSpace
+
+    approx = args.approx if args.approx is not None else DesignSpace.default_approx(lo, hi, limits)
+    alo, ahi = approx
     for name, v in (("--working", lo), ("--working", hi), ("--approx", alo), ("--approx", ahi)):
         if not math.isfinite(v):
             raise ParameterError(f"{name} values must be finite numbers, got {v}")
@@ -653,7 +652,9 @@ def run(args: argparse.Namespace) -> int:
     )
     floors = args.chamber_min_c or [base.chamber_min_c]
     ceilings = args.chamber_max_c or [base.chamber_max_c]
-    limits = dataclasses.replace(base, chamber_min_c=floors[0], chamber_max_c=ceilings[0])
+    limits = dataclasses.replace(
+        _common.device_limits(args, base), chamber_min_c=floors[0], chamber_max_c=ceilings[0]
+    )
     params, limits, model, model_json = _model(args, _common.thermal_params(args), limits)
     spec = build_spec(args, limits)
     robust_tau = _robust(args.robust_tau_s, "--robust-tau-s")

@@ -148,8 +148,9 @@ class PlanAtPoint:
 def default_approx(region: tuple[float, float], limits: Limits) -> tuple[float, float]:
     """The paper's approximation region: 10 degC beyond the working region on each side,
     but not past the device limits (W1 = [-50, -30] gives [-52, -20], as in experiment 1)."""
-    lo, hi = region
-    return max(lo - 10.0, limits.device_min_c), min(hi + 10.0, limits.device_max_c)
+    from ..design import DesignSpace
+
+    return DesignSpace.default_approx(region[0], region[1], limits)
 
 
 def _planner_available() -> bool:

@@ -166,7 +166,9 @@ def check_request(spec: ExperimentSpec, limits: Limits) -> None:
             f"{name}: the working region [{spec.working_lo_c:g}, {spec.working_hi_c:g}] °C "
             f"plus the edge margin {m:g} °C needs the device at {lo:g} .. {hi:g} °C, outside "
             f"its limits {limits.device_min_c:g} .. {limits.device_max_c:g} °C; move the "
-            "region inside the device limits or widen them (device_min_c, device_max_c)"
+            "region inside the device limits or, if the device is rated for it, widen them "
+            "(--device-min-c / --device-max-c; device_min_c / device_max_c in a campaign's "
+            "[limits])"
         )
 
 
