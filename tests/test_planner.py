@@ -328,6 +328,26 @@ def test_a_box_over_tau_only_says_dt0_is_taken_as_exactly_nominal():
     assert "--robust-dt0-c" in notes[0]
 
 
+def test_the_effort_limit_skips_the_robust_boxs_inner_rungs():
+    """A wide box's own search ran 19 min and each inner box 10 min more (red team,
+    [12, 27] degC, tau 1500-2100 s x dT0 0-3 degC), with --effort-s 20: the inner boxes are
+    optional once the nominal plan is in hand and get effort_s of work of their own, so a
+    spent effort limit cuts them and the notes say so (the request of the test below,
+    where they are searched in full at the default effort)."""
+    limits = Limits(duration_max_min=75.0)
+    box = dict(robust_tau_s=(1800.0, 3000.0), robust_dt0_c=(0.0, 6.0))
+    spec = ExperimentSpec("T", -2.0, 0.0, -12.0, 10.0, levels_required=2)
+    said: list[str] = []
+    plan = plan_experiment(spec, limits=limits, progress=said.append, effort_s=1e-9, **box)
+    assert not plan.complete
+    assert any("checking the nominal plan" in m for m in said)
+    # the inner rungs get effort_s of work of their own: the half's search is cut at its
+    # first candidate, the quarter not begun
+    assert not any("trying its inner quarter" in m for m in said), said
+    assert any("inner quarter was not searched (effort limit)" in n for n in plan.notes)
+    assert any("robust box's inner half or quarter were not searched" in n for n in plan.notes)
+
+
 def test_too_wide_a_robust_box_says_which_part_is_covered(tmp_path):
     """A box too wide for the time limit: the planner falls back (inner half or quarter of
     the box, else the nominal point), never calls the plan complete, and names the part

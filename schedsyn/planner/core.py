@@ -83,6 +83,8 @@ class _Effort:
     stop: Callable[[], bool] | None
     hit: bool = False
     answered: bool = False
+    #: what the optional searches that the limit stops are
+    what: str = "some fewer-level counts or sub-regions"
 
     def spent(self) -> bool:
         over = self.stop is not None and self.stop()
@@ -98,7 +100,7 @@ class _Effort:
     def note(self) -> str:
         return (
             f"the search for other plans stopped at its effort limit (effort_s = "
-            f"{self.effort_s:g} s): some fewer-level counts or sub-regions "
+            f"{self.effort_s:g} s): {self.what} "
             "were not searched; allow more with effort_s (CLI --effort-s, 0 = no limit)"
             if self.effort_s is not None
             else "the search for other plans was stopped by the caller"
@@ -644,8 +646,27 @@ def _plan(
                 verify_robust(programme, spec, params, robust_tau_s, robust_dt0_c, limits)["holds"]
             )
 
+        inner_tic: list[int] = []
+
+        def inner_stop() -> bool:
+            """Asked once the nominal plan is in hand: the inner boxes are optional, and
+            get ``effort_s`` of work of their own (from the first time this is asked)."""
+            if not inner_tic:
+                inner_tic.append(lp_nonzeros_solved())
+                effort.work_tic, effort.answered = inner_tic[0], True
+                effort.what = "the robust box's inner half or quarter"
+            return effort.spent()
+
         search, notes, fallback = search_robust(
-            spec, params, limits, robust_tau_s, robust_dt0_c, progress, stats, holds_on_box
+            spec,
+            params,
+            limits,
+            robust_tau_s,
+            robust_dt0_c,
+            progress,
+            stats,
+            holds_on_box,
+            stop=inner_stop,
         )
     else:
         params_list = [params]

@@ -58,6 +58,7 @@ def search_robust(
     progress: Progress,
     stats: LpStats,
     holds_on_box: Callable[[Search], bool] | None = None,
+    stop: Callable[[], bool] | None = None,
 ) -> tuple[Search, list[str], str | None]:
     """Search a programme for the whole box, else the fallbacks: the search, notes saying
     which was used, and the fallback's name (None: the whole box).
@@ -68,6 +69,9 @@ def search_robust(
     is stricter than the dense check (each scenario's windows are placed from the box
     centre), and the nominal plan is one scenario's search: checked first, it spares the
     inner boxes' searches and answers for the whole box where they would answer for a part.
+    ``stop()`` is asked before each inner box (the nominal plan is then in hand) and by
+    its search: True skips the rest (an effort limit; a wide box's search ran 10 min per
+    rung).
     """
     params_list = box_scenarios(params, tau_s, dt0_c)
     models = [FirstOrderLag(p) for p in params_list]
@@ -96,12 +100,27 @@ def search_robust(
         )
         return margin, [note], "nominal point"
     for share, word in INNER_SHARES:
+        if stop is not None and stop():  # the caller's effort limit: the nominal plan
+            if progress:
+                progress(f"effort limit: the robust box's inner {word} is not searched")
+            nominal_note = [
+                "FALLBACK: no single programme meeting the target for every scenario of the "
+                f"robust box was found, and its inner {word} was not searched (effort "
+                "limit); planned at the nominal point with the widest margins that fit"
+            ]
+            break
         in_tau, in_dt0 = _inner(tau_s, share), _inner(dt0_c, share)
         if progress:
             progress(f"no programme fits the robust box; trying its inner {word}")
         inner_list = [params_list[0], *robust_scenarios(params, in_tau, in_dt0)]
         search = synthesise(
-            spec, inner_list, limits, [FirstOrderLag(p) for p in inner_list], progress, stats
+            spec,
+            inner_list,
+            limits,
+            [FirstOrderLag(p) for p in inner_list],
+            progress,
+            stats,
+            stop=stop,
         )
         if search.best is not None:
             box = " x ".join(
