@@ -865,3 +865,16 @@ def test_plan_json_is_strict_json_and_says_when_no_complete_plan_exists(small_pl
         doc = _strict_load(tmp_path / str(bound) / "plan.json")
         assert doc["duration_lower_bound_min"] == written
         assert doc["complete_plan_proven_impossible"] is True
+
+
+def test_a_binding_ceiling_is_explained_with_what_the_levels_need():
+    """Red team: "3 heating levels need clearly more" than 0.227 degC/min, although three
+    levels 0.05 apart need only about 0.15; the note now gives both figures and where
+    planning gets hard (HEADROOM_C_PER_MIN above the levels' spread). g at the ceiling:
+    (80 - 2.4 - 58) / (5180 / 60) = 0.227 degC/min."""
+    from schedsyn.planner.explain import explain_shortfall
+
+    spec = ExperimentSpec("x", 46.0, 58.0, 36.0, 62.0)
+    (note,) = explain_shortfall(spec, ThermalParams(tau_s=5180.0, dt0_c=-2.4), Limits())
+    assert "at most 0.227 °C/min" in note and "at least about 0.15 °C/min" in note, note
+    assert "hard below 0.25 °C/min" in note and "raise the ceiling or lower the level" in note

@@ -35,11 +35,14 @@ def explain_shortfall(spec: ExperimentSpec, params: ThermalParams, limits: Limit
             f"allows cooling gradients of at most {g_cool:.3f} °C/min "
             f"(g = (Tk_min + dT0 - T)/tau); "
             + (
-                f"{n_cool} cooling levels {delta:g} °C/min apart need"
+                f"{n_cool} cooling levels {delta:g} °C/min apart need at least about "
+                f"{n_cool * delta:.2f} °C/min there"
                 if n_cool > 1
-                else f"even one cooling level (at least {delta / 2:g} °C/min) needs"
+                else f"even one cooling level needs at least {delta / 2:g} °C/min there"
             )
-            + " clearly more: lower the floor or the level count"
+            + f", and planning gets hard below {n_cool * delta + HEADROOM_C_PER_MIN:.2f} "
+            "°C/min (the sweeps must also pass the edge at speed): lower the floor or the "
+            "level count"
         )
     g_heat = (limits.chamber_max_c + params.dt0_c - spec.working_hi_c) / tau
     if g_heat <= 0:
@@ -54,11 +57,14 @@ def explain_shortfall(spec: ExperimentSpec, params: ThermalParams, limits: Limit
             f"at {spec.working_hi_c:g} °C the chamber ceiling {limits.chamber_max_c:g} °C "
             f"allows heating gradients of at most {g_heat:.3f} °C/min; "
             + (
-                f"{n_heat} heating levels need"
+                f"{n_heat} heating levels {delta:g} °C/min apart need at least about "
+                f"{n_heat * delta:.2f} °C/min there"
                 if n_heat > 1
-                else f"even one heating level (at least {delta / 2:g} °C/min) needs"
+                else f"even one heating level needs at least {delta / 2:g} °C/min there"
             )
-            + " clearly more: raise the ceiling or lower the level count"
+            + f", and planning gets hard below {n_heat * delta + HEADROOM_C_PER_MIN:.2f} "
+            "°C/min (the sweeps must also pass the edge at speed): raise the ceiling or lower the "
+            "level count"
         )
     # turning room between the working edges and the device limits
     n_dir = max(n_cool, n_heat)
