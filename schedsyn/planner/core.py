@@ -190,6 +190,7 @@ def _fallback(
         progress,
         stats,
         stop=lambda: full_coverage_found() or effort.spent(),
+        deep=lambda: not options,  # nothing else covers any part of the region
     ):
         assert sub_search.best is not None  # subregions yields only what fits
         u_sub, mg, mt = polish(sub_search.ctx, sub_search.best[0])

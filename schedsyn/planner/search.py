@@ -1046,9 +1046,12 @@ def subregions(
     progress: Progress,
     stats: LpStats,
     stop: Callable[[], bool] | None = None,
+    deep: Callable[[], bool] | None = None,
 ) -> Iterator[tuple[ExperimentSpec, Search]]:
     """The widest sub-regions (whole bins cut from the low, the high or both edges) for
     which a structure fits the duration limit: at most one per side, yielded as found.
+    The bound-guided cuts (:data:`SUBREGION_BOUND_SHARES`) are tried only while ``deep()``
+    says so (the caller: while it has nothing else to offer).
 
     ``stop()`` is asked before each search: the caller says when an option already
     covers the full region (sweeps designed for a narrower region often still cover the
@@ -1074,6 +1077,8 @@ def subregions(
             # none of those fitted: the widest sub-regions the bound leaves room for
             done = usual[-1] if usual else 0
             for share in SUBREGION_BOUND_SHARES:
+                if deep is not None and not deep():
+                    return
                 cut = _bound_cut(cut_spec, side, n, params_list[0], limits, share)
                 if cut is not None and cut > done:
                     yield cut
