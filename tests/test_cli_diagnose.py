@@ -42,6 +42,9 @@ def test_diagnose_json_model_file_and_simulate(rate_limited_log, tmp_path, capsy
     assert js["effect"] == "chamber_rate_limit"
     assert js["parameters"]["max_cool_rate_c_per_min"] == pytest.approx(0.6, rel=0.05)
     assert js["parameters"]["max_heat_rate_c_per_min"] == 1e6  # never binding: no limit
+    # ... and not "not determined by this log" either (its missing standard error is on
+    # purpose)
+    assert not [w for w in js["warnings"] if "not determined" in w], js["warnings"]
     assert js["rms_after_c"] < 0.5 * js["rms_before_c"]
     assert {c["effect"] for c in js["candidates"]} >= {"chamber_lag", "asymmetric_tau"}
     for name in (
