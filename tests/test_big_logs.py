@@ -77,7 +77,7 @@ def test_chunked_smoother_equals_the_plain_recursions(messy_log, monkeypatch):
     x0 = (y[np.isfinite(y)][0], 0.0)
     p0 = (est_mod.PRIOR_T_STD_C**2, 0.0, est_mod.PRIOR_G_STD_C_PER_MIN**2)
     filt, pred, innov, svar, m2ll = kalman_filter(y, a, b, u, q11, q12, q22, 4e-4, x0, p0)
-    x1, x2, p11, p12, p22 = rts_smoother(filt, pred, a, b)
+    x1, x2, p11, p12, p22 = rts_smoother(filt, pred, a, b, q11, q12, q22)
     tau = params.tau_min
     g = (tk + params.dt0_c - x1) / tau + x2
     g_std = np.sqrt(p11 / tau**2 - 2 * p12 / tau + p22)

@@ -152,7 +152,7 @@ def test_filter_and_smoother_equal_batch_conditioning(kind, rng):
     x0, p0 = (19.0, 0.1), (4.0, 0.3, 0.5)
     args = [v.tolist() for v in (a, b, u, q11, q12, q22)]
     filt, pred, innov, svar, m2ll = kalman_filter(y.tolist(), *args, r, x0, p0)
-    sm = rts_smoother(filt, pred, a.tolist(), b.tolist())
+    sm = rts_smoother(filt, pred, a.tolist(), b.tolist(), *args[3:])
     mean, cov, m2ll_batch = _batch_posterior(y, a, b, u, q11, q12, q22, r, x0, p0)
     np.testing.assert_allclose(sm[0], mean[:, 0], atol=1e-9)
     np.testing.assert_allclose(sm[1], mean[:, 1], atol=1e-9)
@@ -426,7 +426,7 @@ def test_steady_state_fast_path_equals_plain_recursions(kind, rng, monkeypatch):
     x0, p0 = (y[0], 0.0), (100.0, 0.0, 9.0)
     lists = [v.tolist() for v in (a, b, u, q11, q12, q22)]
     filt, pred, innov, svar, m2ll = kalman_filter(y.tolist(), *lists, 4e-4, x0, p0)
-    ref = rts_smoother(filt, pred, a.tolist(), b.tolist())
+    ref = rts_smoother(filt, pred, a.tolist(), b.tolist(), *lists[3:])
     fast = filter_smooth(y, a, b, u, q11, q12, q22, 4e-4, x0, p0)
     assert len(calls) >= 4  # steady stretches were solved vectorised
     std_t, std_g = np.sqrt(ref[2]), np.sqrt(ref[4])
@@ -569,7 +569,8 @@ def test_order3_filter_and_smoother_equal_batch_conditioning(rng):
     y[[4, 5, n - 5]] = np.nan
     q, r = 2e-3, 0.003
     _, rows = _jerk_setup_rows(t, y, q)
-    # a moderate prior: the dense check loses precision when a diffuse prior cancels
+    # a moderate prior: the dense check loses precision when a diffuse prior cancels (the
+    # estimator's own diffuse prior is checked against the information form below)
     prior = est_mod._Carry((20.0, 0.3, 0.0, 1.0, 0.0, 0.0, 0.1, 0.0, 0.01))
     fwd = est_mod._forward(prior, rows, r, offset=0, store=True, fast=False)
     sm = est_mod._backward(fwd.filt, fwd.pred, fwd.cols, rows, (), None, fast=False)
@@ -591,6 +592,60 @@ def test_order3_filter_and_smoother_equal_batch_conditioning(rng):
         assert np.all(np.abs(sm[row] - dense) <= 1e-6 * np.sqrt(var[:, i] * var[:, j]))
     assert fwd.m2ll == pytest.approx(m2ll, rel=1e-9)
     assert np.isnan(fwd.innov[4]) and np.isfinite(fwd.innov[3])
+
+
+def _information_variances(setup, q, r):
+    """Posterior variances of every state by inverting the information matrix of the
+    whole log (prior, every step's process noise, every reading): no recursion, and no
+    cancellation with a diffuse prior (its inverse only adds a little information)."""
+    rows = setup.rows(0, setup.n, q)
+    f, qq = rows.f[:, rows.idx], rows.q[:, rows.idx]
+    n = setup.n
+    info = np.zeros((3 * n, 3 * n))
+    p = setup.prior().state
+    info[:3, :3] = np.linalg.inv(
+        np.array([[p[3], p[4], p[5]], [p[4], p[6], p[7]], [p[5], p[7], p[8]]])
+    )
+    for k in range(1, n):
+        f11, f12, f13, f22, f23 = f[:, k]
+        q11, q12, q13, q22, q23, q33 = qq[:, k]
+        step = np.array([[f11, f12, f13], [0.0, f22, f23], [0.0, 0.0, 1.0]])
+        noise = np.array([[q11, q12, q13], [q12, q22, q23], [q13, q23, q33]])
+        a = np.hstack([-step, np.eye(3)])  # x_k - F x_k-1 = w_k
+        info[3 * k - 3 : 3 * k + 3, 3 * k - 3 : 3 * k + 3] += a.T @ np.linalg.solve(noise, a)
+    seen = np.flatnonzero(np.isfinite(setup.y))
+    info[3 * seen, 3 * seen] += 1.0 / r
+    return np.diag(np.linalg.inv(info)).reshape(n, 3)
+
+
+@pytest.mark.parametrize("sparse", [False, True])
+def test_smoother_variances_from_the_diffuse_prior_equal_the_information_form(rng, sparse):
+    """The estimator's own prior (T 10 degC, g 3 degC/min, a 1 degC/min^2) on a log of
+    irregular 40-130 s steps and small noise levels: the smoothed variances of the first
+    rows are the difference of numbers ~1e6 larger, and the textbook RTS covariance went
+    negative there (row 1's gradient variance -4e-6 against 1.5e-6 on a red team's
+    log). Every row's variance of T, g and a against the information form, with and
+    without a 40-min gap and missing readings."""
+    import schedsyn.estimate as est_mod
+
+    n = 90
+    t_s = np.cumsum(rng.uniform(40.0, 130.0, n)) - 40.0
+    t_s[0] = 0.0
+    y = -12.5 - 0.002 * t_s / 60.0 + 0.002 * rng.standard_normal(n)
+    if sparse:
+        t_s[n // 2 :] += 2400.0
+        y[[3, 4, n - 6]] = np.nan
+    q, r = 3.5e-6, 3.4e-6
+    setup = est_mod._Setup(t_s, y, None, order=3)
+    got = np.full((n, 3), np.nan)
+
+    def emit(rows, sm, innov, svar, states=True):
+        got[rows] = sm[[3, 6, 8]].T
+
+    est_mod._smooth(setup, q, r, None, emit, None)
+    ref = _information_variances(setup, q, r)
+    assert np.all(got > 0.0)
+    np.testing.assert_allclose(got, ref, rtol=1e-3)
 
 
 def test_order3_fast_path_equals_plain_recursions(rng, monkeypatch):
