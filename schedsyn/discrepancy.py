@@ -1554,6 +1554,19 @@ def _full_prediction(spec: ModelSpec, t0: float, programme: Programme, t: np.nda
     return spec.predict(programme, t, t0_c=t0)
 
 
+def close_rivals(
+    ranked: Sequence[CandidateFit], chosen: CandidateFit, ambiguity_bic: float
+) -> list[CandidateFit]:
+    """The candidates "almost as good" as ``chosen``: scoring worse by less than
+    ``ambiguity_bic``. One scoring better was tried and not taken (the warnings say why):
+    it is not "almost as good"."""
+    return [
+        c
+        for c in ranked
+        if c.effect != chosen.effect and 0.0 <= c.score - chosen.score < ambiguity_bic
+    ]
+
+
 def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
     """Fit the base model, examine residuals, fit every candidate, choose, check held out.
 
@@ -1647,17 +1660,15 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
                         "temperature; without tk_air_c they cannot be told apart "
                         "(log the chamber air to decide)"
                     )
-        for c in ranked:
+        for c in close_rivals(ranked, fits[chosen], settings.ambiguity_bic):
             if c.effect in (chosen, *ambiguous):
                 continue
-            # a candidate scoring better was tried and not taken (said above), not "almost"
-            if 0.0 <= c.score - fits[chosen].score < settings.ambiguity_bic:
-                ambiguous.append(c.effect)
-                warnings.append(
-                    f"{c.effect} fits almost as well as {chosen} "
-                    f"(BIC {c.score - fits[chosen].score:+.1f});"
-                    " the log does not tell them apart reliably"
-                )
+            ambiguous.append(c.effect)
+            warnings.append(
+                f"{c.effect} fits almost as well as {chosen} "
+                f"(BIC {c.score - fits[chosen].score:+.1f});"
+                " the log does not tell them apart reliably"
+            )
     lag_group = lag_ambiguity(chosen, fits, settings)
     for a in lag_group[1:]:
         if a.effect not in ambiguous:

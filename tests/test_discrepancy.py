@@ -651,3 +651,25 @@ def test_a_soak_at_equilibrium_says_its_time_constant_is_not_determined():
     d = diagnose_frame(frame, SETTINGS)
     assert d.stderr["tau_s"] > 0.5 * d.model.tau_s, (d.model.tau_s, d.stderr)
     assert any(w.startswith("tau_s = ") and "not determined" in w for w in d.warnings), d.warnings
+
+
+def test_a_better_scoring_candidate_that_was_rejected_is_not_almost_as_good():
+    """The "almost as good" warning names the candidates scoring worse than the chosen
+    one by less than the ambiguity margin; one that scores better was tried and rejected
+    (held-out check or too small a gain, said in its own warning), and calling it "almost
+    as good" contradicted that (red team)."""
+    from schedsyn.discrepancy import CandidateFit, close_rivals
+
+    def fit(effect, score):
+        return CandidateFit(effect, ModelSpec(), 20.0, {}, {}, 2, 100, 1.0, score, 0.01, None)
+
+    chosen = fit("dead_time", 100.0)
+    ranked = [
+        fit("chamber_lag", 90.0),
+        chosen,
+        fit("dt0_drift", 103.0),
+        fit("selfheat_slope", 140.0),
+    ]
+    rivals = close_rivals(ranked, chosen, ambiguity_bic=6.0)
+    assert [c.effect for c in rivals] == ["dt0_drift"]
+    assert close_rivals(ranked, chosen, ambiguity_bic=50.0)[-1].effect == "selfheat_slope"
