@@ -406,6 +406,7 @@ def rts_step(sf, sp, ss, f, q):
     )
 
 
+# -- the recursions over rows ------------------------------------------------------------
 def _lti(m, w, x_init):
     """``x_j = M x_{j-1} + w_j`` for ``j = 0..n-1`` from ``x_{-1} = x_init``, vectorised.
 
