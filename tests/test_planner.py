@@ -406,9 +406,11 @@ def test_too_wide_a_robust_box_says_which_part_is_covered(tmp_path):
 
 
 def test_too_short_a_request_names_the_requirement():
-    spec = ExperimentSpec(**SMALL)
+    # SMALL narrowed to [-2, 0] degC at 2 levels in 30 min: the same error from the same
+    # place, after a search a third as long as SMALL's within 40 min
+    spec = ExperimentSpec(**dict(SMALL, working_lo_c=-2.0, approx_lo_c=-12.0, levels_required=2))
     with pytest.raises(InfeasiblePlanError, match="best reachable coverage") as info:
-        plan_experiment(spec, limits=Limits(duration_max_min=40.0), require_complete=True)
+        plan_experiment(spec, limits=Limits(duration_max_min=30.0), require_complete=True)
     assert info.value.best_coverage is not None and info.value.best_coverage < 1.0
 
 
@@ -719,11 +721,12 @@ def test_the_step_table_carries_the_plan_and_simulates_with_its_model(tmp_path):
 
 
 def test_require_complete_never_returns_a_graded_plan():
-    """100 min fit 2 levels per bin of [-4, 0] degC but not 3: graded, a plan with 2
-    levels comes back; asked for a complete plan, the planner refuses instead. (SMALL in
-    110 min is the same case, with searches half as long again.)"""
-    spec = ExperimentSpec(**dict(SMALL, working_lo_c=-4.0, approx_lo_c=-14.0))
-    limits = Limits(duration_max_min=100.0)
+    """85 min fit 2 levels per bin of [-2, 0] degC but not 3 (bound 92 min): graded, a
+    plan with 2 levels comes back; asked for a complete plan, the planner refuses instead.
+    ([-4, 0] degC in 100 min, and SMALL in 110 min, are the same case with longer
+    searches.)"""
+    spec = ExperimentSpec(**dict(SMALL, working_lo_c=-2.0, approx_lo_c=-12.0))
+    limits = Limits(duration_max_min=85.0)
     graded = plan_experiment(spec, limits=limits)
     assert not graded.complete and graded.levels_planned == 2
     with pytest.raises(InfeasiblePlanError, match="target cannot be met|no programme"):
