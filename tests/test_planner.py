@@ -746,9 +746,10 @@ def test_the_plan_that_fell_short_survives_a_process_boundary_with_its_error(sma
 
 
 def test_an_over_long_plan_that_cannot_be_cut_leaves_the_other_fallbacks(monkeypatch):
-    """110 min: the 3-level sweeps overrun and the planner falls back. When the over-long
-    programme cannot be cut to end in time (forced here), that one option is dropped and
-    the graded plan still comes back; it used to abort the whole plan with a solver error.
+    """[-2, 0] degC in 85 min: the 3-level sweeps overrun and the planner falls back. When
+    the over-long programme cannot be cut to end in time (forced here), that one option is
+    dropped and the graded plan still comes back; it used to abort the whole plan with a
+    solver error. (SMALL in 110 min is the same case, with a search four times as long.)
     """
     from schedsyn.planner import core
 
@@ -759,7 +760,8 @@ def test_an_over_long_plan_that_cannot_be_cut_leaves_the_other_fallbacks(monkeyp
         return None
 
     monkeypatch.setattr(core, "truncate", no_cut)
-    plan = plan_experiment(ExperimentSpec(**SMALL), limits=Limits(duration_max_min=110.0))
+    spec = ExperimentSpec(**dict(SMALL, working_lo_c=-2.0, approx_lo_c=-12.0))
+    plan = plan_experiment(spec, limits=Limits(duration_max_min=85.0))
     assert calls, "the over-long option was never tried: the test exercises nothing"
     assert not plan.complete and plan.levels_planned == 2
 
