@@ -91,6 +91,11 @@ QUANT_SAMPLE_ROWS = 262_144
 STEADY_RTOL = 1e-11
 #: Shortest run of equal steps with readings worth the vectorised steady-state path.
 MIN_STEADY_ROWS = 32
+#: A smoothed variance below this share of the filtered one means the textbook RTS
+#: covariance cancelled (digits lost ~ -log10 of it): that row is computed again in Joseph
+#: form (:func:`rts_step`). In a settled stretch the share is ~0.3-1; after the diffuse
+#: prior 1e-5-1e-7 (where the textbook form went wrong).
+JOSEPH_BELOW = 1e-3
 #: Relative change below which the smoothed covariance of a steady stretch counts as
 #: settled (the remaining rows of the stretch take that value).
 SMOOTHED_RTOL = 1e-12
@@ -324,11 +329,12 @@ def rts_step(sf, sp, ss, f, q):
     smoothed state of row ``k+1``; ``f``, ``q``: ``F`` and ``Q`` of the step ``k -> k+1``
     (as in :func:`predict`). Returns the smoothed state of row ``k``.
 
-    The covariance is in Joseph form, ``P_k|N = (I - C F) P_k|k (I - C F)^T + C (Q +
-    P_k+1|N) C^T``, a sum of positive semi-definite terms: the textbook ``P_k|k + C
-    (P_k+1|N - P_k+1|k) C^T`` (the same in exact arithmetic) cancels where ``P_k|k`` is
-    large against the result, at the diffuse prior's first rows, and gave negative
-    gradient variances there (a 60-s log: -4e-6 against 1.5e-6 from the batch solution).
+    The covariance is ``P_k|k + C (P_k+1|N - P_k+1|k) C^T``; where that leaves a variance
+    below :data:`JOSEPH_BELOW` of the filtered one (the subtraction cancelled: at the
+    diffuse prior's first rows it gave negative gradient variances, -4e-6 against 1.5e-6
+    from the batch solution on a 60-s log), it is computed again in Joseph form,
+    ``(I - C F) P_k|k (I - C F)^T + C (Q + P_k+1|N) C^T``, the same in exact arithmetic
+    but a sum of positive semi-definite terms (only there: it costs a third more).
     """
     fx1, fx2, fx3, a11, a12, a13, a22, a23, a33 = sf
     px1, px2, px3, b11, b12, b13, b22, b23, b33 = sp
@@ -361,6 +367,35 @@ def rts_step(sf, sp, ss, f, q):
     g33 = (n31 * i13 + n32 * i23 + a33 * i33) / det
     # x_k|N = x_k|k + C (x_k+1|N - x_k+1|k)
     d1, d2, d3 = sx1 - px1, sx2 - px2, sx3 - px3
+    mean = (
+        fx1 + g11 * d1 + g12 * d2 + g13 * d3,
+        fx2 + g21 * d1 + g22 * d2 + g23 * d3,
+        fx3 + g31 * d1 + g32 * d2 + g33 * d3,
+    )
+    # P_k|N = P_k|k + C E C^T,  E = P_k+1|N - P_k+1|k;  T = C E
+    e11, e12, e13, e22, e23, e33 = c11 - b11, c12 - b12, c13 - b13, c22 - b22, c23 - b23, c33 - b33
+    t11 = g11 * e11 + g12 * e12 + g13 * e13
+    t12 = g11 * e12 + g12 * e22 + g13 * e23
+    t13 = g11 * e13 + g12 * e23 + g13 * e33
+    t21 = g21 * e11 + g22 * e12 + g23 * e13
+    t22 = g21 * e12 + g22 * e22 + g23 * e23
+    t23 = g21 * e13 + g22 * e23 + g23 * e33
+    t31 = g31 * e11 + g32 * e12 + g33 * e13
+    t32 = g31 * e12 + g32 * e22 + g33 * e23
+    t33 = g31 * e13 + g32 * e23 + g33 * e33
+    r11 = a11 + t11 * g11 + t12 * g12 + t13 * g13
+    r22 = a22 + t21 * g21 + t22 * g22 + t23 * g23
+    r33 = a33 + t31 * g31 + t32 * g32 + t33 * g33
+    if r11 >= JOSEPH_BELOW * a11 and r22 >= JOSEPH_BELOW * a22 and r33 >= JOSEPH_BELOW * a33:
+        return (
+            *mean,
+            r11,
+            a12 + t11 * g21 + t12 * g22 + t13 * g23,
+            a13 + t11 * g31 + t12 * g32 + t13 * g33,
+            r22,
+            a23 + t21 * g31 + t22 * g32 + t23 * g33,
+            r33,
+        )
     # M = I - C F
     m11 = 1.0 - g11 * f11
     m12 = -(g11 * f12 + g12 * f22)
@@ -394,9 +429,7 @@ def rts_step(sf, sp, ss, f, q):
     v32 = g31 * s12 + g32 * s22 + g33 * s23
     v33 = g31 * s13 + g32 * s23 + g33 * s33
     return (
-        fx1 + g11 * d1 + g12 * d2 + g13 * d3,
-        fx2 + g21 * d1 + g22 * d2 + g23 * d3,
-        fx3 + g31 * d1 + g32 * d2 + g33 * d3,
+        *mean,
         u11 * m11 + u12 * m12 + u13 * m13 + v11 * g11 + v12 * g12 + v13 * g13,
         u11 * m21 + u12 * m22 + u13 * m23 + v11 * g21 + v12 * g22 + v13 * g23,
         u11 * m31 + u12 * m32 + u13 * m33 + v11 * g31 + v12 * g32 + v13 * g33,
