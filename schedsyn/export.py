@@ -622,9 +622,13 @@ def split_parts(programme: Programme, capacity: int | None) -> tuple[Programme, 
     return tuple(out)
 
 
-def join_parts(parts: Sequence[Programme], source: str = "export") -> Programme:
+def join_parts(
+    parts: Sequence[Programme], source: str = "export", holds_min: Sequence[float] = ()
+) -> Programme:
     """The parts of a chained programme as one programme (each must start where the
-    previous ended, within 1e-6 degC)."""
+    previous ended, within 1e-6 degC). ``holds_min``: per part, how long the chamber holds
+    its last value after its path before the next part starts (Binder: the 1-s end
+    segment); the holds between parts are in the result, the last part's is not."""
     if not parts:
         raise StepTableError(f"{source}: no programme in the file")
     for k in range(1, len(parts)):
@@ -633,11 +637,14 @@ def join_parts(parts: Sequence[Programme], source: str = "export") -> Programme:
                 f"{source}: part {k + 1} starts at {parts[k].start_c:g} °C but part {k} "
                 f"ends at {parts[k - 1].end_c:g} °C; the chained programmes must be continuous"
             )
-    return Programme(
-        np.concatenate([p.durations_min for p in parts]),
-        np.concatenate([p.rates_c_per_min for p in parts]),
-        parts[0].start_c,
-    )
+    durations, rates = [], []
+    for k, p in enumerate(parts):
+        durations.append(p.durations_min)
+        rates.append(p.rates_c_per_min)
+        if k < len(parts) - 1 and k < len(holds_min) and holds_min[k] > 0:
+            durations.append(np.array([float(holds_min[k])]))
+            rates.append(np.zeros(1))
+    return Programme(np.concatenate(durations), np.concatenate(rates), parts[0].start_c)
 
 
 # ---------------------------------------------------------------------------------------
@@ -652,6 +659,9 @@ class Decoded:
     numbers: tuple[int, ...]
     parts: tuple[Programme, ...]
     header: Mapping[str, Any]
+    #: per programme, how long it holds its last value after its path, min (Binder: its
+    #: 1-s end segment); the next programme starts after it
+    holds_min: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         if len(self.numbers) != len(self.parts):
@@ -663,7 +673,8 @@ class Decoded:
 
     @property
     def programme(self) -> Programme:
-        return join_parts(self.parts, f"{self.controller} export")
+        """The chamber's path through every programme, with the holds between them."""
+        return join_parts(self.parts, f"{self.controller} export", self.holds_min)
 
 
 @dataclass(frozen=True, slots=True)
@@ -796,7 +807,9 @@ class ControllerExport:
         n, sec = len(self.decoded.parts), self.spec.end_segment_s
         if not sec:
             return ""
-        return f" + {n} end segment(s) of {sec} s = {self.exported.total_min + n * sec / 60:g} min"
+        between = f" (the {n - 1} end segment(s) between programmes included)" if n > 1 else ""
+        total_min = self.exported.total_min + sec / 60
+        return f"{between} + the last end segment of {sec} s = {total_min:g} min"
 
     def summary(self) -> list[str]:
         """Lines for the operator; a lost coverage says so loudly."""
@@ -876,35 +889,52 @@ def _path_deviation_c(source: Programme, exported: Programme) -> float:
 DEVICE_LIMIT_TOL_C = 1e-3
 
 
+def _shortened(part: Programme, cut_min: float, q: float, limits: Limits) -> Programme | None:
+    """``part`` with its last step ``cut_min`` shorter, reaching the same end temperature
+    that much earlier; None where the step would be shorter than ``q`` or its rate outside
+    the limits."""
+    d = part.durations_min.copy()
+    if d[-1] - cut_min < q - 1e-9:
+        return None
+    tk = part.boundary_temps_c
+    rate = float(tk[-1] - tk[-2]) / (d[-1] - cut_min)
+    if not limits.rate_min_c_per_min - 1e-9 <= rate <= limits.rate_max_c_per_min + 1e-9:
+        return None
+    d[-1] -= cut_min
+    rates = part.rates_c_per_min.copy()
+    rates[-1] = rate
+    return Programme(d, rates, part.start_c)
+
+
 def _room_for_end_segments(
     parts: tuple[Programme, ...], spec: ControllerSpec, limits: Limits
 ) -> tuple[Programme, ...]:
-    """``parts`` with room for the controller's end segments within ``duration_max_min``.
+    """``parts`` with room for the controller's end segments, between the programmes and
+    within ``duration_max_min``.
 
     Each programme runs ``spec.end_segment_s`` at its last setpoint after its path (Binder:
-    the 1-s final segment). Where that would take the run past the time limit, the last
-    step of the last part is shortened by the overrun (whole time steps): it reaches the
-    same end temperature that much earlier and the end segment holds it. Unchanged where
-    the shorter step would need a rate outside the limits (the duration check reports it).
+    the 1-s final segment), and the next starts after it. So that every programme after
+    the first still starts on the step table's time, each but the last has its last step
+    shortened by that much (red team: 21 hand-overs put the path 21 s late, 1.1 °C on a
+    fast ramp, with "0.000 °C" reported); where the rate limits forbid it, the delay stays
+    and the path check reports it. Where the last end segment would take the run past the
+    time limit, the last step of the last part is shortened by the overrun (whole time
+    steps). Each shortened step reaches the same end temperature that much earlier and the
+    end segment holds it.
     """
+    q = spec.time_step_min
+    hold_min = math.ceil(spec.end_segment_s / 60.0 / q - 1e-6) * q
+    parts = tuple(
+        (_shortened(p, hold_min, q, limits) or p) if k < len(parts) - 1 else p
+        for k, p in enumerate(parts)
+    )
     run_min = sum(p.total_min for p in parts) + len(parts) * spec.end_segment_s / 60.0
     over_min = run_min - limits.duration_max_min
     if over_min <= 1e-9:
         return parts
-    q = spec.time_step_min
     cut_min = math.ceil(over_min / q - 1e-6) * q
-    last = parts[-1]
-    d = last.durations_min.copy()
-    if d[-1] - cut_min < q - 1e-9:
-        return parts
-    tk = last.boundary_temps_c
-    rate = float(tk[-1] - tk[-2]) / (d[-1] - cut_min)
-    if not limits.rate_min_c_per_min - 1e-9 <= rate <= limits.rate_max_c_per_min + 1e-9:
-        return parts
-    d[-1] -= cut_min
-    rates = last.rates_c_per_min.copy()
-    rates[-1] = rate
-    return (*parts[:-1], Programme(d, rates, last.start_c))
+    last = _shortened(parts[-1], cut_min, q, limits)
+    return parts if last is None else (*parts[:-1], last)
 
 
 def _device_range(p: Programme, check: CoverageCheck) -> tuple[float, float]:
@@ -1057,7 +1087,11 @@ def export_programme(
         src_cov,
         exp_cov,
         check,
-        _rounding_shift_s(programme, spec.time_step_min),
+        # a step shortened for the end segment between two programmes ends that much early
+        max(
+            _rounding_shift_s(programme, spec.time_step_min),
+            float(spec.end_segment_s) if len(parts) > 1 else 0.0,
+        ),
         _path_deviation_c(programme, exported),
         tuple(notes),
         _limit_breaks(
@@ -1065,7 +1099,7 @@ def export_programme(
             exported,
             limits,
             check,
-            len(parts) * spec.end_segment_s / 60.0,
+            spec.end_segment_s / 60.0,  # the last one (those between are in the path)
             table_range_c,
         ),
     )

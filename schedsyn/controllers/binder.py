@@ -20,7 +20,9 @@ the ramp the segment makes (to the next start value), for the operator to read, 
 register. The library links no programmes: a programme longer than 99 segments (plus the
 final one) is split; each part ends holding its last value for 1 s, after which the
 chamber leaves programme mode: the operator starts the next programme at once (and
-sets the manual setpoint to the hand-over temperature as a safeguard). The final
+sets the manual setpoint to the hand-over temperature as a safeguard). Each part but the
+last reaches its end 1 s early to make room for that segment, so the next starts on the
+step table's time (``export._room_for_end_segments``). The final
 segments run after the path (``ControllerSpec.end_segment_s``): where they would pass the
 time limit, the export shortens the last step to make room (``export._room_for_end_segments``).
 """
@@ -173,7 +175,7 @@ class BinderCodec:
         if np.any(np.diff([numbers.index(_int(p, source)) for p in programs]) < 0):
             raise StepTableError(f"{source}: the rows of one program must be consecutive")
         nums = _json.check_numbers(numbers, spec, source)
-        parts = []
+        parts, holds = [], []
         for number, group in zip(nums, groups, strict=True):
             where = f"{source}: program {number}"
             n = len(group)
@@ -219,8 +221,9 @@ class BinderCodec:
             d = np.asarray(secs[:-1], dtype=float) / 60.0
             t = np.asarray(starts, dtype=float)
             parts.append(Programme(d, np.diff(t) / d, float(t[0])))
+            holds.append(secs[-1] / 60.0)
         header = {k: v for k, v in meta.items() if k.startswith("schedsyn_")}
-        return Decoded(spec.key, nums, tuple(parts), header)
+        return Decoded(spec.key, nums, tuple(parts), header, tuple(holds))
 
     def notes(
         self, parts: Sequence[Programme], numbers: Sequence[int], settings: ExportSettings
@@ -229,14 +232,16 @@ class BinderCodec:
             f"start Binder programme {numbers[0]} (progno {numbers[0] - 1}) with the chamber "
             f"and the device at {parts[0].start_c:g} °C"
         ]
-        t = 0.0
+        t, hold = 0.0, BINDER_MB.end_segment_s / 60.0
         for k in range(1, len(parts)):
             t += parts[k - 1].total_min
             out.append(
-                f"programme {numbers[k - 1]} ends at {t:g} min at {parts[k - 1].end_c:g} °C: "
-                f"start programme {numbers[k]} at once (set the manual setpoint to "
-                f"{parts[k - 1].end_c:g} °C beforehand; Binder programmes are not linked)"
+                f"programme {numbers[k - 1]} ends at {t + hold:g} min at "
+                f"{parts[k - 1].end_c:g} °C (after its {BINDER_MB.end_segment_s}-s end "
+                f"segment): start programme {numbers[k]} at once (set the manual setpoint "
+                f"to {parts[k - 1].end_c:g} °C beforehand; Binder programmes are not linked)"
             )
+            t += hold
         out.append("each programme's last segment (1 s) holds its final value: the end marker")
         return out
 
