@@ -915,3 +915,17 @@ def test_a_table_that_itself_passes_a_device_limit_gets_a_note(tmp_path, capsys)
             assert f"takes the device to {peak_c:.2f} °C, above its limit 62 °C" in text
         else:
             assert peak_c < 62.0 and "takes the device to" not in text
+
+
+@pytest.mark.parametrize(("controller", "max_len"), [("espec-p300", 15), ("watlow-f4t", 20)])
+def test_a_programme_name_the_controller_cannot_hold_is_said(controller, max_len):
+    """A name longer than the controller's field was cut without a word (red team); the
+    notes say what is written. A name that fits gets no note."""
+    table = read_step_table(BASELINE).programme
+    long_name = "Gyro_calibration_W1_" + "x" * 10
+    ex = export_programme(table, ExportSettings(controller, name=long_name))
+    (note,) = [n for n in ex.notes if "programme name" in n]
+    written = json.loads(ex.text)["programmes"][0]["program"]["name"]
+    assert len(written) == max_len and f"written as {written!r}" in note
+    fits = export_programme(table, ExportSettings(controller, name="W1"))
+    assert not [n for n in fits.notes if "programme name" in n]

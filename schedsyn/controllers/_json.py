@@ -125,3 +125,15 @@ def short_name(base: str, k: int, n: int, max_len: int) -> str:
     base = re.sub(r"[^A-Za-z0-9_\-]", "_", base)
     suffix = f"-{k}" if n > 1 else ""
     return base[: max(1, max_len - len(suffix))] + suffix
+
+
+def name_note(base: str, n: int, max_len: int) -> list[str]:
+    """A note when the name written (:func:`short_name`) is not the one given: cut to
+    ``max_len`` characters or with characters replaced (red team: cut without a word)."""
+    written = short_name(base, 1, n, max_len)
+    if written == (f"{base}-1" if n > 1 else base):
+        return []
+    return [
+        f"the programme name {base!r} is written as {written!r} (at most {max_len} "
+        "characters: letters, digits, _ and -)"
+    ]

@@ -234,7 +234,7 @@ class EspecCodec:
             f"the last programme ends with mode {settings.effective_end_mode} at "
             f"{parts[-1].end_c:g} °C"
         )
-        return out
+        return out + _json.name_note(settings.name, len(parts), _NAME_LEN)
 
 
 def _part(durations: list[float], temps: list[float]) -> Programme:

@@ -260,4 +260,4 @@ class F4TCodec:
         out.append(
             f"the last profile ends in mode {settings.effective_end_mode} at {parts[-1].end_c:g} °C"
         )
-        return out
+        return out + _json.name_note(settings.name, len(parts), _NAME_LEN)
