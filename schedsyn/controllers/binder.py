@@ -20,11 +20,11 @@ the ramp the segment makes (to the next start value), for the operator to read, 
 register. The library links no programmes: a programme longer than 99 segments (plus the
 final one) is split; each part ends holding its last value for 1 s, after which the
 chamber leaves programme mode: the operator starts the next programme at once (and
-sets the manual setpoint to the hand-over temperature as a safeguard). Each part but the
-last reaches its end 1 s early to make room for that segment, so the next starts on the
-step table's time (``export._room_for_end_segments``). The final
-segments run after the path (``ControllerSpec.end_segment_s``): where they would pass the
-time limit, the export shortens the last step to make room (``export._room_for_end_segments``).
+sets the manual setpoint to the hand-over temperature as a safeguard). The final
+segments run after the path (``ControllerSpec.end_segment_s``), and
+``export._room_for_end_segments`` makes room for them: each part but the last reaches its
+end 1 s early, so the next starts on the step table's time, and where the last one would
+pass the time limit, the last step is shortened by the overrun.
 """
 
 from __future__ import annotations
