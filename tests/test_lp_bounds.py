@@ -108,3 +108,63 @@ def test_solver_failures_are_still_reported_when_only_the_bounds_proved_anything
             require_solvable(stats, "S")
     else:
         require_solvable(stats, "S")  # a solver proved one infeasible: a verdict
+
+
+def test_dense_to_csc_is_scipys_own_matrix():
+    """The probes' fast dense-to-CSC conversion gives scipy's arrays exactly (zeros, signed
+    zeros and NaN included), so Clarabel sees the same problem."""
+    from scipy import sparse
+
+    from schedsyn.planner.lp import dense_to_csc
+
+    rng = np.random.default_rng(3)
+    mats = [
+        rng.normal(size=(int(rng.integers(1, 40)), int(rng.integers(1, 12))))
+        * (rng.random((1, 1)) < 0.5 + rng.random((1, 1)))
+        for _ in range(30)
+    ]
+    mats += [np.zeros((3, 4)), np.array([[np.nan, 0.0, -0.0, 1e-300], [0.0, 2.0, 0.0, -1.0]])]
+    for a in mats:
+        a = a * (rng.random(a.shape) < 0.6)
+        ref, got = sparse.csc_matrix(a), dense_to_csc(a)
+        assert got.shape == ref.shape
+        np.testing.assert_array_equal(got.indptr, ref.indptr)
+        np.testing.assert_array_equal(got.indices, ref.indices)
+        np.testing.assert_array_equal(got.data, ref.data)
+
+
+def test_the_probe_rows_mean_what_le_ge_and_eq_say():
+    """Each block's rows, assembled once for the solver, hold exactly when the constraint
+    it was given as holds: ``le`` as given, ``ge`` with both sides negated (its extra
+    columns keep their sign), ``eq`` as equalities; scalar and per-row right-hand sides."""
+    from schedsyn.model import FirstOrderLag
+    from schedsyn.planner import Scenario
+    from schedsyn.planner.lp import Context, LpStats, Responses, SubLP
+
+    spec = ExperimentSpec("S", -10.0, 0.0, -20.0, 10.0, levels_required=3)
+    p = ThermalParams()
+    ctx = Context(
+        spec, LIMITS, Responses([Scenario(p, FirstOrderLag(p))], 12, 5.0, LIMITS), LpStats()
+    )
+    lp = SubLP(ctx, np.array([1.0, -0.5]), 12, extra=2)
+    rng = np.random.default_rng(5)
+    n = lp.n
+    m_le, m_ge, m_eq = rng.normal(size=(3, n)), rng.normal(size=(4, n)), rng.normal(size=n)
+    rhs_le, rhs_ge = rng.normal(size=3), 0.7
+    lp.eq(m_eq, 1.5)
+    lp.le(m_le, rhs_le, {1: 2.0})
+    lp.ge(m_ge, rhs_ge, {0: -1.0})
+    lp.le(m_le[0], 4.0)
+    n_t, a, b, n_eq = lp._matrices(0.3)
+    assert (n_t, n_eq) == (n, 1) and a.shape == (1 + 3 + 4 + 1 + 2 * n + 2 * n, n + 2 + n)
+    x = rng.normal(size=n + 2 + n)
+    u, e = x[:n], x[n : n + 2]
+    slack = b - a @ x  # >= 0 where a row holds
+    np.testing.assert_allclose(slack[0], 1.5 - m_eq @ u)
+    np.testing.assert_allclose(slack[1:4], rhs_le - (m_le @ u + 2.0 * e[1]))
+    np.testing.assert_allclose(slack[4:8], (m_ge @ u - (-1.0) * e[0]) - rhs_ge)
+    np.testing.assert_allclose(slack[8], 4.0 - m_le[0] @ u)
+    np.testing.assert_allclose(slack[9 : 9 + n], LIMITS.rate_max_c_per_min - u)
+    np.testing.assert_allclose(slack[9 + n : 9 + 2 * n], u - LIMITS.rate_min_c_per_min)
+    t = x[n + 2 :]
+    np.testing.assert_allclose(slack[9 + 2 * n :], np.concatenate((t - u, t + u)))
