@@ -12,3 +12,29 @@ def rng():
     import numpy as np
 
     return np.random.default_rng(12345)
+
+
+#: Modules whose tests share an expensive module fixture (a split, advice, a graded
+#: search, ...): under pytest-xdist each runs whole on one worker, so the fixture is
+#: computed once. (pytest-xdist's own ``--dist loadgroup`` marks stopped grouping with
+#: pytest 9.2's structured node ids, pytest-xdist issue #1386: the tests were spread as
+#: if unmarked.) Every other test is its own unit, as with ``--dist load``.
+WHOLE_MODULES = frozenset(
+    f"tests/test_{name}.py" for name in ("advise", "graded_effort", "informative", "reach", "split")
+)
+
+
+def pytest_xdist_make_scheduler(config, log):
+    """``--dist loadgroup`` (scripts/test.sh): the modules of :data:`WHOLE_MODULES` as one
+    unit each, every other test alone; the units in order of size (the whole modules
+    first), pytest-xdist's load-scope scheduling. Other ``--dist`` modes: xdist's own."""
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class WholeModules(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            module = nodeid.split("::", 1)[0]
+            return module if module in WHOLE_MODULES else nodeid
+
+    return WholeModules(config, log)
