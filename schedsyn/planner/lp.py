@@ -480,9 +480,9 @@ class SubLP:
         self.tk0 = ctx.limits.start_c + float(r.durations[: self.j0] @ u_fixed)
         self.tk_mat = np.tril(np.ones((self.n, self.n))) * r.durations[self.j0 : j1][None, :]
         # row blocks ``(sign, m, rhs, extra_cols)``: ``sign * m @ u + extra <= sign * rhs``
-        # (equalities: ``m @ u == rhs``), kept as given and assembled once in
-        # :meth:`_rows`: the search builds ~10 blocks per probe and most probes end at
-        # the bounds check, so padding each block on arrival cost more than the check
+        # (equalities: ``m @ u == rhs``), kept as given and written once into the LP's
+        # matrix by :meth:`_rows`: padding each block on arrival and stacking the padded
+        # copies cost more than the bounds check that ends most probes
         self._g: list[tuple[float, np.ndarray, Any, dict[int, float] | None]] = []
         self._e: list[tuple[float, np.ndarray, Any, dict[int, float] | None]] = []
         self.last_size = {"variables": 0, "constraints": 0}
