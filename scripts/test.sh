@@ -11,6 +11,6 @@ echo "mypy: types of the package" >&2
 .venv/bin/mypy --no-error-summary
 # -n auto: one worker per core (pytest-xdist); pass -n 0 to run in one process.
 # --dist loadgroup: the tests spread over the workers one by one, except that the modules
-# marked xdist_group (those with an expensive module fixture) each run on one worker, so
-# the fixture is computed once instead of once per worker
+# with an expensive module fixture (tests/conftest.py's WHOLE_MODULES) each run on one
+# worker, so the fixture is computed once instead of once per worker
 exec .venv/bin/python -m pytest -n auto --dist loadgroup "$@"

@@ -24,6 +24,7 @@ WHOLE_MODULES = frozenset(
 )
 
 
+@pytest.hookimpl(optionalhook=True)  # a plain pytest (no xdist) does not know the hook
 def pytest_xdist_make_scheduler(config, log):
     """``--dist loadgroup`` (scripts/test.sh): the modules of :data:`WHOLE_MODULES` as one
     unit each, every other test alone; the units in order of size (the whole modules
