@@ -2,7 +2,9 @@
 
 Most probes of the search scan transitions too short for the device to reach the window's
 first knot; :func:`bounds_prove_infeasible` rejects those without a solver. It must never
-reject an LP a solver can solve, and a plan must not change because of it.
+reject an LP a solver can solve, and a plan must not change because of it. Also how a
+probe reaches the solver: its rows assembled from the ``le``/``ge``/``eq`` blocks, and the
+dense-to-CSC conversion handed to Clarabel.
 """
 
 import numpy as np
