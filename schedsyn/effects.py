@@ -51,6 +51,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
+from collections import OrderedDict
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -58,7 +60,7 @@ from types import MappingProxyType
 import numpy as np
 
 from .errors import ParameterError
-from .model import affine_response, lag_foh, lag_free, lag_ramp, lag_step
+from .model import affine_response, affine_temperature, lag_foh, lag_free, lag_ramp, lag_step
 from .params import DT0_ABS_MAX_C, Limits, ThermalParams
 from .programme import Programme
 
@@ -313,6 +315,62 @@ def rate_limited(
     return out
 
 
+#: The last few rate-limited air paths (:func:`_rate_limited_air`), newest last: a fit
+#: of the device's parameters with the limits held, and a finite-difference Jacobian's
+#: columns for them, ask for the same air again and again.
+_LIMITED_AIR_CACHE: OrderedDict[tuple, tuple[np.ndarray, np.ndarray | None]] = OrderedDict()
+_LIMITED_AIR_CACHE_SIZE = 8
+_LIMITED_AIR_LOCK = threading.Lock()
+
+
+def _rate_limited_air(
+    programme: Programme,
+    grid: np.ndarray,
+    h: float,
+    sample_min: np.ndarray | None,
+    max_cool_c_per_min: float,
+    max_heat_c_per_min: float,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """The rate-limited air on ``grid`` and at ``sample_min`` (None: not asked).
+
+    The limiter runs on the grid with the setpoint's corners (and the samples) added:
+    exact there; a corner between grid points would cut off its peak. The answer depends
+    on nothing else than the arguments, so the last few are kept (keyed by their bytes)
+    and handed out as copies.
+    """
+    c, r = float(max_cool_c_per_min), float(max_heat_c_per_min)
+    samples = None if sample_min is None else np.ravel(np.asarray(sample_min, dtype=float))
+    key = (
+        np.asarray(programme.durations_min, dtype=float).tobytes(),
+        np.asarray(programme.boundary_temps_c, dtype=float).tobytes(),
+        np.asarray(grid, dtype=float).tobytes(),
+        float(h),
+        None if samples is None else samples.tobytes(),
+        c,
+        r,
+    )
+    with _LIMITED_AIR_LOCK:
+        hit = _LIMITED_AIR_CACHE.get(key)
+        if hit is not None:
+            _LIMITED_AIR_CACHE.move_to_end(key)
+    if hit is None:
+        corners = np.cumsum(programme.durations_min)
+        extra = [corners] if samples is None else [corners, samples]
+        fine = np.union1d(grid, np.concatenate(extra))
+        fine = fine[fine >= grid[0]]
+        fine = fine[np.concatenate(([True], np.diff(fine) > 1e-9 * max(h, 1.0)))]
+        air_fine = rate_limited(programme.chamber_at(fine), np.diff(fine), c, r)
+        air = np.interp(grid, fine, air_fine)
+        at = None if sample_min is None else np.interp(sample_min, fine, air_fine)
+        hit = (air, at)
+        with _LIMITED_AIR_LOCK:
+            _LIMITED_AIR_CACHE[key] = hit
+            while len(_LIMITED_AIR_CACHE) > _LIMITED_AIR_CACHE_SIZE:
+                _LIMITED_AIR_CACHE.popitem(last=False)
+    air, at = hit
+    return air.copy(), None if at is None else at.copy()
+
+
 # --------------------------------------------------------------------------------------
 # the model specification (base + at most one effect), as written to model files
 # --------------------------------------------------------------------------------------
@@ -467,15 +525,7 @@ class ModelSpec:
         v = air + self.dt0_c
         tau = self._tau_grid_min(v, temp)
         grad = (v - temp) / tau
-        if self.effect == "chamber_cycling":  # the air exactly, not interpolated
-            p = self.parameters
-            air_t = programme.chamber_at(t) + p["amplitude_c"] * np.sin(
-                2.0 * np.pi * t * 60.0 / p["period_s"] + p["phase_rad"]
-            )
-        elif limited_at is not None:  # the limited air at the samples, exactly
-            air_t = limited_at
-        else:  # the chamber follows its setpoint
-            air_t = programme.chamber_at(t)
+        air_t = self._air_at(programme, t, limited_at)
         return Prediction(t, np.interp(t, grid, temp), np.interp(t, grid, grad), air_t)
 
     def predict_channels(
@@ -492,29 +542,50 @@ class ModelSpec:
         needed (used by the fits, which call it thousands of times).
         """
         if not self.is_linear:
+            # predict's grid and simulation (the rate limiter's knots include every sample
+            # time, so the same times go in), without the gradient and the air it would
+            # also interpolate
+            t = np.asarray(t_times_min, dtype=float)
+            n = t.size
+            times = t if air_times_min is None else np.concatenate((t, air_times_min))
+            end = max(float(times.max()), programme.total_min)
+            h = grid_min if grid_min is not None else min(1.0 / 6.0, end / 2000.0)
+            grid = uniform_grid_min(end, h)
+            _, temp, limited_at = self._simulate_grid(programme, grid, h, t0_c, times)
+            temp_t = np.interp(t, grid, temp)
             if air_times_min is None:
-                return self.predict(programme, t_times_min, t0_c, grid_min).t_c, None
-            n = np.size(t_times_min)
-            pr = self.predict(
-                programme, np.concatenate((t_times_min, air_times_min)), t0_c, grid_min
-            )
-            return pr.t_c[:n], pr.tk_air_c[n:]
-        resp = affine_response(
+                return temp_t, None
+            return temp_t, self._air_at(programme, times, limited_at)[n:]
+        a_t, b_t = affine_temperature(
             self.linear_model(), programme.durations_min, t_times_min, programme.start_c, t0_c
         )
-        temp = resp.a_t @ programme.rates_c_per_min + resp.b_t
+        temp = a_t @ programme.rates_c_per_min + b_t
         if air_times_min is None:
             return temp, None
         if self.effect == "chamber_lag":
-            air = affine_response(
+            a_air, b_air = affine_temperature(
                 LinearEffectModel(self.parameters["tau_chamber_s"], 0.0),
                 programme.durations_min,
                 air_times_min,
                 programme.start_c,
                 programme.start_c,
             )
-            return temp, air.a_t @ programme.rates_c_per_min + air.b_t
+            return temp, a_air @ programme.rates_c_per_min + b_air
         return temp, programme.chamber_at(air_times_min)
+
+    def _air_at(
+        self, programme: Programme, t: np.ndarray, limited_at: np.ndarray | None
+    ) -> np.ndarray:
+        """The chamber air at the sample times ``t`` of a nonlinear model's simulation
+        (``limited_at``: the rate-limited air there, from :meth:`_simulate_grid`)."""
+        if self.effect == "chamber_cycling":  # the air exactly, not interpolated
+            p = self.parameters
+            return programme.chamber_at(t) + p["amplitude_c"] * np.sin(
+                2.0 * np.pi * t * 60.0 / p["period_s"] + p["phase_rad"]
+            )
+        if limited_at is not None:  # the limited air at the samples, exactly
+            return limited_at
+        return programme.chamber_at(t)  # the chamber follows its setpoint
 
     def _tau_grid_min(self, v: np.ndarray, temp: np.ndarray) -> np.ndarray:
         if self.effect == "asymmetric_tau":
@@ -536,32 +607,23 @@ class ModelSpec:
         """Air and internal temperature on the uniform ``grid``; the rate-limited air also
         at ``sample_min`` (else None)."""
         p = self.parameters
-        setpoint = programme.chamber_at(grid)
         limited_at = None
         if self.effect == "chamber_rate_limit":
-            # the limiter on the grid with the setpoint's corners (and the samples) added:
-            # exact there; a corner between grid points would cut off its peak
-            corners = np.cumsum(programme.durations_min)
-            extra = [corners] if sample_min is None else [corners, np.ravel(sample_min)]
-            fine = np.union1d(grid, np.concatenate(extra))
-            fine = fine[fine >= grid[0]]
-            fine = fine[np.concatenate(([True], np.diff(fine) > 1e-9 * max(h, 1.0)))]
-            air_fine = rate_limited(
-                programme.chamber_at(fine),
-                np.diff(fine),
+            air, limited_at = _rate_limited_air(
+                programme,
+                grid,
+                h,
+                sample_min,
                 p["max_cool_rate_c_per_min"],
                 p["max_heat_rate_c_per_min"],
             )
-            air = np.interp(grid, fine, air_fine)
-            if sample_min is not None:
-                limited_at = np.interp(sample_min, fine, air_fine)
         elif self.effect == "chamber_cycling":
             # A = S + amp sin(2 pi t/P + phi)
-            air = setpoint + p["amplitude_c"] * np.sin(
+            air = programme.chamber_at(grid) + p["amplitude_c"] * np.sin(
                 2.0 * np.pi * grid * 60.0 / p["period_s"] + p["phase_rad"]
             )
         else:
-            air = setpoint
+            air = programme.chamber_at(grid)
         v = air + self.dt0_c
         if self.effect == "asymmetric_tau":
             temp = lag_foh_asymmetric(v, t0_c, p["tau_heat_s"] / 60.0, p["tau_cool_s"] / 60.0, h)

@@ -197,10 +197,7 @@ def affine_response(
     """
     d = np.asarray(durations_min, dtype=float)
     t = np.asarray(times_min, dtype=float)
-    edges = segment_starts(d)
-    # lag[k, i] = t_k - t_i  and  t_k - t_{i+1}
-    lag_start = t[:, None] - edges[None, :-1]
-    lag_end = t[:, None] - edges[None, 1:]
+    lag_start, lag_end = _segment_lags(d, t)
     k = model.gain
     a_t = k * (model.ramp(lag_start) - model.ramp(lag_end))
     a_g = k * (model.step(lag_start) - model.step(lag_end))
@@ -209,3 +206,25 @@ def affine_response(
     return AffineResponse(
         times_min=t, a_t=a_t, b_t=b_t, a_g=a_g, b_g=b_g, a_tk=a_tk, b_tk=np.full(t.shape, tk0_c)
     )
+
+
+def _segment_lags(d: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``t_k - t_i`` and ``t_k - t_{i+1}`` for every sample k and segment i (start, end)."""
+    edges = segment_starts(d)
+    return t[:, None] - edges[None, :-1], t[:, None] - edges[None, 1:]
+
+
+def affine_temperature(
+    model: LinearThermalModel,
+    durations_min: np.ndarray,
+    times_min: np.ndarray,
+    tk0_c: float = 20.0,
+    t0_c: float = 20.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(A_t, b_t)`` of :func:`affine_response` alone (the same numbers), for callers that
+    need only the temperature: the diagnosis fits evaluate it thousands of times."""
+    d = np.asarray(durations_min, dtype=float)
+    t = np.asarray(times_min, dtype=float)
+    lag_start, lag_end = _segment_lags(d, t)
+    a_t = model.gain * (model.ramp(lag_start) - model.ramp(lag_end))
+    return a_t, model.free(t, tk0_c, t0_c)[0]

@@ -397,3 +397,80 @@ def test_tau_temperature_is_linearised_where_the_plan_works():
     np.testing.assert_allclose(pred.t_c, lin_t, atol=2e-3)
     base_t = affine_response(spec.linear_model(), prog.durations_min, times, -43.0, -40.5)
     assert np.max(np.abs(base_t.evaluate([0.0])[0] - pred.t_c)) > 0.02  # tau at 20 is off
+
+
+_EVERY_EFFECT = {
+    "none": {},
+    "chamber_lag": {"tau_chamber_s": 400.0},
+    "chamber_rate_limit": {"max_cool_rate_c_per_min": 0.6, "max_heat_rate_c_per_min": 1.5},
+    "chamber_cycling": {"amplitude_c": 0.4, "period_s": 900.0, "phase_rad": 0.7},
+    "dead_time": {"delay_s": 240.0},
+    "second_time_constant": {"tau2_s": 500.0},
+    "selfheat_slope": {"dt0_slope_c_per_c": 0.02},
+    "dt0_drift": {"dt0_drift_c_per_h": 0.2},
+    "asymmetric_tau": {"tau_heat_s": 2000.0, "tau_cool_s": 2900.0},
+    "tau_temperature": {"tau_slope_per_c": 0.004},
+}
+
+
+@pytest.mark.parametrize("effect", list(_EVERY_EFFECT))
+def test_the_fits_channels_are_predict_s_own_numbers(effect):
+    """``predict_channels`` (what the diagnosis fits call, thousands of times, without the
+    gradient) gives exactly ``predict``'s temperature and air, with and without air
+    times, on samples that do not fall on the simulation grid."""
+    assert set(_EVERY_EFFECT) == {"none", *EFFECTS}  # every effect has a case
+    spec = ModelSpec(2300.0, 2.5, effect, _EVERY_EFFECT[effect])
+    rng = np.random.default_rng(5)
+    t = np.sort(rng.uniform(0.0, PROG.total_min + 20.0, 211))
+    air_t = np.sort(rng.uniform(0.0, PROG.total_min, 97))
+    for grid_min in (None, 1.0 / 3.0):
+        temp, none = spec.predict_channels(PROG, t, None, t0_c=19.0, grid_min=grid_min)
+        assert none is None
+        both = spec.predict(PROG, np.concatenate((t, air_t)), t0_c=19.0, grid_min=grid_min)
+        temp2, air = spec.predict_channels(PROG, t, air_t, t0_c=19.0, grid_min=grid_min)
+        np.testing.assert_array_equal(temp2, both.t_c[: t.size])
+        np.testing.assert_array_equal(air, both.tk_air_c[t.size :])
+        if effect != "chamber_rate_limit":  # there the samples are the limiter's knots
+            alone = spec.predict(PROG, t, t0_c=19.0, grid_min=grid_min)
+            np.testing.assert_array_equal(temp, alone.t_c)
+
+
+def test_the_rate_limited_air_kept_for_the_next_call_is_the_right_one():
+    """The limiter's air is kept between calls (a fit holds the limits while it fits the
+    device): each answer equals a fresh computation whatever was asked before (another
+    limit, programme, grid or samples), and changing a returned array changes no later
+    answer."""
+    from schedsyn import effects
+
+    rng = np.random.default_rng(11)
+    other = Programme([30.0, 20.0, 40.0, 60.0, 25.0], [-1.0, 0.0, 2.0, -0.5, 0.0], 20.0)
+    samples = np.sort(rng.uniform(0.0, PROG.total_min, 50))
+    grid = effects.uniform_grid_min(PROG.total_min, 1.0 / 3.0)
+    asks = [
+        (PROG, grid, 1.0 / 3.0, samples, 0.5, 2.0),
+        (PROG, grid, 1.0 / 3.0, samples, 0.4, 2.0),  # another cooling limit
+        (PROG, grid, 1.0 / 3.0, samples, 0.5, 1.0),  # another heating limit
+        (other, grid, 1.0 / 3.0, samples, 0.5, 2.0),  # same durations, other temperatures
+        (PROG, grid, 1.0 / 3.0, samples + 0.05, 0.5, 2.0),  # other samples
+        (PROG, grid, 1.0 / 3.0, None, 0.5, 2.0),
+        (PROG, effects.uniform_grid_min(PROG.total_min, 0.25), 0.25, samples, 0.5, 2.0),
+    ]
+
+    def fresh(args):
+        effects._LIMITED_AIR_CACHE.clear()
+        return effects._rate_limited_air(*args)
+
+    expected = [fresh(a) for a in asks]
+    assert len({e[0].tobytes() for e in expected}) == len(asks)  # every ask differs
+    effects._LIMITED_AIR_CACHE.clear()
+    for _ in range(2):  # second round: every answer from the cache
+        for args, (air_e, at_e) in zip(asks, expected, strict=True):
+            air, at = effects._rate_limited_air(*args)
+            np.testing.assert_array_equal(air, air_e)
+            if at_e is None:
+                assert at is None
+            else:
+                np.testing.assert_array_equal(at, at_e)
+                at += 100.0  # the caller's copy
+            air += 100.0
+    assert len(effects._LIMITED_AIR_CACHE) == len(asks)
