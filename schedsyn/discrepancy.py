@@ -250,6 +250,15 @@ class _Data:
     air_c: np.ndarray | None
     air_var: np.ndarray | None
     step_min: float
+    # the three-point second derivative's spacings (:func:`_second_derivative`), fixed
+    # by the times: worked out once instead of at every evaluation of a fit
+    t_spacing: tuple[np.ndarray, ...] = field(init=False, repr=False, compare=False)
+    air_spacing: tuple[np.ndarray, ...] | None = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "t_spacing", _spacing(self.time_min))
+        air = None if self.air_time_min is None else _spacing(self.air_time_min)
+        object.__setattr__(self, "air_spacing", air)
 
     def subset(self, until_min: float) -> _Data:
         m = self.time_min <= until_min
@@ -294,15 +303,25 @@ def _block_means(
     return tm, np.add.reduceat(v, starts) / counts, var
 
 
-def _second_derivative(t: np.ndarray, f: np.ndarray) -> np.ndarray:
-    """``f''`` on an irregular grid (three-point formula; ends copy their neighbours)."""
+def _spacing(t: np.ndarray) -> tuple[np.ndarray, ...]:
+    """``(h1, h2, h1 + h2)`` of :func:`_second_derivative` for the times ``t``."""
+    h = np.diff(t)
+    return h[:-1], h[1:], h[:-1] + h[1:]
+
+
+def _second_derivative(
+    t: np.ndarray, f: np.ndarray, spacing: tuple[np.ndarray, ...] | None = None
+) -> np.ndarray:
+    """``f''`` on an irregular grid (three-point formula; ends copy their neighbours).
+
+    ``spacing``: :func:`_spacing` of ``t`` if already known."""
     out = np.zeros_like(f)
     if f.size < 3:
         return out
-    h1, h2 = np.diff(t)[:-1], np.diff(t)[1:]
+    h1, h2, h12 = _spacing(t) if spacing is None else spacing
     df = np.diff(f)
     # f'' = 2 [(f[k+1]-f[k])/h2 - (f[k]-f[k-1])/h1] / (h1 + h2)
-    out[1:-1] = 2.0 * (df[1:] / h2 - df[:-1] / h1) / (h1 + h2)
+    out[1:-1] = 2.0 * (df[1:] / h2 - df[:-1] / h1) / h12
     out[0], out[-1] = out[1], out[-2]
     return out
 
@@ -404,7 +423,7 @@ class CandidateFit:
 def _spec(effect: str, theta: np.ndarray, names: Sequence[str]) -> ModelSpec:
     tau, dt0 = float(theta[0]), float(theta[1])
     params = {n: float(v) for n, v in zip(names, theta[3:], strict=True)}
-    return ModelSpec(tau, dt0, effect, params)
+    return ModelSpec.within_bounds(tau, dt0, effect, params)
 
 
 def _residuals(spec: ModelSpec, t0: float, data: _Data) -> tuple[np.ndarray, np.ndarray | None]:
@@ -416,10 +435,10 @@ def _residuals(spec: ModelSpec, t0: float, data: _Data) -> tuple[np.ndarray, np.
         grid_min=min(data.step_min, 1 / 3),
     )
     # block mean = f(t_mean) + var/2 f''
-    temp = temp + 0.5 * data.t_var * _second_derivative(data.time_min, temp)
+    temp = temp + 0.5 * data.t_var * _second_derivative(data.time_min, temp, data.t_spacing)
     if air is None or data.air_time_min is None or data.air_var is None:
         return temp - data.t_c, None
-    air = air + 0.5 * data.air_var * _second_derivative(data.air_time_min, air)
+    air = air + 0.5 * data.air_var * _second_derivative(data.air_time_min, air, data.air_spacing)
     return temp - data.t_c, air - data.air_c
 
 
@@ -508,7 +527,8 @@ def _fit(
     se = dict.fromkeys(_BASE_NAMES + names, 0.0)
     for j, i in enumerate(free_idx):
         se[(_BASE_NAMES + names)[i]] = float(se_free[j])
-    spec = _spec(effect, theta, names)
+    fast = _spec(effect, theta, names)
+    spec = ModelSpec(fast.tau_s, fast.dt0_c, effect, fast.parameters)  # the checked model
     r_t, r_a = _residuals(spec, theta[2], data)
     score = n * math.log(max(sse, 1e-300) / n) + k * math.log(n)
     return CandidateFit(

@@ -419,6 +419,21 @@ class ModelSpec:
         object.__setattr__(self, "dt0_c", float(self.dt0_c))
         object.__setattr__(self, "parameters", MappingProxyType(params))
 
+    @classmethod
+    def within_bounds(
+        cls, tau_s: float, dt0_c: float, effect: str, parameters: dict[str, float]
+    ) -> ModelSpec:
+        """The model without the checks of its values: for a fit whose optimiser keeps
+        them within the effect's bounds and evaluates thousands of them (the checks cost
+        as much as a linear model's prediction). ``parameters`` is taken as is (floats,
+        exactly the effect's names)."""
+        spec = object.__new__(cls)
+        object.__setattr__(spec, "tau_s", float(tau_s))
+        object.__setattr__(spec, "dt0_c", float(dt0_c))
+        object.__setattr__(spec, "effect", effect)
+        object.__setattr__(spec, "parameters", MappingProxyType(parameters))
+        return spec
+
     # -- kinds ---------------------------------------------------------------------------
     @property
     def is_linear(self) -> bool:

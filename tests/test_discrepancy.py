@@ -673,3 +673,25 @@ def test_a_better_scoring_candidate_that_was_rejected_is_not_almost_as_good():
     rivals = close_rivals(ranked, chosen, ambiguity_bic=6.0)
     assert [c.effect for c in rivals] == ["dt0_drift"]
     assert close_rivals(ranked, chosen, ambiguity_bic=50.0)[-1].effect == "selfheat_slope"
+
+
+def test_the_block_mean_correction_s_second_derivative_is_exact_for_a_parabola():
+    """The fits add ``var/2 f''`` to each predicted block mean, with ``f''`` by the
+    three-point formula on the blocks' irregular times and the spacings worked out once
+    per log (``_Data``): exact for a parabola, the same numbers with the kept spacings
+    as without, and the log's own spacings kept."""
+    from schedsyn.discrepancy import _prepare, _second_derivative, _spacing
+
+    rng = np.random.default_rng(2)
+    t = np.cumsum(rng.uniform(0.2, 3.0, 40))
+    f = 0.7 * t**2 - 3.0 * t + 1.0
+    d2 = _second_derivative(t, f)
+    np.testing.assert_allclose(d2, 1.4, rtol=1e-9)
+    np.testing.assert_array_equal(_second_derivative(t, f, _spacing(t)), d2)
+    frame, _, _ = blind_case("none", 3, blind_programmes()["cold"], sample_s=10.0)
+    data, _ = _prepare(log_from_frame(frame), SETTINGS)
+    for got, want in zip(data.t_spacing, _spacing(data.time_min), strict=True):
+        np.testing.assert_array_equal(got, want)
+    half = data.subset(float(data.time_min[len(data.time_min) // 2]))
+    for got, want in zip(half.t_spacing, _spacing(half.time_min), strict=True):
+        np.testing.assert_array_equal(got, want)
