@@ -423,7 +423,7 @@ class CandidateFit:
 def _spec(effect: str, theta: np.ndarray, names: Sequence[str]) -> ModelSpec:
     tau, dt0 = float(theta[0]), float(theta[1])
     params = {n: float(v) for n, v in zip(names, theta[3:], strict=True)}
-    return ModelSpec.within_bounds(tau, dt0, effect, params)
+    return ModelSpec.unchecked(tau, dt0, effect, params)
 
 
 def _residuals(spec: ModelSpec, t0: float, data: _Data) -> tuple[np.ndarray, np.ndarray | None]:

@@ -420,7 +420,7 @@ class ModelSpec:
         object.__setattr__(self, "parameters", MappingProxyType(params))
 
     @classmethod
-    def within_bounds(
+    def unchecked(
         cls, tau_s: float, dt0_c: float, effect: str, parameters: dict[str, float]
     ) -> ModelSpec:
         """The model without the checks of its values: for a fit whose optimiser keeps

@@ -479,9 +479,9 @@ def test_the_rate_limited_air_kept_for_the_next_call_is_the_right_one():
 @pytest.mark.parametrize("effect", list(_EVERY_EFFECT))
 def test_a_fit_s_unchecked_model_is_the_checked_one(effect):
     """The diagnosis fits build their trial models without the value checks
-    (``ModelSpec.within_bounds``): the same model, the same predictions."""
+    (``ModelSpec.unchecked``): the same model, the same predictions."""
     params = dict(_EVERY_EFFECT[effect])
-    fast = ModelSpec.within_bounds(2300.0, 2.5, effect, params)
+    fast = ModelSpec.unchecked(2300.0, 2.5, effect, params)
     checked = ModelSpec(2300.0, 2.5, effect, params)
     assert fast == checked and fast.is_linear == checked.is_linear
     a, b = fast.predict(PROG, TIMES, t0_c=19.0), checked.predict(PROG, TIMES, t0_c=19.0)
