@@ -191,6 +191,17 @@ def uniform_grid_min(end_min: float, step_min: float) -> np.ndarray:
     return step_min * np.arange(n + 1)
 
 
+def _simulation_grid(
+    programme: Programme, times_min: np.ndarray, grid_min: float | None
+) -> tuple[np.ndarray, float]:
+    """The uniform grid a nonlinear model is simulated on for samples at ``times_min``,
+    and its step: ``grid_min``, or 1/6 min (finer for short logs), to the later of the
+    last sample and the programme's end."""
+    end = max(float(np.max(times_min)), programme.total_min)
+    h = grid_min if grid_min is not None else min(1.0 / 6.0, end / 2000.0)
+    return uniform_grid_min(end, h), h
+
+
 def lag_foh_asymmetric(
     v_c: np.ndarray, t0_c: float, tau_heat_min: float, tau_cool_min: float, h_min: float
 ) -> np.ndarray:
@@ -533,9 +544,7 @@ class ModelSpec:
                 )
                 tk = air_resp.evaluate(programme.rates_c_per_min)[0]
             return Prediction(t, temp, grad, tk)
-        end = max(float(t.max()), programme.total_min)
-        h = grid_min if grid_min is not None else min(1.0 / 6.0, end / 2000.0)
-        grid = uniform_grid_min(end, h)
+        grid, h = _simulation_grid(programme, t, grid_min)
         air, temp, limited_at = self._simulate_grid(programme, grid, h, t0_c, t)
         v = air + self.dt0_c
         tau = self._tau_grid_min(v, temp)
@@ -563,9 +572,7 @@ class ModelSpec:
             t = np.asarray(t_times_min, dtype=float)
             n = t.size
             times = t if air_times_min is None else np.concatenate((t, air_times_min))
-            end = max(float(times.max()), programme.total_min)
-            h = grid_min if grid_min is not None else min(1.0 / 6.0, end / 2000.0)
-            grid = uniform_grid_min(end, h)
+            grid, h = _simulation_grid(programme, times, grid_min)
             _, temp, limited_at = self._simulate_grid(programme, grid, h, t0_c, times)
             temp_t = np.interp(t, grid, temp)
             if air_times_min is None:
