@@ -15,12 +15,14 @@ def rng():
 
 
 #: Modules whose tests share an expensive module fixture (a split, advice, a graded
-#: search, ...): under pytest-xdist each runs whole on one worker, so the fixture is
-#: computed once. (pytest-xdist's own ``--dist loadgroup`` marks stopped grouping with
-#: pytest 9.2's structured node ids, pytest-xdist issue #1386: the tests were spread as
-#: if unmarked.) Every other test is its own unit, as with ``--dist load``.
+#: search, ...) or a module-level memo (test_replan's planner answers, ``PLANNED``, which
+#: two of its ~30 s tests ask alike): under pytest-xdist each runs whole on one worker, so
+#: the work is done once. (pytest-xdist's own ``--dist loadgroup`` marks stopped
+#: grouping with pytest 9.2's structured node ids, pytest-xdist issue #1386: the tests
+#: were spread as if unmarked.) Every other test is its own unit, as with ``--dist load``.
 WHOLE_MODULES = frozenset(
-    f"tests/test_{name}.py" for name in ("advise", "graded_effort", "informative", "reach", "split")
+    f"tests/test_{name}.py"
+    for name in ("advise", "graded_effort", "informative", "reach", "replan", "split")
 )
 
 
