@@ -420,9 +420,13 @@ class CandidateFit:
         return dict(self.model.parameters)
 
 
-def _spec(effect: str, theta: np.ndarray, names: Sequence[str]) -> ModelSpec:
+def _spec(effect: str, theta: np.ndarray, names: Sequence[str], checked: bool = False) -> ModelSpec:
+    """The model of ``theta``: unchecked for a fit's trial points (the optimiser keeps
+    them within bounds), ``checked`` for the one a fit reports."""
     tau, dt0 = float(theta[0]), float(theta[1])
     params = {n: float(v) for n, v in zip(names, theta[3:], strict=True)}
+    if checked:
+        return ModelSpec(tau, dt0, effect, params)
     return ModelSpec.unchecked(tau, dt0, effect, params)
 
 
@@ -527,8 +531,7 @@ def _fit(
     se = dict.fromkeys(_BASE_NAMES + names, 0.0)
     for j, i in enumerate(free_idx):
         se[(_BASE_NAMES + names)[i]] = float(se_free[j])
-    fast = _spec(effect, theta, names)
-    spec = ModelSpec(fast.tau_s, fast.dt0_c, effect, fast.parameters)  # the checked model
+    spec = _spec(effect, theta, names, checked=True)
     r_t, r_a = _residuals(spec, theta[2], data)
     score = n * math.log(max(sse, 1e-300) / n) + k * math.log(n)
     return CandidateFit(
