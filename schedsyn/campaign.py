@@ -445,6 +445,7 @@ class _PlanJob:
     robust_tau_s: tuple[float, float] | None
     robust_dt0_c: tuple[float, float] | None
     shorten: bool = False
+    end_soak: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -481,6 +482,7 @@ def _plan_job(job: _PlanJob, progress: Callable[[str], None] | None) -> Plan | I
             robust_dt0_c=job.robust_dt0_c,
             progress=say,
             shorten=job.shorten,
+            end_soak=job.end_soak,
         )
     except InfeasiblePlanError as exc:
         say(f"infeasible: {exc}")
@@ -659,6 +661,7 @@ def plan_campaign(
     *,
     workers: int | None = None,
     shorten: bool = False,
+    end_soak: bool = False,
 ) -> CampaignResult:
     """Plan every experiment of ``config`` (in parallel on ``backend``, see ``run_map``).
 
@@ -678,6 +681,10 @@ def plan_campaign(
         Give each complete plan to the timetable stage for a shorter one
         (:func:`~schedsyn.planner.plan_experiment`'s ``shorten``; 1-2 min more each);
         also when ``config.shorten``.
+    end_soak : bool
+        The tables will end with a soak (``--end-soak``): an ``informative`` plan ends no
+        farther from settled than its shortest plan run on (``plan_experiment``'s
+        ``end_soak``).
 
     Returns
     -------
@@ -690,7 +697,15 @@ def plan_campaign(
     if shorten:
         check_shorten(config)
     jobs = [
-        _PlanJob(s, config.params, config.limits, config.robust_tau_s, config.robust_dt0_c, shorten)
+        _PlanJob(
+            s,
+            config.params,
+            config.limits,
+            config.robust_tau_s,
+            config.robust_dt0_c,
+            shorten,
+            end_soak,
+        )
         for s in config.experiments
     ]
     # longest first, so that the pool is not left waiting on one long experiment at the end

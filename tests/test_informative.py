@@ -90,6 +90,28 @@ def test_informative_plan_is_complete_longer_and_more_informative(plans, tmp_pat
     assert any(n.startswith("informative: ") and "min longer" in n for n in informative.notes)
 
 
+def _minutes_in_region(plan, tmp_path, space_lo_c: float, space_hi_c: float) -> int:
+    """1-min samples of the exported table's scipy trajectory inside [lo, hi] degC."""
+    path = tmp_path / f"{plan.spec.objective}-in-region.csv"
+    plan.programme.to_csv(path)
+    knots_t, knots_tk = chamber_knots(path)
+    _, temp, _ = ode_trajectories(knots_t, knots_tk, 2400.0, 3.0, dt_min=1.0)
+    return int(((temp[0] >= space_lo_c) & (temp[0] <= space_hi_c)).sum())
+
+
+def test_the_pull_brings_the_run_on_minutes_into_the_region(plans, tmp_path):
+    """The region is far from the 20 degC start and end: the minutes the informative plan
+    runs on begin as holds at the end temperature, where a sample carries no information
+    and no gradient of log det would move it. The pull brings most of them in (without it,
+    PULL_SAMPLES_PER_C = 0, the plan had 129 minutes in the region against 202)."""
+    shortest, informative = plans
+    lo, hi = SPEC.approx_lo_c, SPEC.approx_hi_c
+    in_shortest = _minutes_in_region(shortest, tmp_path, lo, hi)
+    in_informative = _minutes_in_region(informative, tmp_path, lo, hi)
+    price = informative.duration_min - shortest.duration_min
+    assert in_informative >= in_shortest + 0.5 * price, (in_shortest, in_informative, price)
+
+
 def test_shortest_objective_does_not_run_on(plans):
     shortest, _ = plans
     assert shortest.informative is None
@@ -125,3 +147,16 @@ def _x(t, g, space):
 def _ld(t, g, space) -> float:
     x = _x(t, g, space)
     return float(np.linalg.slogdet(x.T @ x)[1])
+
+
+def test_the_settled_temperature_of_a_model_is_the_lag_s_own():
+    """Where the device settles with the chamber held at the end temperature (the bound of
+    --end-soak's informative plans): end_c + dT0 for the first-order lag, and the same from
+    the model's own response when a model is given (here the lag itself, other numbers)."""
+    from schedsyn.model import FirstOrderLag
+    from schedsyn.planner.core import _settled_c
+
+    params = ThermalParams(tau_s=1800.0, dt0_c=4.5)
+    limits = dataclasses.replace(Limits(), end_c=25.0)
+    assert _settled_c(limits, params, None) == pytest.approx(29.5)
+    assert _settled_c(limits, ThermalParams(), FirstOrderLag(params)) == pytest.approx(29.5)

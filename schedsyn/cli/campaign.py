@@ -132,6 +132,7 @@ def run(args: argparse.Namespace) -> int:
         backend=args.backend,
         workers=args.workers,
         shorten=args.shorten,
+        end_soak=args.end_soak,
     )
     lines = []
     no_soak: list[str] = []
@@ -169,6 +170,7 @@ def run(args: argparse.Namespace) -> int:
                         lim,
                         robust_tau_s=config.robust_tau_s,
                         robust_dt0_c=config.robust_dt0_c,
+                        end_soak=True,
                     ),
                 )
             try:

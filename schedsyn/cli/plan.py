@@ -709,6 +709,7 @@ def run(args: argparse.Namespace) -> int:
                 progress=progress,
                 effort_s=_effort_s(args),
                 shorten=args.shorten,
+                end_soak=args.end_soak,
             )
 
         try:

@@ -276,6 +276,7 @@ def plan_experiment(
     stop: Callable[[], bool] | None = None,
     timetable: bool = True,
     shorten: bool = False,
+    end_soak: bool = False,
 ) -> Plan:
     """Synthesise a chamber programme for ``spec`` (see :mod:`schedsyn.planner`).
 
@@ -331,6 +332,11 @@ def plan_experiment(
         1-2 min of LP solves each (up to ``timetable.MAX_LPS``). Default False; with a
         robust box, a continuation, another objective or ``timetable=False`` it is a
         :class:`ParameterError`.
+    end_soak : bool
+        The table will end with a soak until the device settles (``--end-soak``). An
+        ``informative`` plan then ends no farther from settled than the shortest plan run
+        on with holds does (otherwise it may spend its last minutes in a region far from
+        the end temperature, and the soak would not fit). Default False.
 
     Returns
     -------
@@ -381,6 +387,7 @@ def plan_experiment(
             graded=graded,
             effort=_Effort(lp_nonzeros_solved(), effort_s, stop),
             search_stop=stop,
+            end_soak=end_soak,
         )
     except InfeasiblePlanError as err:
         if not try_timetable or (stop is not None and stop()):
@@ -566,6 +573,7 @@ def _plan(
     graded: bool,
     effort: _Effort,
     search_stop: Callable[[], bool] | None,
+    end_soak: bool = False,
 ) -> Plan:
     """:func:`plan_experiment` within one effort limit, shared by the plans it makes on
     the way (fewer levels, longer segments); ``search_stop`` ends the search for the
@@ -817,7 +825,7 @@ def _plan(
     )
     if spec.objective == "informative":
         structure = best[0] if best is not None else None
-        plan = _make_informative(plan, model, ctx, structure, chosen, progress)
+        plan = _make_informative(plan, model, ctx, structure, chosen, progress, end_soak)
     if (
         programme.n_segments > spec.max_steps
         and cov.complete
@@ -910,10 +918,12 @@ def _make_informative(
     structure: Structure | None,
     chosen: _Candidate,
     progress: Callable[[str], None] | None,
+    end_soak: bool = False,
 ) -> Plan:
     """``objective = "informative"``: the complete shortest ``plan`` run on to the budget
     with every rate chosen for the drift fit (:mod:`.informative`), when the result checks
-    complete and within every limit; otherwise ``plan`` with a note saying why not."""
+    complete and within every limit; otherwise ``plan`` with a note saying why not.
+    ``end_soak``: the device ends no farther from settled than the shortest plan run on."""
     from ..design import plan_design, plan_space
 
     tic = time.perf_counter()
@@ -936,6 +946,10 @@ def _make_informative(
         res = informative_rates(
             ctx, structure, chosen.u, space, n_ext, progress=progress,
             margins=(0.8 * chosen.margin_g, 0.8 * chosen.margin_t), l1_weight=l1_weight,
+            end_settled=(
+                (_settled_c(limits, plan.params, model), limits.end_tol_c)
+                if end_soak else None
+            ),
         )  # fmt: skip
         if res is None:
             return keep("no change of the rates raised the information; the shortest stands")
@@ -1389,3 +1403,15 @@ def _coarser(
             )
             return _respec(alt, spec, note, False)
     return None
+
+
+def _settled_c(limits: Limits, params: ThermalParams, model: LinearThermalModel | None) -> float:
+    """Where the device settles with the chamber held at ``limits.end_c``, degC (the first-
+    order lag: ``end_c + dT0``; any linear model: its exact response long after a hold)."""
+    if model is None:
+        return limits.end_c + params.dt0_c
+    from ..programme import Programme
+    from ..simulate import simulate
+
+    hold = Programme(np.array([1.0]), np.array([0.0]), start_c=limits.end_c)
+    return float(simulate(hold, model=model, times_min=np.array([1e6])).t_c[0])
