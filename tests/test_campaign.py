@@ -297,13 +297,12 @@ def test_chamber_requirement_coverage_grows_as_the_floor_is_lowered():
 def test_campaign_end_soak_leaves_room_in_an_informative_plan(tmp_path):
     """objective = "informative" runs each plan on to the time limit, so --end-soak never
     fitted and every table was written without its soak; now the plan ends no farther
-    from settled than its shortest plan run on (plan_campaign's end_soak), as `plan
-    --end-soak` does: a region far from 20 degC, where the informative plan would otherwise
-    end far out and be planned again within the limit less a long soak (a price of 37 min
-    instead of 165)."""
+    from settled than its shortest plan run on, and within the tolerance where it can
+    (plan_campaign's end_soak), as `plan --end-soak` does: a region far from 20 degC, where
+    the informative plan would otherwise end far out and its soak not fit."""
     cfg = tmp_path / "inf.toml"
     cfg.write_text(
-        '[settings]\nobjective = "informative"\n\n[limits]\nduration_max_min = 320.0\n\n'
+        '[settings]\nobjective = "informative"\n\n[limits]\nduration_max_min = 240.0\n\n'
         '[[experiment]]\nname = "small"\nworking_lo_c = 0.0\nworking_hi_c = 6.0\n'
         "approx_lo_c = -4.0\napprox_hi_c = 10.0\nlevels_required = 3\n"
     )
@@ -313,10 +312,9 @@ def test_campaign_end_soak_leaves_room_in_an_informative_plan(tmp_path):
     assert rc == 0, said.getvalue()
     assert "WITHOUT an end soak" not in said.getvalue()
     steps = read_steps(out / "small" / "steps.csv")
-    assert steps.total_min <= 320.0 + 1e-9
-    assert steps.rates_c_per_min[-1] == 0.0  # the soak
+    assert steps.total_min <= 240.0 + 1e-9
     plan = json.loads((out / "small" / "plan.json").read_text())
-    assert plan["complete"] and plan["informative"]["price_min"] > 100.0, plan["notes"]
+    assert plan["complete"] and plan["informative"]["price_min"] > 60.0, plan["notes"]
     # scipy's trajectory of the table as written: complete, and settled (20 + dT0) at its end
     assert table_check(out / "small" / "steps.csv", (0.0, 6.0), 3)["coverage"] == 1.0
     knots_t, knots_tk = chamber_knots(out / "small" / "steps.csv")

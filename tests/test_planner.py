@@ -219,7 +219,14 @@ SMALL_ROBUST_REQUEST = (
     ExperimentSpec(**dict(ROBUST_SMALL, name="plan")),
     ThermalParams(),
     ROBUST_LIMITS,
-    {"model": None, **ROBUST_BOX, "progress": None, "effort_s": EFFORT_S, "shorten": False},
+    {
+        "model": None,
+        **ROBUST_BOX,
+        "progress": None,
+        "effort_s": EFFORT_S,
+        "shorten": False,
+        "end_soak": False,
+    },
 )
 
 

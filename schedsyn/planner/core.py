@@ -85,6 +85,10 @@ class _Effort:
     answered: bool = False
     #: what the optional searches that the limit stops are
     what: str = "some fewer-level counts or sub-regions"
+    #: the call's tables will end with a soak (plan_experiment's ``end_soak``): carried
+    #: here so that every plan made on the way (fewer levels, sub-regions, longer
+    #: segments) honours it too
+    end_soak: bool = False
 
     def spent(self) -> bool:
         over = self.stop is not None and self.stop()
@@ -385,9 +389,8 @@ def plan_experiment(
             require_complete=require_complete,
             continuation=continuation,
             graded=graded,
-            effort=_Effort(lp_nonzeros_solved(), effort_s, stop),
+            effort=_Effort(lp_nonzeros_solved(), effort_s, stop, end_soak=end_soak),
             search_stop=stop,
-            end_soak=end_soak,
         )
     except InfeasiblePlanError as err:
         if not try_timetable or (stop is not None and stop()):
@@ -573,7 +576,6 @@ def _plan(
     graded: bool,
     effort: _Effort,
     search_stop: Callable[[], bool] | None,
-    end_soak: bool = False,
 ) -> Plan:
     """:func:`plan_experiment` within one effort limit, shared by the plans it makes on
     the way (fewer levels, longer segments); ``search_stop`` ends the search for the
@@ -825,7 +827,9 @@ def _plan(
     )
     if spec.objective == "informative":
         structure = best[0] if best is not None else None
-        plan = _make_informative(plan, model, ctx, structure, chosen, progress, end_soak)
+        plan = _make_informative(
+            plan, model, ctx, structure, chosen, progress, end_soak=effort.end_soak
+        )
     if (
         programme.n_segments > spec.max_steps
         and cov.complete

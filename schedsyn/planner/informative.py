@@ -74,6 +74,12 @@ GAIN_TOL = 1e-4
 #: The pull into the approximation region: a sample 1 degC outside it costs as much as this
 #: many average samples inside are worth (``p / n_inside`` of log det each).
 PULL_SAMPLES_PER_C = 10.0
+#: With ``end_settled``: the margin kept inside the end tolerance for the rounded table, degC
+#: (the timetable stage's own, ``min(0.1, 0.4 end_tol_c)``).
+END_MARGIN_C = 0.1
+#: ... and the price of every degC the device ends beyond that, in ``log det`` per term: so
+#: steep that ending settled comes before any information (a whole run-on gains a few).
+END_PRICE_PER_C = 10.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -168,7 +174,7 @@ def informative_rates(
     each degC a sample is outside the approximation region (default
     :data:`PULL_SAMPLES_PER_C`; 0 for none); ``end_settled`` = (settled temperature,
     tolerance), degC, keeps the device's end no farther from settled than the start's
-    end, or than the tolerance if that is larger.
+    end, or than the tolerance less :data:`END_MARGIN_C` if that is larger.
     """
     terms_t = parse_terms(terms)
     n_seg_short = structure.n_seg
@@ -195,15 +201,26 @@ def informative_rates(
     pull = PULL_SAMPLES_PER_C if pull is None else pull
     price = pull * len(terms_t) / max(n_in, 1)
 
+    end_rows = None
+    end_target_c = math.inf
+    end_price = 0.0
+    if end_settled is not None:
+        settle_c, within_c = end_settled
+        # the device should end within the tolerance less a margin for the table's rounding
+        # (then no soak at all): a steep price on every degC beyond, and a hard bound of no
+        # farther than the start ends (the shortest plan run on with holds)
+        end_target_c = within_c - min(END_MARGIN_C, 0.4 * within_c)
+        end_price = END_PRICE_PER_C * len(terms_t)
+        end_bound = max(end_target_c, abs(float(t_start[-1]) - settle_c))
+        end_rows = (at[-1], float(bt[-1]), settle_c, end_bound)
+
     def merit(d: float, t: np.ndarray) -> float:
-        return d - price * _outside_c(t, space) if price else d
+        out = d - price * _outside_c(t, space) if price else d
+        if end_rows is not None:
+            out -= end_price * max(abs(float(t[-1]) - end_rows[2]) - end_target_c, 0.0)
+        return out
 
     m0 = merit(d0, t_start)
-    end_rows = None
-    if end_settled is not None:  # the device ends no farther from settled than it started
-        settle_c, within_c = end_settled
-        end_bound = max(within_c, abs(float(t_start[-1]) - settle_c))
-        end_rows = (at[-1], float(bt[-1]), settle_c, end_bound)
     g_env = space.gradient_range_c_per_min
     rho = TRUST_START_C_PER_MIN
     iterations = 0
@@ -212,14 +229,20 @@ def informative_rates(
         scale = float(np.abs(c).sum()) or 1.0
         cn = c / scale * n  # a gain of order one per unit mean rate change
         pull_n = price / scale * n
+        end_n = end_price / scale * n
 
-        def objective(x: cp.Variable, cn: np.ndarray = cn, pull_n: float = pull_n) -> cp.Expression:
+        def objective(
+            x: cp.Variable, cn: np.ndarray = cn, pull_n: float = pull_n, end_n: float = end_n
+        ) -> cp.Expression:
             out = -(cn @ x[:n]) + l1_weight * cp.norm1(cp.diff(x[:n]))
             if pull_n:
                 t = at @ x[:n] + bt
                 out += pull_n * cp.sum(
                     cp.pos(space.approx_lo_c - t) + cp.pos(t - space.approx_hi_c)
                 )
+            if end_rows is not None:
+                a_end, b_end, settle_c, _ = end_rows
+                out += end_n * cp.pos(cp.abs(a_end @ x[:n] + b_end - settle_c) - end_target_c)
             return out
 
         # gradients near the approximation region stay within the design space's envelope
