@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ParameterError
+from ..errors import InfeasiblePlanError, ParameterError
 from ..params import Limits, ThermalParams
 from ..planner import OBJECTIVES, ExperimentSpec, Plan
 from . import _common
@@ -429,7 +429,13 @@ def informative_with_room_for_soak(plan: Plan, replan, model=None) -> Plan:
         shorter = math.floor(candidate.limits.duration_max_min - over)
         if shorter < 1:
             break
-        candidate = replan(dataclasses.replace(limits, duration_max_min=float(shorter)))
+        try:
+            candidate = replan(dataclasses.replace(limits, duration_max_min=float(shorter)))
+        except (InfeasiblePlanError, ParameterError):
+            # nothing can be planned within the shorter limit: the soak does not fit, and
+            # with_end_soak says so for the request's own limit (not the shorter one's
+            # error: "no complete plan exists within 111 min" when 240 were asked)
+            break
         if not candidate.complete:
             break
     return plan
