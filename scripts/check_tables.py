@@ -80,6 +80,7 @@ def check(
         "min_levels": int(lev.min()),
         "device_min_c": float(temp.min()),
         "device_max_c": float(temp.max()),
+        "device_end_c": float(temp[-1]),
         "chamber_min_c": float(knots_tk.min()),
         "chamber_max_c": float(knots_tk.max()),
         "rate_min": float(rates.min()),

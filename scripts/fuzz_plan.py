@@ -14,17 +14,26 @@ is reported when:
   twenty, or a plan called complete is not complete by the re-check;
 * the table breaks the budget, the rate limits or the return to the end temperature;
 * a complete plan is shorter than its proven lower bound, or the exit code disagrees
-  with plan.json's ``complete``.
+  with plan.json's ``complete``;
+* with ``--end-soak``: the device is not within the end tolerance (0.5 degC) of where it
+  settles (the end temperature plus dT0) when the table ends, or the soak was refused in
+  more than one line.
+
+``--objective informative`` plans every request with that objective (the shortest plan
+run on to the budget for the drift fit); ``--end-soak`` appends the soak.
 
 One JSON line per request on stdout (the request, exit code, wall time, coverage both
 ways, duration, bound and problems); a summary on stderr; exit 1 when any request had a
 problem. Found so far (2026-11-26, seed 7, 30 requests): an error that said "lengthen the
 duration" for a bin the chamber floor cannot reach, and a ceiling request stuck with
-every band design (both fixed).
+every band design (both fixed); 2026-11-28, seed 45, 8 requests, ``--objective informative
+--end-soak``: "no complete plan exists within 111 min" for a 240-min request whose soak
+did not fit, and graded plans that ignored the end soak (both fixed).
 
 Usage::
 
     python scripts/fuzz_plan.py [--seed 7] [--requests 30] [--effort-s 15] [--out DIR]
+        [--objective shortest|margin|informative] [--end-soak]
 """
 
 from __future__ import annotations
@@ -69,8 +78,11 @@ def draw(rng: np.random.Generator, i: int) -> dict:
     }
 
 
-def arguments(req: dict, effort_s: float, out: Path) -> list[str]:
+def arguments(
+    req: dict, effort_s: float, out: Path, objective: str = "shortest", end_soak: bool = False
+) -> list[str]:
     args = ["plan", "--name", req["name"], "--effort-s", f"{effort_s:g}", "--out", str(out)]
+    args += ["--objective", objective] + (["--end-soak"] if end_soak else [])
     for key, value in req.items():
         if key == "name":
             continue
@@ -79,7 +91,9 @@ def arguments(req: dict, effort_s: float, out: Path) -> list[str]:
     return args + ["--quiet"]
 
 
-def problems_of(req: dict, proc: subprocess.CompletedProcess, out: Path) -> tuple[list, dict]:
+def problems_of(
+    req: dict, proc: subprocess.CompletedProcess, out: Path, end_soak: bool = False
+) -> tuple[list, dict]:
     """The problems of one answer, and the figures reported for it."""
     problems: list[str] = []
     seen: dict = {}
@@ -128,6 +142,14 @@ def problems_of(req: dict, proc: subprocess.CompletedProcess, out: Path) -> tupl
         problems.append(f"complete in {res['duration_min']:g} min, below its bound {bound:.1f}")
     if (proc.returncode == 0) != bool(plan["complete"]):
         problems.append(f"exit {proc.returncode} but complete = {plan['complete']}")
+    if end_soak:
+        settled_c = 20.0 + req["dt0_c"]
+        seen.update(device_end_c=res["device_end_c"], informative=plan.get("informative"))
+        if abs(res["device_end_c"] - settled_c) > 0.5 + 0.02:
+            problems.append(
+                f"--end-soak: the device ends at {res['device_end_c']:.2f} degC, "
+                f"{settled_c:g} when settled"
+            )
     return problems, seen
 
 
@@ -137,6 +159,10 @@ def main() -> int:
     ap.add_argument("--requests", type=int, default=30)
     ap.add_argument("--effort-s", type=float, default=15.0, help="each plan's effort limit")
     ap.add_argument("--out", type=Path, default=None, help="keep the plans here")
+    ap.add_argument(
+        "--objective", default="shortest", choices=("shortest", "margin", "informative")
+    )
+    ap.add_argument("--end-soak", action="store_true", help="append the end soak (plan --end-soak)")
     args = ap.parse_args()
     if args.requests < 1 or not args.effort_s > 0:
         ap.error("--requests must be >= 1 and --effort-s > 0")
@@ -150,9 +176,11 @@ def main() -> int:
         out = root / req["name"]
         tic = time.perf_counter()
         proc = subprocess.run(
-            command + arguments(req, args.effort_s, out), capture_output=True, text=True
+            command + arguments(req, args.effort_s, out, args.objective, args.end_soak),
+            capture_output=True,
+            text=True,
         )
-        problems, seen = problems_of(req, proc, out)
+        problems, seen = problems_of(req, proc, out, args.end_soak)
         bad += bool(problems)
         row = {"request": req, "exit": proc.returncode, "wall_s": time.perf_counter() - tic}
         print(json.dumps({**row, **seen, "problems": problems}), flush=True)

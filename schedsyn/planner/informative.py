@@ -33,7 +33,9 @@ informative plan from 381 to 461 of its 540 minutes in the region and its inform
 from 1.02 to 1.57 times the shortest plan's (docs/drift-fit.md). A run that ends in a
 region far from the end temperature needs a long soak to settle; when the table will end
 with one (``end_soak``), the device must end no farther from settled than the shortest
-plan run on with holds does, so the soak fits where that plan's would.
+plan run on with holds does, and every degC beyond the end tolerance (less
+``END_MARGIN_C``) costs ``END_PRICE_PER_C`` of ``log det`` per term, so that it ends
+settled wherever the programme can.
 
 The result is re-checked like every plan (rounded table, dense re-simulation): it is
 used only when it is complete and within every limit, otherwise the shortest plan stands
