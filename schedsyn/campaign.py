@@ -682,9 +682,8 @@ def plan_campaign(
         (:func:`~schedsyn.planner.plan_experiment`'s ``shorten``; 1-2 min more each);
         also when ``config.shorten``.
     end_soak : bool
-        The tables will end with a soak (``--end-soak``): an ``informative`` plan ends no
-        farther from settled than its shortest plan run on (``plan_experiment``'s
-        ``end_soak``).
+        The tables will end with a soak (``--end-soak``): an ``informative`` plan ends
+        settled where it can (``plan_experiment``'s ``end_soak``).
 
     Returns
     -------

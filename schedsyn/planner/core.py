@@ -338,9 +338,11 @@ def plan_experiment(
         :class:`ParameterError`.
     end_soak : bool
         The table will end with a soak until the device settles (``--end-soak``). An
-        ``informative`` plan then ends no farther from settled than the shortest plan run
-        on with holds does (otherwise it may spend its last minutes in a region far from
-        the end temperature, and the soak would not fit). Default False.
+        ``informative`` plan then ends settled (within ``end_tol_c``) wherever the
+        programme can, and never farther from settled than the shortest plan run on with
+        holds does (otherwise it may spend its last minutes in a region far from the end
+        temperature, and the soak would not fit). Every plan made on the way (graded,
+        fewer levels, longer segments) does the same. Default False.
 
     Returns
     -------
@@ -927,7 +929,8 @@ def _make_informative(
     """``objective = "informative"``: the complete shortest ``plan`` run on to the budget
     with every rate chosen for the drift fit (:mod:`.informative`), when the result checks
     complete and within every limit; otherwise ``plan`` with a note saying why not.
-    ``end_soak``: the device ends no farther from settled than the shortest plan run on."""
+    ``end_soak``: the device ends settled where it can (:func:`informative_rates`'s
+    ``end_settled``)."""
     from ..design import plan_design, plan_space
 
     tic = time.perf_counter()
