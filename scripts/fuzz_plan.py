@@ -16,8 +16,8 @@ is reported when:
 * a complete plan is shorter than its proven lower bound, or the exit code disagrees
   with plan.json's ``complete``;
 * with ``--end-soak``: the device is not within the end tolerance (0.5 degC) of where it
-  settles (the end temperature plus dT0) when the table ends, or the soak was refused in
-  more than one line.
+  settles (the end temperature plus dT0) when the table ends (a soak that does not fit is
+  a refusal, exit 2, held to the three lines above).
 
 ``--objective informative`` plans every request with that objective (the shortest plan
 run on to the budget for the drift fit); ``--end-soak`` appends the soak.
