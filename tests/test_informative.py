@@ -160,3 +160,20 @@ def test_the_settled_temperature_of_a_model_is_the_lag_s_own():
     limits = dataclasses.replace(Limits(), end_c=25.0)
     assert _settled_c(limits, params, None) == pytest.approx(29.5)
     assert _settled_c(limits, ThermalParams(), FirstOrderLag(params)) == pytest.approx(29.5)
+
+
+def test_a_graded_plan_keeps_what_its_objective_did(plans):
+    """A request planned graded returns the complete plan for fewer levels under the
+    request's own notes: that plan's "informative: ..." note (what it ran on and for how
+    much information) comes with it (it was dropped with the rest of its notes)."""
+    from schedsyn.planner.core import _Fewer, _graded
+
+    _, informative = plans
+    asked = dataclasses.replace(informative.spec, levels_required=SPEC.levels_required + 3)
+    graded = _graded(
+        None, asked, ThermalParams(), LIMITS, ("why not",), _Fewer(3, informative, (3,))
+    )
+    assert graded is not None and graded.levels_planned == 3 and not graded.complete
+    assert graded.notes[0] == "why not" and graded.notes[1].startswith("GRADED")
+    kept = [n for n in graded.notes if n.startswith("informative: ")]
+    assert kept == [n for n in informative.notes if n.startswith("informative: ")] != []

@@ -1151,6 +1151,8 @@ def _graded(
             f"fits in {limits.duration_max_min:g} min; levels searched: {searched}): "
             f"weakest bin {cov.min_levels} levels, {cov.coverage:.0%} of the bins at "
             f"{spec.levels_required}",
+            # what the fewer-level plan's own objective did (it is the plan returned)
+            *(n for n in fewer.plan.notes if n.startswith("informative:")),
         ),
         duration_lower_bound_min=duration_lower_bound(spec, params, limits).lower_bound_min,
     )
