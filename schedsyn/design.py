@@ -627,3 +627,109 @@ def level_floor_dph(
             raise ParameterError(f"{name} must be >= 0, got {v!r}")
     k = walk_dph_per_rt_h / 60.0  # deg/h per sqrt(s)
     return math.sqrt(k * k * entry_min * 60.0 + k * white_dph_per_rt_hz)
+
+
+@dataclass(frozen=True)
+class FitErrorPrediction:
+    """The drift fit's expected error for one run and one gyro's noise, deg/h
+    (:func:`predicted_fit_error`)."""
+
+    #: RMS over the working region's T x g grid of the fitted drift's standard error
+    total_dph: float
+    #: the same with the drift's level (the grid mean) removed: the error of its shape
+    shape_dph: float
+    #: samples of the run inside the approximation region that the prediction uses
+    n_samples: int
+    white_noise_dph_per_rt_hz: float
+    bias_walk_dph_per_rt_h: float
+    terms: str
+
+    def summary(self) -> str:
+        return (
+            f"predicted drift-fit error ({self.terms} model, white noise "
+            f"{self.white_noise_dph_per_rt_hz:g} °/h/√Hz, bias walk "
+            f"{self.bias_walk_dph_per_rt_h:g} °/h/√h; RMS over the working region's T x g "
+            f"grid): {self.total_dph:.4g} °/h, {self.shape_dph:.4g} °/h with the level "
+            "removed"
+        )
+
+
+def predicted_fit_error(
+    time_min: np.ndarray,
+    t_c: np.ndarray,
+    g_c_per_min: np.ndarray,
+    space: DesignSpace,
+    white_noise_dph_per_rt_hz: float,
+    bias_walk_dph_per_rt_h: float,
+    terms: str | tuple = "full",
+) -> FitErrorPrediction:
+    """How well a run determines the drift polynomial, given the gyro's noise, before it is
+    run: the standard error of the generalised-least-squares fit of ``terms`` to the
+    samples inside the approximation region, RMS over the working region's grid
+    (``space.grid("working")``), total and with the level removed.
+
+    The drift readings are modelled as the polynomial plus a bias random walk of ``K`` =
+    ``bias_walk_dph_per_rt_h`` started at ``time_min = 0`` (switch-on) and white noise of
+    density ``N`` = ``white_noise_dph_per_rt_hz`` averaged over each sample's period ``h``
+    (the spacing of ``time_min``; :mod:`schedsyn.gyro`'s readings), so their covariance is
+    ``Omega = K^2 min(t_i, t_j) + (N^2 / h) I`` and the coefficients' covariance is
+    ``(X' Omega^-1 X)^-1``. The temperature and gradient are taken as known (the planned
+    trajectory); the fit's own gradient estimate adds to this. Unlike the D-, A- and
+    I-criteria (which are per sample and blind to the walk), this counts the walk that
+    the region's samples share: it is what no choice of the samples' gradients removes
+    (:func:`level_floor_dph` is its bound on the level).
+    """
+    for name, v in (
+        ("white_noise_dph_per_rt_hz", white_noise_dph_per_rt_hz),
+        ("bias_walk_dph_per_rt_h", bias_walk_dph_per_rt_h),
+    ):
+        if not (math.isfinite(v) and v >= 0.0):
+            raise ParameterError(f"{name} must be a number >= 0, got {v!r}")
+    if white_noise_dph_per_rt_hz == 0.0 and bias_walk_dph_per_rt_h == 0.0:
+        raise ParameterError(
+            "a noise-free gyro is fitted exactly: give white_noise_dph_per_rt_hz or "
+            "bias_walk_dph_per_rt_h > 0"
+        )
+    time = np.asarray(time_min, dtype=float)
+    t = np.asarray(t_c, dtype=float)
+    g = np.asarray(g_c_per_min, dtype=float)
+    if not (time.shape == t.shape == g.shape) or time.ndim != 1 or time.size < 2:
+        raise ParameterError("time_min, t_c and g_c_per_min must be 1-D and of one length >= 2")
+    if not (np.isfinite(time).all() and (np.diff(time) > 0).all() and time[0] >= 0.0):
+        raise ParameterError("time_min must be finite, >= 0 and increasing (min since switch-on)")
+    period_s = np.diff(time, prepend=time[0] - (time[1] - time[0])) * 60.0
+    terms_t = parse_terms(terms)
+    inside = np.isfinite(t) & np.isfinite(g) & (t >= space.approx_lo_c) & (t <= space.approx_hi_c)
+    x = monomials(*space.code(t[inside], g[inside]), terms_t)
+    if x.shape[0] < x.shape[1]:
+        raise ParameterError(
+            f"{int(inside.sum())} samples in the approximation region [{space.approx_lo_c:g}, "
+            f"{space.approx_hi_c:g}] °C, fewer than the {x.shape[1]} terms to fit"
+        )
+    hours = time[inside] / 60.0
+    omega = bias_walk_dph_per_rt_h**2 * np.minimum.outer(hours, hours)
+    omega[np.diag_indices_from(omega)] += white_noise_dph_per_rt_hz**2 / period_s[inside]
+    try:
+        chol = np.linalg.cholesky(omega)
+    except np.linalg.LinAlgError:  # no white noise and a sample at switch-on
+        raise ParameterError(
+            "the readings' covariance is singular: give white_noise_dph_per_rt_hz > 0"
+        ) from None
+    w = np.linalg.solve(chol, x)  # Omega^-1/2 X
+    info = w.T @ w
+    if not np.linalg.cond(info) < SINGULAR_COND:
+        raise ParameterError(
+            "the run's samples do not determine every term (singular information): fit "
+            "fewer terms, or plan a run with more distinct gradients in the region"
+        )
+    cov = np.linalg.inv(info)
+    z = monomials(*space.code(*space.grid("working")), terms_t)
+    zc = z - z.mean(axis=0)
+    return FitErrorPrediction(
+        total_dph=math.sqrt(float(np.einsum("ij,jk,ik->i", z, cov, z).mean())),
+        shape_dph=math.sqrt(max(float(np.einsum("ij,jk,ik->i", zc, cov, zc).mean()), 0.0)),
+        n_samples=int(inside.sum()),
+        white_noise_dph_per_rt_hz=float(white_noise_dph_per_rt_hz),
+        bias_walk_dph_per_rt_h=float(bias_walk_dph_per_rt_h),
+        terms=term_set_name(terms_t),
+    )

@@ -2,14 +2,14 @@
 
 For each experiment of a planned campaign folder (``schedsyn campaign ... --out DIR``):
 the minutes of the planning model's 1-min samples inside the approximation region, and
-the walk-aware prediction of the fitted drift's error, computed before anything is run:
-the exact generalised-least-squares prediction error of the full cubic over the working
-grid (``DesignSpace.grid("working")``) under ``Omega = K^2 min(t_i, t_j) + sigma^2 I``
-(a bias walk of ``K`` deg/h/sqrt(h) started at switch-on, white noise of ``N``
-deg/h/sqrt(Hz) averaged over a minute), total and shape (offset removed); the same for a
-paper-like programme of the same duration. With ``--cases``, the RMS over gyros of the
-selected model's total and shape error from ``scripts/bench_fit.py``'s ``cases.csv``
-files (and, for two of them, the per-gyro shape ratio of the second to the first).
+the walk-aware prediction of the fitted drift's error, computed before anything is run
+(``schedsyn.design.predicted_fit_error``: the generalised-least-squares error of the full
+cubic over the working grid under a bias walk of ``K`` deg/h/sqrt(h) started at
+switch-on and white noise of ``N`` deg/h/sqrt(Hz), on 1-min samples), total and shape
+(offset removed); the same for a paper-like programme of the same duration. With
+``--cases``, the RMS over gyros of the selected model's total and shape error from
+``scripts/bench_fit.py``'s ``cases.csv`` files (and, for two of them, the per-gyro shape
+ratio of the second to the first).
 
     python scripts/informative_figures.py out/informative [--config data/paper_campaign.toml]
         [--k 0.0125] [--n 0.3] [--cases A/cases.csv B/cases.csv]
@@ -26,29 +26,18 @@ import pandas as pd
 
 from schedsyn.baseline import paper_like_programme
 from schedsyn.campaign import load_campaign
-from schedsyn.design import DesignSpace
+from schedsyn.design import DesignSpace, predicted_fit_error
 from schedsyn.programme import read_steps
 from schedsyn.simulate import simulate
-from schedsyn.terms import monomials, parse_terms
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def walk_aware(programme, space: DesignSpace, k: float, n: float) -> tuple[int, float, float]:
     """(minutes in the region, predicted RMS error total, shape), deg/h."""
-    terms = parse_terms("full")
     traj = simulate(programme, space.params, dt_min=1.0, t0_c=space.limits.t_init_c)
-    t, g = traj.t_c, traj.g_c_per_min
-    inside = (t >= space.approx_lo_c) & (t <= space.approx_hi_c)
-    x = monomials(*space.code(t[inside], g[inside]), terms)
-    hours = traj.time_min[inside] / 60.0
-    omega = k**2 * np.minimum.outer(hours, hours) + (n**2 / 60.0) * np.eye(hours.size)
-    cov = np.linalg.inv(x.T @ np.linalg.solve(omega, x))
-    z = monomials(*space.code(*space.grid("working")), terms)
-    zc = z - z.mean(axis=0)
-    total = math.sqrt(np.einsum("ij,jk,ik->i", z, cov, z).mean())
-    shape = math.sqrt(np.einsum("ij,jk,ik->i", zc, cov, zc).mean())
-    return int(inside.sum()), total, shape
+    pred = predicted_fit_error(traj.time_min, traj.t_c, traj.g_c_per_min, space, n, k)
+    return pred.n_samples, pred.total_dph, pred.shape_dph
 
 
 def main() -> None:

@@ -131,6 +131,7 @@ def test_simulate_writes_a_gyro_log(tmp_path, capsys):
     assert rc == 0
     text = capsys.readouterr().out
     assert "gyro log" in text and "drift-fit design" in text and "I-efficiency" in text
+    assert "predicted drift-fit error (full model, white noise" in text
     log = read_log(log_path)
     assert log.drift_dph is not None and np.isfinite(log.drift_dph).all()
     assert np.allclose(np.diff(log.time_s), 30.0)

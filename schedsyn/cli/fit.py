@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import argparse
 
+import numpy as np
+
 from ..driftfit import (
     ESTIMATORS,
     OUTLIER_POLICIES,
@@ -175,6 +177,7 @@ def simulate_hook(
     approx = tuple(args.approx) if args.approx else DesignSpace.default_approx(lo, hi, limits)
     written: list[str] = []
     lines: list[str] = []
+    space: DesignSpace | None = None
     try:
         space = DesignSpace(lo, hi, approx[0], approx[1], params, limits)
     except ParameterError as exc:
@@ -211,4 +214,27 @@ def simulate_hook(
             "bias_walk_dph for checks)"
         )
         written.append(str(path))
+        if space is not None:
+            lines.append(_predicted_error_line(traj, space, gyro))
     return written, lines
+
+
+def _predicted_error_line(traj, space, gyro) -> str:
+    """What the fit of this run can achieve with this gyro's noise (1-min samples of the
+    simulated trajectory: the white noise averages alike over a minute's readings)."""
+    from ..design import predicted_fit_error
+    from ..errors import ParameterError
+
+    time_min = np.arange(0.0, float(traj.time_min[-1]) + 1e-9, 1.0)
+    try:
+        pred = predicted_fit_error(
+            time_min,
+            np.interp(time_min, traj.time_min, traj.t_c),
+            np.interp(time_min, traj.time_min, traj.g_c_per_min),
+            space,
+            gyro.white_noise_dph_per_rt_hz,
+            gyro.bias_walk_dph_per_rt_h,
+        )
+    except ParameterError as exc:
+        return f"predicted drift-fit error: not reported ({exc})"
+    return pred.summary()
