@@ -55,6 +55,9 @@ from .programme import Programme
 from .synth import synth_log
 from .terms import EXPONENTS, TERMS, evaluate
 
+#: Keys a ``[gyro]`` table must give (0 is a value, a missing key is not): the
+#: polynomial's origin and the noise, which defaults would change without a word.
+REQUIRED_GYRO_KEYS = ("t_ref_c", "white_noise_dph_per_rt_hz", "bias_walk_dph_per_rt_h")
 #: Keys of the ``[gyro]`` table besides ``drift_dph``.
 GYRO_KEYS = (
     "name",
@@ -180,7 +183,18 @@ def gyro_from_dict(doc: Mapping, source: str = "<gyro>") -> Gyro:
             f"{source}: [gyro] has unknown key(s) {unknown}; allowed: "
             f"{', '.join(GYRO_KEYS)}, drift_dph"
         )
-    coefs = table.get("drift_dph", {})
+    missing = [k for k in REQUIRED_GYRO_KEYS if k not in table]
+    if missing:
+        raise ParameterError(
+            f"{source}: [gyro] lacks {', '.join(missing)}; give each (0 for no noise of that "
+            "kind): t_ref_c is the temperature the coefficients are about, degC"
+        )
+    if "drift_dph" not in table:
+        raise ParameterError(
+            f"{source}: no [gyro.drift_dph] table: give the drift's coefficients as term = "
+            f"number (terms {', '.join(TERMS)}; a missing term is 0)"
+        )
+    coefs = table["drift_dph"]
     if not isinstance(coefs, Mapping):
         raise ParameterError(f"{source}: [gyro.drift_dph] must be a table of term = number")
     kwargs = {k: table[k] for k in GYRO_KEYS if k in table}

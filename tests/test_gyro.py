@@ -55,15 +55,30 @@ def test_toml_round_trip(tmp_path, rng):
     "doc, words",
     [
         ({}, "no [gyro] table"),
-        ({"gyro": {"drift_dph": {"t4": 1.0}}}, "unknown drift term(s) t4"),
-        ({"gyro": {"white_noise_dph_per_rt_hz": -1.0}}, "white_noise_dph_per_rt_hz must be >= 0"),
-        ({"gyro": {"t_ref_c": "warm"}}, "t_ref_c must be a number"),
-        ({"gyro": {"bias": 1.0}}, "unknown key(s) ['bias']"),
+        ({"drift_dph": {"t4": 1.0}}, "unknown drift term(s) t4"),
+        ({"white_noise_dph_per_rt_hz": -1.0}, "white_noise_dph_per_rt_hz must be >= 0"),
+        ({"t_ref_c": "warm"}, "t_ref_c must be a number"),
+        ({"bias": 1.0}, "unknown key(s) ['bias']"),
+        # a missing key would silently take a default (t_ref 20 degC, no noise, no drift)
+        ({"t_ref_c": None}, "[gyro] lacks t_ref_c; give each"),
+        ({"white_noise_dph_per_rt_hz": None, "bias_walk_dph_per_rt_h": None},
+         "lacks white_noise_dph_per_rt_hz, bias_walk_dph_per_rt_h"),
+        ({"drift_dph": None}, "no [gyro.drift_dph] table"),
     ],
-)
+)  # fmt: skip
 def test_bad_gyro_files_name_the_problem(doc, words):
+    """Each change to a good [gyro] table (None: the key left out) is refused in one line
+    naming the key."""
+    good = {
+        "t_ref_c": 20.0,
+        "white_noise_dph_per_rt_hz": 0.3,
+        "bias_walk_dph_per_rt_h": 0.0,
+        "drift_dph": {"1": 0.5},
+    }
+    assert gyro_from_dict({"gyro": good}, "g.toml").coefficients_dph["1"] == 0.5
+    table = {k: v for k, v in {**good, **doc}.items() if v is not None}
     with pytest.raises(ParameterError) as exc:
-        gyro_from_dict(doc, "g.toml")
+        gyro_from_dict({"gyro": table} if doc else {}, "g.toml")
     assert words in str(exc.value) and "\n" not in str(exc.value)
 
 
@@ -142,7 +157,10 @@ def test_simulate_writes_a_gyro_log(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--gyro" in err
     bad = tmp_path / "bad.toml"
-    bad.write_text("[gyro]\nwhite_noise_dph_per_rt_hz = -2\n")
+    bad.write_text(
+        "[gyro]\nt_ref_c = 20\nbias_walk_dph_per_rt_h = 0\nwhite_noise_dph_per_rt_hz = -2\n"
+        "[gyro.drift_dph]\n"
+    )
     assert (
         main(
             [
