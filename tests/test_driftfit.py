@@ -344,6 +344,30 @@ def _dense_objective(t_h, d, x, lam, reml):
     return (m2 + np.linalg.slogdet(a)[1] if reml else m2), s2
 
 
+@pytest.mark.parametrize("n_rows, period_s", [(3240, 10.0), (32400, 1.0)])
+def test_the_noise_model_counts_every_reading(n_rows, period_s):
+    """A 9-h log at 10 s and at 1 s (white 0.3 deg/h/sqrt(Hz), walk 0.01 deg/h/sqrt(h)),
+    fitted whole, as 2000 block means, and with one reading left out: the same white
+    noise and walk. (Every k-th row, as before: one reading blanked moved the 10-s log's
+    walk from 0.0076 to 0.00003, and the 1-s log's every 17th row lost the walk.)"""
+    rng = np.random.default_rng(0)
+    t = np.arange(n_rows) * period_s
+    x = np.column_stack([np.ones(n_rows), np.sin(t / 3000), (t / 30000) ** 2])
+    white = rng.normal(0, 0.3 / math.sqrt(period_s), n_rows)
+    walk = np.cumsum(rng.normal(0, 0.01 * math.sqrt(period_s / 3600), n_rows))
+    d = x @ [1.0, 0.1, 0.05] + white + walk
+    whole = noise_fit(t, d, x, max_rows=n_rows)
+    for fit in (
+        noise_fit(t, d, x, max_rows=2000),
+        noise_fit(np.delete(t, 7), np.delete(d, 7), np.delete(x, 7, axis=0), max_rows=2000),
+        noise_fit(np.delete(t, 7), np.delete(d, 7), np.delete(x, 7, axis=0)),
+    ):
+        assert fit.sigma_dph == pytest.approx(whole.sigma_dph, rel=0.03)
+        assert fit.walk_dph_per_rt_h == pytest.approx(whole.walk_dph_per_rt_h, rel=0.1)
+        assert fit.walk_upper_dph_per_rt_h == pytest.approx(whole.walk_upper_dph_per_rt_h, rel=0.1)
+    assert whole.sigma_dph == pytest.approx(0.3 / math.sqrt(period_s), rel=0.05)
+
+
 @pytest.mark.parametrize("reml", [True, False])
 def test_noise_fit_matches_dense_likelihood(rng, reml):
     """The Kalman-whitened profile likelihood equals the dense Gaussian one, and its
@@ -702,6 +726,13 @@ def test_cli_fit_terms_option_and_errors(logs_dir, tmp_path, capsys):
     assert main(["fit", str(no_drift), "--region", "-50", "-21", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "drift_dph" in err
+    # a stuck channel (0 or a constant on every row): said so, not "use a longer log"
+    for value in (0.0, 0.5):
+        stuck = tmp_path / f"stuck{value:g}.csv"
+        pd.read_csv(logs_dir / "run1.csv").assign(drift_dph=value).to_csv(stuck, index=False)
+        assert main(["fit", str(stuck), "--region", "-50", "-21", "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"drift_dph reads {value:g} °/h on every one" in err
 
 
 @pytest.mark.parametrize(
