@@ -853,13 +853,19 @@ def test_fit_leaves_out_glitches_lists_them_and_refuses_a_bad_column(programme):
         FitSettings(outliers="ignore")
 
 
-def test_cli_fit_never_overwrites_its_input(logs_dir, tmp_path, capsys):
-    src = tmp_path / "compensation.csv"
+@pytest.mark.parametrize("name", ["compensation.csv", "surface.png"])
+def test_cli_fit_never_overwrites_its_input(logs_dir, tmp_path, capsys, name):
+    """A log in --out under the name of an output (the last one written among them, too)
+    is refused before anything is written: the folder keeps what it held (red team:
+    coefficients.json and compensation.csv were replaced before residuals.csv refused)."""
+    src = tmp_path / name
     src.write_bytes((logs_dir / "run1.csv").read_bytes())
-    before = src.read_bytes()
+    earlier = tmp_path / "coefficients.json"
+    earlier.write_text('{"from": "an earlier fit"}')
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
     assert main(["fit", str(src), "--region", "-50", "-21", "--out", str(tmp_path)]) == 2
     assert "refusing to overwrite" in capsys.readouterr().err
-    assert src.read_bytes() == before
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
 
 
 def test_drift_rows_in_a_long_sensor_dropout_are_left_out_and_said(programme):

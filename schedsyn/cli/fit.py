@@ -85,6 +85,17 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+#: The files ``schedsyn fit`` writes into ``--out``.
+FIT_OUTPUTS = (
+    "coefficients.json",
+    "compensation.csv",
+    "residuals.csv",
+    "residuals_t.png",
+    "residuals_g.png",
+    "surface.png",
+)
+
+
 def run(args: argparse.Namespace) -> int:
     from .. import fitplots
 
@@ -96,6 +107,10 @@ def run(args: argparse.Namespace) -> int:
         min_points_per_bin=args.min_points_per_bin,
         outliers=args.outliers,
     )
+    inputs = [args.log] + ([args.holdout] if args.holdout else [])
+    # every output is checked against the inputs before any work and written into a
+    # staging folder that moves into place as a whole (a refusal leaves nothing written)
+    out = _common.output_dir(args.out, "out/fit", inputs, FIT_OUTPUTS)
     log = read_log(args.log)
     holdout = read_log(args.holdout) if args.holdout else None
     for one in (log, holdout):
@@ -106,30 +121,24 @@ def run(args: argparse.Namespace) -> int:
     given = args.tau_s is not None or args.dt0_c is not None
     params = _common.thermal_params(args) if given else None
     fit = fit_drift(log, tuple(args.region), settings, params, holdout=holdout)
-    out = _common.out_dir(args.out, "out/fit")
-    inputs = [args.log] + ([args.holdout] if args.holdout else [])
     doc = fit.to_json_dict()
     doc["log_readings"] = _common.log_record(log)
-    write_json_atomic(out / "coefficients.json", doc, inputs)
-    write_frame_atomic(out / "compensation.csv", fit.compensation_frame(), inputs)
-    write_frame_atomic(out / "residuals.csv", fit.residual_frame(), inputs)
+    write_json_atomic(out.path("coefficients.json"), doc)
+    write_frame_atomic(out.path("compensation.csv"), fit.compensation_frame())
+    write_frame_atomic(out.path("residuals.csv"), fit.residual_frame())
     fitplots.save_figure(
         fitplots.fit_residual_plot(fit, "t", title="residuals against temperature"),
-        out / "residuals_t.png",
-        inputs,
+        out.path("residuals_t.png"),
     )
     fitplots.save_figure(
         fitplots.fit_residual_plot(fit, "g", title="residuals against gradient"),
-        out / "residuals_g.png",
-        inputs,
+        out.path("residuals_g.png"),
     )
-    fitplots.save_figure(fitplots.fit_surface_plot(fit), out / "surface.png", inputs)
+    fitplots.save_figure(fitplots.fit_surface_plot(fit), out.path("surface.png"))
+    out.commit()
     for line in fit.summary_lines():
         print(line)
-    print(
-        f"wrote {out}/coefficients.json, compensation.csv, residuals.csv, residuals_t.png, "
-        "residuals_g.png, surface.png"
-    )
+    print(f"wrote {out.target}/{', '.join(FIT_OUTPUTS)}")
     return 0
 
 
