@@ -73,6 +73,9 @@ I_OPTIMAL_TOL = 0.005
 SINGULAR_COND = 1e12
 #: Planned samples are taken every minute (the planner's sample spacing).
 SAMPLE_MIN = 1.0
+#: A run that stops this short of an end of the approximation region is said not to reach
+#: it (the fit's bins there would be empty), degC.
+REACH_TOL_C = 0.5
 
 
 # -- reachable gradients ----------------------------------------------------------------
@@ -389,6 +392,9 @@ class DesignReport:
         2-norm condition number of the coded model matrix.
     variance_map : DataFrame
         ``t_c, g_c_per_min, prediction_variance`` over the working region's grid.
+    reached_lo_c, reached_hi_c : float
+        The coldest and warmest sample inside the approximation region, degC (NaN if
+        none): a fit over the region needs samples across it.
     """
 
     space: DesignSpace
@@ -404,6 +410,8 @@ class DesignReport:
     log_det: float
     condition_number: float
     variance_map: pd.DataFrame
+    reached_lo_c: float = math.nan
+    reached_hi_c: float = math.nan
 
     @property
     def in_region_fraction(self) -> float:
@@ -431,7 +439,25 @@ class DesignReport:
             "i_optimal_prediction_variance": self.i_optimal_variance,
             "log_det_information": self.log_det,
             "condition_number": self.condition_number,
+            "reached_lo_c": self.reached_lo_c,
+            "reached_hi_c": self.reached_hi_c,
         }
+
+    def unreached(self) -> str:
+        """What the run misses of the approximation region ("" when it reaches across
+        it to within :data:`REACH_TOL_C`)."""
+        lo, hi = self.space.approx_lo_c, self.space.approx_hi_c
+        if not self.n_in_region:
+            return f"the run never enters the approximation region {lo:g} .. {hi:g} °C"
+        if self.reached_lo_c - lo <= REACH_TOL_C and hi - self.reached_hi_c <= REACH_TOL_C:
+            return ""
+        fit_lo = lo if self.reached_lo_c - lo <= REACH_TOL_C else math.ceil(self.reached_lo_c)
+        fit_hi = hi if hi - self.reached_hi_c <= REACH_TOL_C else math.floor(self.reached_hi_c)
+        return (
+            f"the run reaches only {self.reached_lo_c:.1f} .. {self.reached_hi_c:.1f} °C of the "
+            f"approximation region {lo:g} .. {hi:g} °C: fit over what it reaches (schedsyn fit "
+            f"--region {fit_lo:g} {fit_hi:g})"
+        )
 
     def summary(self) -> str:
         g_lo, g_hi = self.space.gradient_range_c_per_min
@@ -441,13 +467,18 @@ class DesignReport:
             f"{g_lo:.2f} .. {g_hi:.2f} °C/min; {self.in_region_fraction:.0%} of the run in "
             "the region): "
         )
+        tail = f"; {self.unreached()}" if self.unreached() else ""
         if self.singular:
-            return head + "singular: these samples cannot determine every term"
-        return head + (
-            f"D-efficiency {self.d_efficiency_pct:.1f} %, A-efficiency "
-            f"{self.a_efficiency_pct:.2f} %, I-efficiency {self.i_efficiency_pct:.0f} % of the "
-            f"I-optimal design; prediction variance over the working region mean "
-            f"{self.mean_variance:.1f}, max {self.max_variance:.1f} (units of σ²/n)"
+            return head + "singular: these samples cannot determine every term" + tail
+        return (
+            head
+            + (
+                f"D-efficiency {self.d_efficiency_pct:.1f} %, A-efficiency "
+                f"{self.a_efficiency_pct:.2f} %, I-efficiency {self.i_efficiency_pct:.0f} % of the "
+                f"I-optimal design; prediction variance over the working region mean "
+                f"{self.mean_variance:.1f}, max {self.max_variance:.1f} (units of σ²/n)"
+            )
+            + tail
         )
 
 
@@ -474,6 +505,9 @@ def design_report(
     t = np.asarray(t_c, dtype=float)
     x = model_matrix(t, g_c_per_min, space, terms_t)
     n_in, p = x.shape
+    g = np.asarray(g_c_per_min, dtype=float)
+    t_in = t[np.isfinite(t) & np.isfinite(g) & (t >= space.approx_lo_c) & (t <= space.approx_hi_c)]
+    reached = (float(t_in.min()), float(t_in.max())) if t_in.size else (math.nan, math.nan)
     gt, gg = space.grid("working")
     gu, gv = space.code(gt, gg)
     xg = monomials(gu, gv, terms_t)
@@ -497,6 +531,8 @@ def design_report(
             variance_map=pd.DataFrame(
                 {"t_c": gt, "g_c_per_min": gg, "prediction_variance": inf_map}
             ),
+            reached_lo_c=reached[0],
+            reached_hi_c=reached[1],
         )
     m = x.T @ x / n_in
     m_inv = np.linalg.inv(m)
@@ -517,6 +553,8 @@ def design_report(
         log_det=float(np.linalg.slogdet(m)[1]),
         condition_number=cond,
         variance_map=pd.DataFrame({"t_c": gt, "g_c_per_min": gg, "prediction_variance": var}),
+        reached_lo_c=reached[0],
+        reached_hi_c=reached[1],
     )
 
 

@@ -446,3 +446,30 @@ def test_predicted_fit_error_refuses_what_it_cannot_predict():
     far = DesignSpace(60.0, 70.0, 58.0, 72.0)  # the run never gets there
     with pytest.raises(ParameterError, match="fewer than the 10 terms"):
         predicted_fit_error(traj.time_min, traj.t_c, traj.g_c_per_min, far, 0.3, 0.01)
+
+
+def test_the_report_says_what_the_run_misses_of_the_approximation_region():
+    """The paper's W1 baseline reaches -51.7 .. -20.1 degC (scipy's trajectory, below):
+    across W1's approximation region [-52, -20] to within REACH_TOL_C, not across
+    [-60, -20], where the report names what it reaches and the region to fit over (red
+    team: the campaign's W2 reaches -32.4 of its -40 and the report said nothing, while
+    `fit --region -40 10` then refused the log)."""
+    from independent import chamber_knots, ode_trajectories
+
+    from schedsyn.design import REACH_TOL_C
+
+    knots_t, knots_tk = chamber_knots(BASELINE)
+    _, temp, grad = ode_trajectories(knots_t, knots_tk, 2400.0, 3.0, dt_min=1.0)
+    t, g = temp[0], grad[0]
+    coldest = float(t.min())
+    assert -52.0 + REACH_TOL_C > coldest > -60.0 + REACH_TOL_C
+    across = design_report(t, g, W1)
+    assert across.unreached() == "" and "reaches only" not in across.summary()
+    wide = design_report(t, g, DesignSpace(-50.0, -30.0, -60.0, -20.0))
+    assert wide.reached_lo_c == pytest.approx(coldest)
+    said = wide.unreached()
+    assert said.startswith(f"the run reaches only {coldest:.1f} .. ")
+    assert said.endswith(f"(schedsyn fit --region {math.ceil(coldest):g} -20)")
+    assert said in wide.summary()
+    far = design_report(t, g, DesignSpace(60.0, 70.0, 58.0, 72.0))
+    assert "never enters the approximation region 58 .. 72" in far.summary()
