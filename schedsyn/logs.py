@@ -713,6 +713,12 @@ def read_log(
                 f"{path}: line 1 is a spreadsheet's {first.strip()!r} line, not the header; "
                 "delete that line (or save the log as plain CSV) and read it again"
             )
+        if first.lstrip().startswith("#"):
+            raise LogFormatError(
+                f"{path}: line 1 is a comment ({first.strip()[:60]!r}), not the header: a log "
+                "starts with its column names (time_s, t_int_c, ...); delete the lines that "
+                "begin with # above them and read it again"
+            )
         _check_unique_columns(_header_names(head, dialect.separator), str(path))
         try:
             with pd.read_csv(

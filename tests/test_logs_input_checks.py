@@ -277,3 +277,16 @@ def test_a_spreadsheet_sep_line_is_named_with_the_fix(tmp_path, hint):
     path.write_text(hint + "\n" + "\n".join(rows) + "\n")
     with pytest.raises(LogFormatError, match=r"line 1 is a spreadsheet's .*sep=.*delete"):
         read_log(path)
+
+
+def test_a_comment_line_above_the_header_is_named_with_the_fix(tmp_path):
+    """A logger's '# exported by ...' line above the header was read as the header: the
+    log was refused for 'missing required column(s) ... found # exported by chamber X'
+    (red team). It is named as a comment, with the fix."""
+    path = tmp_path / "commented.csv"
+    rows = ["time_s,t_int_c"] + [f"{10 * i},{20 + 0.01 * i:.2f}" for i in range(30)]
+    path.write_text("# exported by chamber X\n" + "\n".join(rows) + "\n")
+    with pytest.raises(LogFormatError, match=r"line 1 is a comment .*# exported by chamber X"):
+        read_log(path)
+    path.write_text("\n".join(rows) + "\n")
+    assert read_log(path).n_rows == 30
