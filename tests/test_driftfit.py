@@ -726,6 +726,14 @@ def test_cli_fit_terms_option_and_errors(logs_dir, tmp_path, capsys):
     assert main(["fit", str(no_drift), "--region", "-50", "-21", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "drift_dph" in err
+    # a log with a gap in its sampling is fitted, and the gap said (red team: no word)
+    gappy = tmp_path / "gappy.csv"
+    frame = pd.read_csv(logs_dir / "run1.csv")
+    cut = (frame["time_s"] > 12000) & (frame["time_s"] < 13200)
+    frame[~cut].to_csv(gappy, index=False)
+    assert main(["fit", str(gappy), "--region", "-50", "-21", "--out", str(tmp_path / "gap")]) == 0
+    err = capsys.readouterr().err
+    assert "1 gap(s) in the sampling, the longest 20.0 min (12000 .. 13200 s)" in err, err
     # a stuck channel (0 or a constant on every row): said so, not "use a longer log"
     for value in (0.0, 0.5):
         stuck = tmp_path / f"stuck{value:g}.csv"

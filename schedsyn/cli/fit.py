@@ -116,6 +116,13 @@ def run(args: argparse.Namespace) -> int:
     for one in (log, holdout):
         if one is not None:
             _common.log_warnings(one)
+            if one.report.gaps_s:  # fitted as they are, but the user should know
+                a, b = max(one.report.gaps_s, key=lambda gap: gap[1] - gap[0])
+                _common.stderr(
+                    f"note: {one.source}: {len(one.report.gaps_s)} gap(s) in the sampling, the "
+                    f"longest {(b - a) / 60:.1f} min ({a:g} .. {b:g} s); the fit uses the "
+                    "readings on either side"
+                )
     # the smoother's model: as given (either option; the other at its default), else
     # identified from each log
     given = args.tau_s is not None or args.dt0_c is not None
