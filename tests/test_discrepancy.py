@@ -695,3 +695,38 @@ def test_the_block_mean_correction_s_second_derivative_is_exact_for_a_parabola()
     half = data.subset(float(data.time_min[len(data.time_min) // 2]))
     for got, want in zip(half.t_spacing, _spacing(half.time_min), strict=True):
         np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("sample_s", [1.0, 10.0])
+def test_a_setpoint_logged_to_a_tenth_of_a_degree_is_rebuilt_as_its_ramps(sample_s):
+    """The paper-like table and the blind programmes, their setpoint logged to 0.1 degC:
+    rebuilt with the table's own number of segments and within 0.01 degC RMS of the
+    table's setpoint (evaluated here by interpolating the table's knots). With the 0.05
+    degC tolerance alone, 1-s logs became staircases (6566 segments for a 58-step plan,
+    450 s to diagnose) and, once that was widened, the corners stayed on samples half a
+    step off (0.027 degC RMS, a false 'chamber_lag' on a clean log)."""
+    progs = dict(blind_programmes())
+    progs["exp1"] = read_steps(ROOT / "data" / "baseline_exp1_steps.csv")
+    for name, prog in progs.items():
+        knots_min = np.concatenate(([0.0], np.cumsum(prog.durations_min)))
+        knots_c = prog.start_c + np.concatenate(
+            ([0.0], np.cumsum(prog.durations_min * prog.rates_c_per_min))
+        )
+        time_s = np.arange(0.0, knots_min[-1] * 60.0 + 1e-9, sample_s)
+        true_c = np.interp(time_s / 60.0, knots_min, knots_c)
+        rebuilt = setpoint_programme(time_s, np.round(true_c, 1))
+        err = rebuilt.chamber_at(time_s / 60.0) - true_c
+        assert rebuilt.n_segments == prog.n_segments, name
+        assert math.sqrt(float(np.mean(err**2))) < 0.01, name
+
+
+def test_a_clean_log_with_a_setpoint_to_a_tenth_of_a_degree_is_clean():
+    """1-s readings, setpoint logged to 0.1 degC, no effect: 'none' (red team: 'none'
+    after 450 s with the staircase; 'chamber_lag' of 0.3 s with corners left on samples)."""
+    prog = blind_programmes()["cold"]
+    frame = synth_effect_log(
+        prog, ModelSpec(2400.0, 3.0, "none", {}), sample_s=1.0, noise_c=0.01, seed=4,
+        with_air=False,
+    )  # fmt: skip
+    frame["tk_set_c"] = np.round(frame["tk_set_c"], 1)
+    assert diagnose_frame(frame).effect == "none"
