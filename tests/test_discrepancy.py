@@ -730,3 +730,22 @@ def test_a_clean_log_with_a_setpoint_to_a_tenth_of_a_degree_is_clean():
     )  # fmt: skip
     frame["tk_set_c"] = np.round(frame["tk_set_c"], 1)
     assert diagnose_frame(frame).effect == "none"
+
+
+@pytest.mark.parametrize("name", ["warm", "exp1"])
+def test_a_rate_limit_just_below_the_fastest_ramp_is_found(name):
+    """The chamber cools at 95 % of the programme's fastest cooling ramp: from the start
+    grid's limits at 85 % and 105 % of it the fit found no limit (red team; here without
+    the 94 % start: chamber_lag on 'warm', chamber_cycling on the paper-like table)."""
+    progs = dict(blind_programmes())
+    progs["exp1"] = read_steps(ROOT / "data" / "baseline_exp1_steps.csv")
+    prog = progs[name]
+    cool = -float(prog.rates_c_per_min.min())
+    truth = ModelSpec(
+        2400.0, 3.0, "chamber_rate_limit",
+        {"max_cool_rate_c_per_min": 0.95 * cool, "max_heat_rate_c_per_min": 1e6},
+    )  # fmt: skip
+    frame = synth_effect_log(prog, truth, sample_s=10.0, noise_c=0.02, seed=2, with_air=True)
+    d = diagnose_frame(frame)
+    assert d.effect == "chamber_rate_limit", (d.effect, d.warnings)
+    assert d.parameters["max_cool_rate_c_per_min"] == pytest.approx(0.95 * cool, rel=0.02)
