@@ -253,7 +253,7 @@ def _refit_corners(
     samples; elsewhere the sampled breakpoint (see :func:`setpoint_programme`).
 
     The crossing may lie anywhere between the neighbouring breakpoints where the setpoint
-    there is within ``2 tol_c`` of it: Douglas-Peucker places a breakpoint where the
+    there is within ``tol_c`` of it: Douglas-Peucker places a breakpoint where the
     setpoint has left the chord by ``tol_c``, which on a coarsely logged setpoint (1 s,
     0.1 degC: a tolerance of 0.11 degC) is many samples after the corner; kept there, the
     sampled value (up to half a step off) made the segments chords instead of the lines.
@@ -279,9 +279,7 @@ def _refit_corners(
         yc = before[0] * tc + before[1]
         near = max(t[k - 1], tb[m - 1]) < tc < t[k + 1]
         # else the setpoint jumps (the lines cross far from it): as sampled
-        if near or (
-            tb[m - 1] < tc < t[idx[m + 1]] and abs(yc - np.interp(tc, t, y)) <= 1.0 * tol_c
-        ):
+        if near or (tb[m - 1] < tc < t[idx[m + 1]] and abs(yc - np.interp(tc, t, y)) <= tol_c):
             tb[m], yb[m] = tc, yc
     return tb, yb
 
