@@ -279,13 +279,20 @@ class DesignSpace:
 
 
 # -- criteria ---------------------------------------------------------------------------
+def in_region(t_c: np.ndarray, g_c_per_min: np.ndarray, space: DesignSpace) -> np.ndarray:
+    """The samples a fit over ``space`` uses: finite and inside the approximation region."""
+    t = np.asarray(t_c, dtype=float)
+    g = np.asarray(g_c_per_min, dtype=float)
+    return np.isfinite(t) & np.isfinite(g) & (t >= space.approx_lo_c) & (t <= space.approx_hi_c)
+
+
 def model_matrix(
     t_c: np.ndarray, g_c_per_min: np.ndarray, space: DesignSpace, terms: str | tuple = "full"
 ) -> np.ndarray:
     """Coded model matrix of the samples inside the approximation region (n_in x p)."""
     t = np.asarray(t_c, dtype=float)
     g = np.asarray(g_c_per_min, dtype=float)
-    inside = np.isfinite(t) & np.isfinite(g) & (t >= space.approx_lo_c) & (t <= space.approx_hi_c)
+    inside = in_region(t, g, space)
     u, v = space.code(t[inside], g[inside])
     return monomials(u, v, parse_terms(terms))
 
@@ -467,7 +474,8 @@ class DesignReport:
             f"{g_lo:.2f} .. {g_hi:.2f} °C/min; {self.in_region_fraction:.0%} of the run in "
             "the region): "
         )
-        tail = f"; {self.unreached()}" if self.unreached() else ""
+        missed = self.unreached()
+        tail = f"; {missed}" if missed else ""
         if self.singular:
             return head + "singular: these samples cannot determine every term" + tail
         return (
@@ -505,8 +513,7 @@ def design_report(
     t = np.asarray(t_c, dtype=float)
     x = model_matrix(t, g_c_per_min, space, terms_t)
     n_in, p = x.shape
-    g = np.asarray(g_c_per_min, dtype=float)
-    t_in = t[np.isfinite(t) & np.isfinite(g) & (t >= space.approx_lo_c) & (t <= space.approx_hi_c)]
+    t_in = t[in_region(t, g_c_per_min, space)]
     reached = (float(t_in.min()), float(t_in.max())) if t_in.size else (math.nan, math.nan)
     gt, gg = space.grid("working")
     gu, gv = space.code(gt, gg)
@@ -737,7 +744,7 @@ def predicted_fit_error(
         raise ParameterError("time_min must be finite, >= 0 and increasing (min since switch-on)")
     period_s = np.diff(time, prepend=time[0] - (time[1] - time[0])) * 60.0
     terms_t = parse_terms(terms)
-    inside = np.isfinite(t) & np.isfinite(g) & (t >= space.approx_lo_c) & (t <= space.approx_hi_c)
+    inside = in_region(t, g, space)
     x = monomials(*space.code(t[inside], g[inside]), terms_t)
     if x.shape[0] < x.shape[1]:
         raise ParameterError(
