@@ -310,8 +310,10 @@ class _Data:
         air = None if self.air_time_min is None else _spacing(self.air_time_min)
         object.__setattr__(self, "air_spacing", air)
 
-    def subset(self, until_min: float) -> _Data:
-        m = self.time_min <= until_min
+    def subset(self, until_min: float, after_min: float = -math.inf) -> _Data:
+        """The samples in ``(after_min, until_min]``; the programme is the whole log's
+        (a prediction starts at its start whichever part it is scored on)."""
+        m = (self.time_min > after_min) & (self.time_min <= until_min)
         if self.air_time_min is None:
             return _Data(
                 self.programme,
@@ -324,7 +326,7 @@ class _Data:
                 self.step_min,
             )
         assert self.air_c is not None and self.air_var is not None  # set with the times
-        am = self.air_time_min <= until_min
+        am = (self.air_time_min > after_min) & (self.air_time_min <= until_min)
         return _Data(
             self.programme,
             self.time_min[m],
@@ -658,10 +660,12 @@ def _base_start(data: _Data) -> np.ndarray:
     return np.array([tau_s, float(np.clip(dt0, -49, 49)), t0])
 
 
-def fit_base(data: _Data, start: CandidateFit | None = None) -> CandidateFit:
+def fit_base(
+    data: _Data, start: CandidateFit | None = None, fixed: Mapping[str, float] | None = None
+) -> CandidateFit:
     lo, hi = _base_bounds(data)
     x0 = _base_start(data) if start is None else np.array([start.values[n] for n in _BASE_NAMES])
-    return _fit("none", [x0], lo, hi, data)
+    return _fit("none", [x0], lo, hi, data, fixed=fixed)
 
 
 def fit_base_log(log, settings: DiagnoseSettings | None = None) -> tuple[CandidateFit, float]:
@@ -803,9 +807,14 @@ def polish_fit(fit: CandidateFit, data: _Data) -> CandidateFit:
 
 
 def fit_candidate(
-    name: str, base: CandidateFit, data: _Data, start: CandidateFit | None = None
+    name: str,
+    base: CandidateFit,
+    data: _Data,
+    start: CandidateFit | None = None,
+    fixed: Mapping[str, float] | None = None,
 ) -> CandidateFit:
-    """Fit one effect, from multi-starts around the base fit (or from ``start`` alone)."""
+    """Fit one effect, from multi-starts around the base fit (or from ``start`` alone),
+    with the parameters in ``fixed`` held at their values."""
     eff = EFFECTS[name]
     lo, hi = _effect_bounds(eff, data)
     if start is not None:
@@ -815,7 +824,7 @@ def fit_candidate(
         starts = _effect_starts(eff, base, data)
         if name == "chamber_rate_limit":
             starts = _profiled_starts(name, starts, lo, hi, data)
-    fit = _fit(name, starts, lo, hi, data, n_refine=1 if eff.linear else 2)
+    fit = _fit(name, starts, lo, hi, data, fixed=fixed, n_refine=1 if eff.linear else 2)
     if name == "chamber_rate_limit":
         fit = _unbind_rate_limits(fit, data)
     return fit
@@ -1430,9 +1439,11 @@ class Diagnosis:
     ``effect`` is the chosen effect name or ``"none"``; ``model`` the augmented model
     (write it with ``json.dumps(d.model.to_json_dict())``); RMS figures are of the
     internal temperature predicted from the setpoint programme, over every finite sample
-    of the log (``rms_*``) and over the held-out last part when fitted without it
-    (``holdout_*``), degC; ``ambiguous_with`` lists effects the channels present cannot
-    tell apart from the chosen one; ``warnings`` are sentences for the report.
+    of the log (``rms_*``) and over the held-out part when fitted without it
+    (``holdout_*``, degC; ``holdout_part`` "last", or "first" for an effect the log's
+    first part does not show, over ``holdout_start_min .. holdout_end_min``);
+    ``ambiguous_with`` lists effects the channels present cannot tell apart from the
+    chosen one; ``warnings`` are sentences for the report.
     """
 
     effect: str
@@ -1461,6 +1472,8 @@ class Diagnosis:
     after_g_c_per_min: np.ndarray = field(repr=False)
     air_findings: tuple[AirFinding, ...] = ()
     lag_ambiguity: tuple[AmbiguousFit, ...] = ()
+    holdout_part: str = "last"
+    holdout_end_min: float = math.nan
 
     @property
     def main_parameter(self) -> tuple[str, float] | None:
@@ -1499,7 +1512,9 @@ class Diagnosis:
             "rms_before_c": self.rms_before_c,
             "rms_after_c": self.rms_after_c,
             "holdout": {
+                "part": self.holdout_part,
                 "start_min": self.holdout_start_min,
+                "end_min": _json_num(self.holdout_end_min),
                 "rms_before_c": self.holdout_rms_before_c,
                 "rms_after_c": self.holdout_rms_after_c,
             },
@@ -1540,8 +1555,13 @@ class Diagnosis:
             f"RMS gap (internal temperature from the setpoint): {self.rms_before_c:.4f}"
             f" -> {self.rms_after_c:.4f} degC"
         )
+        span = (
+            f"after {self.holdout_start_min:.0f} min"
+            if self.holdout_part == "last"
+            else f"the first {self.holdout_end_min:.0f} min"
+        )
         lines.append(
-            f"held-out (after {self.holdout_start_min:.0f} min, fitted without it): "
+            f"held-out ({span}, fitted without it): "
             f"{self.holdout_rms_before_c:.4f} -> {self.holdout_rms_after_c:.4f} degC"
         )
         lines.append("before: " + self.residuals_before.summary())
@@ -1625,6 +1645,18 @@ def _doubts(fit: CandidateFit, data: _Data, after: ResidualReport, noise_c: floa
     return out
 
 
+def effect_size_c(fit: CandidateFit, data: _Data) -> float:
+    """RMS by which ``fit``'s effect moves the predicted channels at ``data``'s samples
+    (its model against the same device without the effect), degC: 0 where the samples
+    never exercise it, e.g. a rate limit no ramp among them reaches."""
+    plain = ModelSpec(fit.model.tau_s, fit.model.dt0_c)
+    parts = zip(
+        _residuals(fit.model, fit.t0_c, data), _residuals(plain, fit.t0_c, data), strict=True
+    )
+    diff = [a - b for a, b in parts if a is not None and b is not None]
+    return _rms(np.concatenate(diff))
+
+
 def _full_prediction(spec: ModelSpec, t0: float, programme: Programme, t: np.ndarray):
     return spec.predict(programme, t, t0_c=t0)
 
@@ -1687,8 +1719,27 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
         pr = _full_prediction(fit.model, fit.t0_c, data.programme, t_ok[tail])
         return _rms(pr.t_c - meas[tail])
 
+    def reverse_holdout(cand: CandidateFit) -> tuple[float, float, float]:
+        """The base model and ``cand`` fitted on the log after its first
+        ``holdout_fraction`` (the device's starting temperature held at the first
+        reading, which the rest hardly determines): RMS of each over that first part."""
+        f_cut = data.time_min[-1] * settings.holdout_fraction
+        rest = data.subset(math.inf, after_min=f_cut)
+        fixed = {"t0_c": float(data.t_c[0])}
+        r_base = fit_base(rest, start=base, fixed=fixed)
+        r_fit = fit_candidate(cand.effect, r_base, rest, start=cand, fixed=fixed)
+        first = t_ok <= f_cut
+
+        def rms(fit: CandidateFit) -> float:
+            pr = _full_prediction(fit.model, fit.t0_c, data.programme, t_ok[first])
+            return _rms(pr.t_c - meas[first])
+
+        return rms(r_base), rms(r_fit), float(f_cut)
+
     h_base = fit_base(head, start=base)
     hb = ha = tail_rms(h_base)
+    holdout_part, holdout_span = "last", (float(cut), float(data.time_min[-1]))
+    noise_c = sensor_noise_c(log.t_int_c)
     # the guard: BIC margin, RMS improvement, and a better prediction of the held-out
     # part; the best candidate passing all three is chosen (at most max_tries are tried)
     chosen = "none"
@@ -1712,6 +1763,25 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
         if h_rms < hb:
             chosen, ha = cand.effect, h_rms
             break
+        if effect_size_c(cand, head) < noise_c:
+            # the first part never exercises the effect (a rate limit reached only by the
+            # last ramps): fitted there, it cannot predict the rest better. Held out the
+            # other way round instead -- fitted on the rest, does it predict the first
+            # part better? With the effect unmodelled, the base fit bends its tau and dT0
+            # to mimic it; with it, they come out right (red team: a cooling limit hit
+            # after 70 % of the run was named asymmetric_tau)
+            f_b, f_a, f_cut = reverse_holdout(cand)
+            if f_a < f_b:
+                chosen, hb, ha = cand.effect, f_b, f_a
+                holdout_part, holdout_span = "first", (0.0, f_cut)
+                warnings.append(
+                    f"{cand.effect} does not show in the first "
+                    f"{1.0 - settings.holdout_fraction:.0%} of the log, so it was checked "
+                    f"the other way round: fitted on the last "
+                    f"{1.0 - settings.holdout_fraction:.0%}, it predicts the held-out first "
+                    f"{settings.holdout_fraction:.0%} better ({f_b:.4f} -> {f_a:.4f} degC)"
+                )
+                break
         warnings.append(
             f"{cand.effect} fits the log but does not predict its held-out last "
             f"{settings.holdout_fraction:.0%} better ({hb:.4f} -> {h_rms:.4f} degC): "
@@ -1812,7 +1882,7 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
         rms_after_c=_rms(p_after.t_c - meas),
         holdout_rms_before_c=hb,
         holdout_rms_after_c=ha,
-        holdout_start_min=float(cut),
+        holdout_start_min=holdout_span[0],
         candidates=ranked,
         base_fit=base,
         residuals_before=res_before,
@@ -1829,6 +1899,8 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
         after_g_c_per_min=p_after.g_c_per_min,
         air_findings=air_found,
         lag_ambiguity=lag_group,
+        holdout_part=holdout_part,
+        holdout_end_min=holdout_span[1],
     )
 
 

@@ -138,7 +138,10 @@ def _diagnosis_facts(folder: Path) -> dict[str, Any] | None:
         out["RMS gap, °C"] = f"{d['rms_before_c']:.3f} → {d['rms_after_c']:.3f}"
     hold = d.get("holdout") or {}
     if "rms_before_c" in hold and "rms_after_c" in hold:
-        out["held-out RMS gap, °C"] = f"{hold['rms_before_c']:.3f} → {hold['rms_after_c']:.3f}"
+        part = " (the first part, fitted on the rest)" if hold.get("part") == "first" else ""
+        out[f"held-out RMS gap{part}, °C"] = (
+            f"{hold['rms_before_c']:.3f} → {hold['rms_after_c']:.3f}"
+        )
     if d.get("ambiguous_with"):
         out["cannot be told apart from"] = d["ambiguous_with"]
     for i, w in enumerate(d.get("warnings") or [], start=1):

@@ -749,3 +749,45 @@ def test_a_rate_limit_just_below_the_fastest_ramp_is_found(name):
     d = diagnose_frame(frame)
     assert d.effect == "chamber_rate_limit", (d.effect, d.warnings)
     assert d.parameters["max_cool_rate_c_per_min"] == pytest.approx(0.95 * cool, rel=0.02)
+
+
+# --------------------------------------------------------------------------------------
+# an effect the first part of the log does not show
+# --------------------------------------------------------------------------------------
+def _late_fast_cooling():
+    """Slow ramps for the first 70 % of 9 h; the one fast cooling ramp after that."""
+    d = [40, 60, 67, 60, 40, 140, 40, 30, 20, 43]
+    r = [1.0, 0.0, -0.3, 0.0, 0.5, 0.0, -1.0, 0.0, 1.0, 0.0]
+    return Programme(np.array(d, dtype=float), np.array(r, dtype=float))
+
+
+@pytest.mark.parametrize("air", [False, True])
+def test_a_limit_reached_only_in_the_held_out_part_is_checked_the_other_way_round(air):
+    """Red team: a cooling limit reached only by a ramp after 70 % of the run was not
+    taken (fitted on the first 70 %, where it never binds, it predicts the rest no
+    better) and asymmetric_tau was named in its place, or none with the air channel."""
+    truth = ModelSpec(
+        2400.0,
+        3.0,
+        "chamber_rate_limit",
+        {"max_cool_rate_c_per_min": 0.45, "max_heat_rate_c_per_min": 10.0},
+    )
+    prog = _late_fast_cooling()
+    assert prog.durations_min[:6].sum() / prog.total_min > 0.7  # the fast ramp is late
+    frame = synth_effect_log(prog, truth, sample_s=10.0, noise_c=0.02, seed=4, with_air=air)
+    d = diagnose_frame(frame.drop(columns=["t_true_c", "g_true_c_per_min"]), SETTINGS)
+    assert d.effect == "chamber_rate_limit", d.summary()
+    assert d.parameters["max_cool_rate_c_per_min"] == pytest.approx(0.45, rel=0.05)
+    assert d.holdout_part == "first" and d.holdout_start_min == 0.0
+    assert d.holdout_rms_after_c < 0.1 * d.holdout_rms_before_c
+    assert "held-out (the first 162 min" in d.summary()
+    assert json.loads(json.dumps(d.to_json_dict()))["holdout"]["part"] == "first"
+
+
+def test_a_clean_log_of_a_late_fast_ramp_is_still_none():
+    frame = synth_effect_log(
+        _late_fast_cooling(), ModelSpec(2400.0, 3.0), sample_s=10.0, noise_c=0.02, seed=5
+    )
+    d = diagnose_frame(frame.drop(columns=["t_true_c", "g_true_c_per_min"]), SETTINGS)
+    assert d.effect == "none", d.summary()
+    assert d.holdout_part == "last"

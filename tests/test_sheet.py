@@ -413,7 +413,7 @@ def test_report_names_versions_inputs_and_verdict(tmp_path):
                 "uncertainty": {"tau_air_s": 4.2},
                 "rms_before_c": 0.91,
                 "rms_after_c": 0.12,
-                "holdout": {"rms_before_c": 0.95, "rms_after_c": 0.15},
+                "holdout": {"part": "first", "rms_before_c": 0.95, "rms_after_c": 0.15},
                 "ambiguous_with": ["second_time_constant"],
                 "warnings": ["no air channel"],
             }
@@ -441,6 +441,7 @@ def test_report_names_versions_inputs_and_verdict(tmp_path):
     assert summary["run_coverage"] < summary["planned_coverage"]  # the sample run falls short
     assert f"The run covered {summary['run_coverage']:.0%}" in page
     assert "chamber_lag" in page and "312.5 ± 4.2" in page and "0.910 → 0.120" in page
+    assert "held-out RMS gap (the first part, fitted on the rest), °C" in page
     assert "cubic in (T, g)" in page and "value, °/h" in page  # value_dph: unit from the name
     assert "coefficients.csv" in page
     assert not re.search(r"""(src|href)=["']?(https?:|//)""", page)
