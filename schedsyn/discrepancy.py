@@ -439,6 +439,46 @@ def _prepare(log, settings: DiagnoseSettings) -> tuple[_Data, dict]:
     return _Data(programme, bt, bv, bvar, at, av, avar, step_min), info
 
 
+#: A stretch without setpoint readings longer than this many sampling steps, and than
+#: SETPOINT_GAP_MIN_S, is reported by the diagnosis (the programme across it is guessed).
+SETPOINT_GAP_SAMPLES = 3
+SETPOINT_GAP_MIN_S = 60.0
+
+
+def setpoint_gaps_min(time_s: np.ndarray, tk_set_c: np.ndarray) -> list[tuple[float, float]]:
+    """Stretches without a setpoint reading (min from the first row): between two
+    readings further apart than :data:`SETPOINT_GAP_SAMPLES` sampling steps and
+    :data:`SETPOINT_GAP_MIN_S`. The chamber's path across them is guessed (a straight
+    line, or one corner where the lines either side cross)."""
+    time_s = np.asarray(time_s, dtype=float)
+    sp_t = time_s[np.isfinite(np.asarray(tk_set_c, dtype=float))]
+    if sp_t.size < 2:
+        return []
+    dt_s = float(np.median(np.diff(time_s)))
+    gap = np.diff(sp_t) > max(SETPOINT_GAP_SAMPLES * dt_s, SETPOINT_GAP_MIN_S)
+    t0 = float(time_s[0])
+    return [
+        ((a - t0) / 60.0, (b - t0) / 60.0)
+        for a, b in zip(sp_t[:-1][gap], sp_t[1:][gap], strict=True)
+    ]
+
+
+def _gap_warning(gaps_min: Sequence[tuple[float, float]]) -> str | None:
+    if not gaps_min:
+        return None
+    longest = max(gaps_min, key=lambda ab: ab[1] - ab[0])
+    shown = ", ".join(f"{a:.0f}-{b:.0f}" for a, b in gaps_min[:5])
+    more = f" and {len(gaps_min) - 5} more" if len(gaps_min) > 5 else ""
+    return (
+        f"the setpoint is not logged over {len(gaps_min)} stretch(es) ({shown} min{more}; the "
+        f"longest {longest[1] - longest[0]:.0f} min): the chamber's path there is guessed "
+        "(straight, or one corner where the ramps either side meet). If it turned more "
+        "than once, the model misses the device for about tau after, which can be read as "
+        "an effect: trust an effect only if it stands on the rest of the log (cut the gaps "
+        "out, or diagnose the part after them)"
+    )
+
+
 # --------------------------------------------------------------------------------------
 # fitting
 # --------------------------------------------------------------------------------------
@@ -1877,6 +1917,9 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
         data.t_c,
         data.programme,
     )
+    gap_note = _gap_warning(setpoint_gaps_min(log.time_s, log.tk_set_c))
+    if gap_note is not None:
+        warnings.append(gap_note)
     warnings.extend(undetermined(chosen_fit))
     if chosen != "none":
         warnings.extend(_doubts(chosen_fit, data, res_after, sensor_noise_c(log.t_int_c)))

@@ -818,3 +818,18 @@ def test_a_clean_log_of_a_late_fast_ramp_is_still_none():
     d = diagnose_frame(frame.drop(columns=["t_true_c", "g_true_c_per_min"]), SETTINGS)
     assert d.effect == "none", d.summary()
     assert d.holdout_part == "last"
+
+
+def test_a_setpoint_gap_is_named_in_the_diagnosis():
+    """Red team: 20 min of rows lost on a clean 10-s log of a plan (two corners inside the
+    hole) gave dt0_drift and nothing said the setpoint there was guessed."""
+    prog = read_steps(ROOT / "tests" / "data" / "plans" / "w2_steps.csv")
+    frame = synth_effect_log(prog, ModelSpec(2400.0, 3.0), sample_s=10.0, seed=6, with_air=False)
+    frame = frame.drop(columns=["t_true_c", "g_true_c_per_min"])
+    holed = frame[(frame["time_s"] < 120 * 60) | (frame["time_s"] > 140 * 60)]
+    d = diagnose_frame(holed, SETTINGS)
+    gap = [w for w in d.warnings if w.startswith("the setpoint is not logged")]
+    assert len(gap) == 1 and "(120-140 min; the longest 20 min)" in gap[0], d.warnings
+    # one missing row is no gap
+    d = diagnose_frame(frame.drop(index=frame.index[700]), SETTINGS)
+    assert not any(w.startswith("the setpoint is not logged") for w in d.warnings), d.warnings
