@@ -833,3 +833,21 @@ def test_a_setpoint_gap_is_named_in_the_diagnosis():
     # one missing row is no gap
     d = diagnose_frame(frame.drop(index=frame.index[700]), SETTINGS)
     assert not any(w.startswith("the setpoint is not logged") for w in d.warnings), d.warnings
+
+
+def test_a_setpoint_logged_to_whole_degrees_asks_more_of_an_effect():
+    """Red team: a clean log of a plan with the setpoint rounded to 1 degC was named
+    asymmetric_tau (the rebuilt ramps miss by up to the resolution; the effect took 5 %
+    of that misfit). A real effect still stands out."""
+    prog = read_steps(ROOT / "tests" / "data" / "plans" / "w2_steps.csv")
+    for truth, want in (
+        (ModelSpec(2400.0, 3.0), "none"),
+        (ModelSpec(2400.0, 3.0, "chamber_cycling",
+                   {"amplitude_c": 0.6, "period_s": 900.0, "phase_rad": 0.3}), "chamber_cycling"),
+    ):  # fmt: skip
+        frame = synth_effect_log(prog, truth, sample_s=10.0, seed=3, with_air=False)
+        frame = frame.drop(columns=["t_true_c", "g_true_c_per_min"])
+        frame["tk_set_c"] = np.round(frame["tk_set_c"])
+        d = diagnose_frame(frame)
+        assert d.effect == want, d.summary()
+        assert any("the setpoint is logged to 1 degC" in w for w in d.warnings), d.warnings
