@@ -142,6 +142,9 @@ class LogReport:
         Isolated ``t_int_c`` glitch readings (:func:`glitch_rows`), excluded: 0-based row,
         its time, the reading and how far it lay from its neighbours' median. They are NaN
         in :attr:`MeasuredLog.t_int_c`; ``nan_counts`` counts the file's blank cells only.
+    stuck_s : tuple of (start_s, end_s, value_c, jump_c)
+        Runs of one ``t_int_c`` value repeated that end in a jump (:func:`stuck_runs`): a
+        held reading, not the device. The repeats after the first are excluded (NaN).
     """
 
     n_rows: int
@@ -151,6 +154,7 @@ class LogReport:
     median_step_s: float
     warnings: tuple[str, ...] = ()
     glitches: tuple[tuple[int, float, float, float], ...] = ()
+    stuck_s: tuple[tuple[float, float, float, float], ...] = ()
 
     @property
     def clean(self) -> bool:
@@ -491,12 +495,63 @@ def glitch_rows(time_s: np.ndarray, values_c: np.ndarray) -> tuple[np.ndarray, n
     return rows[confirmed], off[confirmed], limit_c
 
 
+#: A t_int_c value repeated on at least this many consecutive rows ...
+STUCK_MIN_ROWS = 6
+
+
+def stuck_runs(values_c: np.ndarray, limit_c: float) -> list[tuple[int, int, float]]:
+    """Held readings: ``(first_row, last_row, jump_c)`` of each run of at least
+    :data:`STUCK_MIN_ROWS` consecutive rows with one finite value whose next row jumps
+    from it by more than ``limit_c`` (the glitch limit of :func:`glitch_rows`). A device
+    lagging its chamber cannot jump, and a reading that only repeats while the device is
+    still (a hold, coarse quantisation) moves on by a step or two: a logger that repeats
+    a failed read while the device moves on does both (red team: 10 min of one value,
+    then a 5 degC jump, read as a gradient of 4.8 degC/min by the smoother, 25 degC/min
+    for 30 min)."""
+    v = np.asarray(values_c, dtype=float)
+    if v.size < STUCK_MIN_ROWS + 1 or not math.isfinite(limit_c):
+        return []
+    same = np.diff(v) == 0.0  # NaN never equals: a blank cell ends a run
+    edges = np.diff(np.concatenate(([0], same.astype(np.int8), [0])))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    out = []
+    for a, b in zip(starts, ends, strict=True):  # rows a..b hold one value
+        if b - a + 1 < STUCK_MIN_ROWS or b + 1 >= v.size or not math.isfinite(v[b + 1]):
+            continue
+        jump = float(v[b + 1] - v[a])
+        if abs(jump) > limit_c:
+            out.append((int(a), int(b), jump))
+    return out
+
+
 def _exclude_glitches(
     values: dict[str, np.ndarray], report: LogReport, source: str
 ) -> tuple[np.ndarray, LogReport]:
-    """``t_int_c`` with its glitch readings set to NaN, and the report that lists them."""
+    """``t_int_c`` with its glitch readings and held readings (:func:`stuck_runs`) set to
+    NaN, and the report that lists them."""
     temp = values["t_int_c"]
     rows, off, limit_c = glitch_rows(values["time_s"], temp)
+    held = stuck_runs(temp, limit_c)
+    if held:
+        t = values["time_s"]
+        stuck = tuple((float(t[a]), float(t[b]), float(temp[a]), j) for a, b, j in held)
+        listed = ", ".join(
+            f"{val:g} °C over {t0:g} .. {t1:g} s, then {j:+.3g} °C" for t0, t1, val, j in stuck[:5]
+        )
+        more = f" and {len(stuck) - 5} more" if len(stuck) > 5 else ""
+        note = (
+            f"t_int_c: {len(stuck)} run(s) of one reading repeated on {STUCK_MIN_ROWS} or more "
+            f"rows that then jumps by more than {limit_c:.3g} °C (a held or stuck reading, "
+            f"not the device): {listed}{more}; the repeats were excluded (treated as "
+            "missing); check the sensor and the logger"
+        )
+        temp = temp.copy()
+        for a, b, _ in held:
+            temp[a + 1 : b + 1] = np.nan
+        temp.setflags(write=False)
+        report = dataclasses.replace(report, warnings=(note, *report.warnings), stuck_s=stuck)
+        keep = ~np.isnan(temp[rows]) if rows.size else np.zeros(0, dtype=bool)
+        rows, off = rows[keep], off[keep]
     if rows.size == 0:
         return temp, report
     n_finite = int(np.isfinite(temp).sum())
@@ -776,7 +831,12 @@ def thin_log(log: MeasuredLog, max_rows: int) -> tuple[MeasuredLog, int]:
             cols[name] = v[::k].copy()
             cols[name].setflags(write=False)
     report = log_report(cols["time_s"], {c: v for c, v in cols.items() if c != "time_s"})
-    report = dataclasses.replace(report, warnings=log.report.warnings, glitches=log.report.glitches)
+    report = dataclasses.replace(
+        report,
+        warnings=log.report.warnings,
+        glitches=log.report.glitches,
+        stuck_s=log.report.stuck_s,
+    )
     thin = MeasuredLog(
         time_s=cols["time_s"],
         t_int_c=cols["t_int_c"],

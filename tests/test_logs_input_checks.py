@@ -290,3 +290,42 @@ def test_a_comment_line_above_the_header_is_named_with_the_fix(tmp_path):
         read_log(path)
     path.write_text("\n".join(rows) + "\n")
     assert read_log(path).n_rows == 30
+
+
+# -- a held (stuck) reading ----------------------------------------------------------------
+def test_a_held_reading_that_then_jumps_is_excluded_and_named(tmp_path, capsys):
+    """Red team: the logger repeated t_int_c for 10 min while the device moved on 3 degC;
+    the smoother read the jump as 4.8 degC/min and the fit took g terms that were not
+    there. The repeats are excluded like blank readings, and said so."""
+    f = _sample_run()
+    ramp = int(np.argmax(np.abs(np.gradient(f["t_int_c"].to_numpy())) > 0.05))
+    a, b = ramp + 100, ramp + 160  # 61 rows of one value inside a ramp
+    f.loc[a:b, "t_int_c"] = f.loc[a, "t_int_c"]
+    jump = f.loc[b + 1, "t_int_c"] - f.loc[a, "t_int_c"]
+    assert abs(jump) > 1.0
+    log = log_from_frame(f, source="held.csv")
+    ((t0, t1, value, j),) = log.report.stuck_s
+    assert (t0, t1, value) == (f.loc[a, "time_s"], f.loc[b, "time_s"], f.loc[a, "t_int_c"])
+    assert j == pytest.approx(jump)
+    assert np.isfinite(log.t_int_c[a]) and np.isnan(log.t_int_c[a + 1 : b + 1]).all()
+    assert "repeated on 6 or more rows that then jumps" in log.report.summary()
+    # the gradient estimate stays that of the clean log; with the repeats kept it did not
+    est = estimate_gradient(log).g_est_c_per_min
+    clean = estimate_gradient(log_from_frame(_sample_run())).g_est_c_per_min
+    assert np.max(np.abs(est - clean)) < 0.1
+    # a run that ends in a step of the resolution is a still device, not a held reading
+    still = _sample_run()
+    still.loc[a:b, "t_int_c"] = np.round(still.loc[a, "t_int_c"], 1)
+    still.loc[b + 1, "t_int_c"] = still.loc[a, "t_int_c"] + 0.1
+    assert log_from_frame(still).report.stuck_s == ()
+    # the fit's JSON records it
+    g = _good_frame()
+    g.loc[150:170, "t_int_c"] = g.loc[150, "t_int_c"]
+    g.loc[171, "t_int_c"] = g.loc[150, "t_int_c"] + 3.0
+    path = tmp_path / "held.csv"
+    g.to_csv(path, index=False)
+    out = tmp_path / "out"
+    assert main(["fit", str(path), "--region", "21", "28", "--out", str(out)]) == 0
+    doc = json.loads((out / "coefficients.json").read_text())
+    (held,) = doc["log_readings"]["excluded_held_readings"]
+    assert held["start_s"] == 1500.0 and held["end_s"] == 1700.0 and held["jump_c"] > 2.9

@@ -205,14 +205,19 @@ def stderr(message: str) -> None:
 
 
 def log_record(log) -> dict:
-    """What the output JSON says about the log's readings: warnings and the glitch readings
-    excluded (``LogReport.glitches``; rows 1-based like the messages)."""
+    """What the output JSON says about the log's readings: warnings, the glitch readings
+    excluded (``LogReport.glitches``; rows 1-based like the messages) and the runs of a
+    held reading whose repeats were excluded (``LogReport.stuck_s``)."""
     return {
         "source": log.source,
         "warnings": list(log.report.warnings),
         "excluded_glitches": [
             {"row": row + 1, "time_s": t_s, "t_int_c": value_c, "off_c": off_c}
             for row, t_s, value_c, off_c in log.report.glitches
+        ],
+        "excluded_held_readings": [
+            {"start_s": a, "end_s": b, "t_int_c": value_c, "jump_c": jump_c}
+            for a, b, value_c, jump_c in log.report.stuck_s
         ],
     }
 
