@@ -1661,6 +1661,8 @@ def undetermined(fit: CandidateFit) -> list[str]:
         v = fit.values.get(name)
         if name == "t0_c" or v is None or v == NOT_BINDING_C_PER_MIN:
             continue  # (a rate limit that never binds has no standard error, on purpose)
+        if name == "tau_s" and fit.effect == "asymmetric_tau":
+            continue  # its two time constants replace tau (red team: warned on every one)
         if not math.isfinite(se) or (name in positive and se > 0.5 * abs(v)):
             out.append(
                 f"{name} = {v:.4g} is not determined by this log (standard error "
