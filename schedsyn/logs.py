@@ -513,15 +513,14 @@ def stuck_runs(values_c: np.ndarray, limit_c: float) -> list[tuple[int, int, flo
         return []
     same = np.diff(v) == 0.0  # NaN never equals: a blank cell ends a run
     edges = np.diff(np.concatenate(([0], same.astype(np.int8), [0])))
-    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    out = []
-    for a, b in zip(starts, ends, strict=True):  # rows a..b hold one value
-        if b - a + 1 < STUCK_MIN_ROWS or b + 1 >= v.size or not math.isfinite(v[b + 1]):
-            continue
-        jump = float(v[b + 1] - v[a])
-        if abs(jump) > limit_c:
-            out.append((int(a), int(b), jump))
-    return out
+    a, b = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)  # rows a..b: one value
+    long = (b - a + 1 >= STUCK_MIN_ROWS) & (b + 1 < v.size)
+    a, b = a[long], b[long]
+    jump = v[b + 1] - v[a]  # NaN after the run: no jump seen, not flagged
+    held = np.abs(jump) > limit_c
+    return [
+        (int(i), int(j), float(d)) for i, j, d in zip(a[held], b[held], jump[held], strict=True)
+    ]
 
 
 def _exclude_glitches(
