@@ -1311,6 +1311,13 @@ def air_channel_findings(
             f"ramp runs {rate * tau_c / 60.0:.2g} °C behind)",
             shift,
         )
+        # the device alone cannot confirm it: a short air lag is a slightly longer tau to
+        # it, and a lagging air sensor reads the same (red team: a 30-s sensor lag on a
+        # clean device was reported as moving the device by 0.45 degC)
+        text += (
+            f" if the chamber air itself lags; a lagging air sensor reads the same, and the "
+            f"device alone tells such a lag from a {tau_c:.0f} s longer tau only weakly"
+        )
         out.append(
             AirFinding(
                 "chamber_lag",

@@ -779,6 +779,9 @@ def test_a_lagging_air_sensor_on_a_clean_device_is_not_a_chamber_effect():
     d = diagnose_frame(frame)
     assert d.effect == "none", d.summary()
     assert any("internal temperature worse" in w for w in d.warnings), d.warnings
+    # the air finding does not claim the device moved: a lagging sensor reads the same
+    (lag,) = [f for f in d.air_findings if f.effect == "chamber_lag"]
+    assert "a lagging air sensor reads the same" in lag.text, lag.text
 
 
 # --------------------------------------------------------------------------------------
