@@ -156,20 +156,51 @@ def setpoint_programme(time_s: np.ndarray, tk_set_c: np.ndarray, tol_c: float = 
 SETPOINT_QUANTA_C = (1.0, 0.5, 0.2, 0.1, 0.05, 0.02, 0.01)
 #: Share of the changing samples that must lie on a resolution's grid.
 SETPOINT_ON_GRID_SHARE = 0.95
+#: A rounded setpoint's slow ramps stutter (see :func:`setpoint_quantum_c`): at least
+#: this many times.
+SETPOINT_MIN_STUTTERS = 10
 
 
 def setpoint_quantum_c(tk_set_c: np.ndarray) -> float | None:
-    """The coarsest of :data:`SETPOINT_QUANTA_C` (degC) on whose grid the setpoint's
-    changing values lie (:data:`SETPOINT_ON_GRID_SHARE` of them), or None."""
+    """The resolution the setpoint is logged to: the coarsest of
+    :data:`SETPOINT_QUANTA_C` (degC) on whose grid its changing values lie
+    (:data:`SETPOINT_ON_GRID_SHARE` of them), if it is rounded to it; else None.
+
+    Exact samples of ramps can land on a grid too (1 and 0.5 degC/min sampled every
+    60 s: whole and half degrees; red team: such a log was taken for one rounded to
+    0.5 degC). They step by the same amount from sample to sample along a ramp; a
+    rounded ramp does not (0, 1, 0, 1 grid steps, or 1, 2, 1, 2): it is taken as
+    rounded only when its runs of equal nonzero steps are mostly single samples.
+    """
     y = np.asarray(tk_set_c, dtype=float)
     y = y[np.isfinite(y)]
-    changing = y[1:][np.abs(np.diff(y)) > 1e-9]  # where a logged resolution shows
+    d1 = np.diff(y)
+    moving = np.abs(d1) > 1e-9
+    changing = y[1:][moving]  # where a logged resolution shows
     if changing.size < 10:
         return None
     for q in SETPOINT_QUANTA_C:
         off = np.abs(changing / q - np.round(changing / q))
         if np.mean(off < 1e-6 * np.maximum(1.0, np.abs(changing) / q)) >= SETPOINT_ON_GRID_SHARE:
-            return q
+            break
+    else:
+        return None
+    # runs of equal consecutive steps: long on exact ramps; single samples on a rounded
+    # ramp faster than the resolution per sample (1, 2, 1, 2 steps) ...
+    new_run = np.r_[True, np.abs(np.diff(d1)) > 1e-6 * q]
+    starts = np.flatnonzero(new_run)
+    lengths = np.diff(np.r_[starts, d1.size])
+    ramp = moving[starts]
+    if ramp.any() and float(np.median(lengths[ramp])) <= 1.0:
+        return q
+    # ... and, on a slower one, stutters: a step or three of no change between steps the
+    # same way (an exact programme holds for minutes, not a sample or two)
+    sign = np.sign(d1[starts])
+    inner = np.arange(1, starts.size - 1)
+    stutter = (~ramp[inner]) & (lengths[inner] <= 3) & (sign[inner - 1] == sign[inner + 1])
+    stutter &= sign[inner - 1] != 0
+    if int(stutter.sum()) >= SETPOINT_MIN_STUTTERS:
+        return q
     return None
 
 

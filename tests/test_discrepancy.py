@@ -857,3 +857,22 @@ def test_a_setpoint_logged_to_whole_degrees_asks_more_of_an_effect():
         d = diagnose_frame(frame)
         assert d.effect == want, d.summary()
         assert any("the setpoint is logged to 1 degC" in w for w in d.warnings), d.warnings
+
+
+def test_exact_ramps_that_land_on_a_grid_are_not_a_rounded_setpoint():
+    """Red team: 1 and 0.5 degC/min ramps sampled every 60 s land on whole and half
+    degrees; the setpoint was taken as logged to 0.5 degC and a real 0.3 degC cycling
+    then needed a 10 % gain (it had 8 %) and was not named."""
+    from schedsyn.discrepancy import setpoint_quantum_c
+
+    prog = Programme(
+        np.array([50.0, 90.0, 40.0, 60.0, 30.0, 90.0, 20.0, 160.0]),
+        np.array([1.0, 0.0, -0.5, 0.0, 1.0, 0.0, -0.5, 0.0]),
+    )
+    for sample_s in (60.0, 10.0, 1.0):
+        t_min = np.arange(0.0, prog.total_min * 60.0 + 1.0, sample_s) / 60.0
+        exact = prog.chamber_at(t_min)
+        assert setpoint_quantum_c(exact) is None, sample_s
+        if sample_s < 60.0:  # rounded: steps of 0 and 1 grid step along a ramp
+            assert setpoint_quantum_c(np.floor(exact + 0.5)) == 1.0, sample_s
+            assert setpoint_quantum_c(np.floor(exact * 10.0 + 0.5) / 10.0) == 0.1, sample_s
