@@ -1785,8 +1785,10 @@ def fit_drift(
 #: The larger model's surface is flagged where it is more than this many of the chosen
 #: model's standard deviations from it ...
 DROPPED_TERMS_SIGMAS = 1.0
-#: ... on more than this share of the compensation table.
+#: ... on more than this share of the compensation table, or moves a coefficient both
+#: models have by more than this many of its standard errors.
 DROPPED_TERMS_SHARE = 0.10
+DROPPED_TERMS_COEF_SE = 2.0
 
 
 def _dropped_terms_note(fit: DriftFit, eiv: bool, walk_start_s: float) -> str | None:
@@ -1821,17 +1823,41 @@ def _dropped_terms_note(fit: DriftFit, eiv: bool, walk_start_s: float) -> str | 
     diff = np.abs(larger.predict(t, g) - fit.model.predict(t, g))
     sd = fit.model.predict_std(t, g)
     share = float(np.mean(diff > DROPPED_TERMS_SIGMAS * sd))
-    if share <= DROPPED_TERMS_SHARE:
+    # the shared coefficients' shifts, in the chosen model's standard errors
+    big_coef = dict(zip(larger.terms, larger.coefficients_dph, strict=True))
+    shifts = {
+        term: abs(big_coef[term] - c) / se
+        for term, c, se in zip(
+            fit.model.terms, fit.model.coefficients_dph, fit.model.std_errors, strict=True
+        )
+        if se > 0
+    }
+    moved = sorted(
+        (k for k, v in shifts.items() if v > DROPPED_TERMS_COEF_SE), key=lambda k: shifts[k]
+    )
+    if share <= DROPPED_TERMS_SHARE and not moved:
         return None
     extra = [x for x in larger.terms if x not in fit.model.terms]
     dbic = float(sel.loc[sel["candidate"] == big, "delta_bic"].iloc[0])
+    parts = []
+    if share > DROPPED_TERMS_SHARE:
+        parts.append(
+            f"its surface is more than {DROPPED_TERMS_SIGMAS:g} of the chosen model's "
+            f"standard deviations away on {share:.0%} of the compensation table (up to "
+            f"{float(diff.max()):.3g} °/h)"
+        )
+    if moved:
+        parts.append(
+            "it moves "
+            + ", ".join(f"{k} by {shifts[k]:.1f}" for k in reversed(moved))
+            + " standard errors"
+        )
     return (
-        f"BIC chose {chosen}, but {big} (BIC {dbic:+.1f}) differs from it by more than "
-        f"{DROPPED_TERMS_SIGMAS:g} of its standard deviations on {share:.0%} of the "
-        f"compensation table (up to {float(diff.max()):.3g} °/h): the run cannot rule out "
-        f"{', '.join(extra)}, and if the gyro has them the {chosen} coefficients are off by "
-        f"more than their standard errors say; --terms {big} fits them (wider standard "
-        "errors, without that bias)"
+        f"BIC chose {chosen}, but with {', '.join(extra)} as well ({big}, BIC {dbic:+.1f}) "
+        + " and ".join(parts)
+        + f": the run cannot rule out those terms, and if the gyro has them the {chosen} "
+        "fit is off by more than its standard errors say; --terms "
+        f"{big} fits them (wider standard errors, without that bias)"
     )
 
 
