@@ -945,3 +945,21 @@ def test_a_fit_that_drops_terms_the_run_cannot_rule_out_says_how_much_they_move_
     assert "--terms full" in note
     # chosen full: nothing was dropped, no note
     assert not any(n.startswith("BIC chose") for n in _w3_random_gyro_fit(1).notes)
+
+
+def test_no_dropped_terms_note_on_a_t_only_choice():
+    """Adding six free gradient terms moves a T-only gyro's T coefficients by a few of
+    their standard errors too: on the T-only cubic (BIC's strong evidence against any
+    gradient term) the note would only alarm (it fired on half of such gyros)."""
+    from schedsyn.gyro import random_gyro
+
+    prog = read_steps("tests/data/plans/w3_steps.csv")
+    for seed in range(4):
+        gyro = random_gyro(np.random.default_rng([seed, 9]), (-2.0, 33.0), gradient_terms=False)
+        frame = gyro_log(prog, gyro, sample_s=10.0, seed=seed)
+        log = log_from_frame(
+            frame.drop(columns=["t_true_c", "g_true_c_per_min", "drift_true_dph", "bias_walk_dph"])
+        )
+        fit = fit_drift(log, (-2.0, 33.0))
+        assert fit.terms == parse_terms("t-only")
+        assert not any(n.startswith("BIC chose") for n in fit.notes), fit.notes
