@@ -590,6 +590,11 @@ def predict_run(request: ReplanRequest, programme: Programme) -> RunPrediction:
 #: A re-planned run is also predicted at the corners of the identified model's box: tau and
 #: dT0 each this many standard deviations either side of the estimate.
 UNCERTAINTY_SIGMAS = 2.0
+#: A completion predicted from a log shorter than this many identified time constants is
+#: not a promise (exit code 1): an effect the model lacks has not had time to show (red
+#: team: at minutes 10-25, a tau that changes with temperature, a dT0 drift or a chamber
+#: rate limit not yet reached; "complete", and 17-45 % on the true device).
+TRUST_MIN_TAUS = 1.0
 #: The box's corners stay inside what :class:`schedsyn.params.ThermalParams` accepts:
 #: tau up to this, s, and |dT0| up to this, degC.
 BOX_TAU_MAX_S = TAU_MAX_S
@@ -944,13 +949,28 @@ class ReplanResult:
     @property
     def trusted_complete(self) -> bool:
         """:attr:`complete`, from a fit that pins the device down
-        (:meth:`~schedsyn.monitor.Identified.doubts` empty), and complete too with every
-        model that fits the log about as well (:attr:`rivals`): what exit code 0 says."""
-        return (
-            self.complete
-            and not self.request.doubts()
-            and all(r.prediction.complete for r in self.rivals)
-        )
+        (:meth:`~schedsyn.monitor.Identified.doubts` empty), on a log of at least
+        :data:`TRUST_MIN_TAUS` time constants, complete too at every corner of the
+        identified model's box (:attr:`uncertainty`) and with every model that fits the
+        log about as well (:attr:`rivals`): what exit code 0 says."""
+        return self.complete and not self.untrusted_reasons()
+
+    def untrusted_reasons(self) -> tuple[str, ...]:
+        """Why a predicted completion is not a promise (see :attr:`trusted_complete`)."""
+        out = []
+        if self.request.doubts():
+            out.append("the log does not pin the device down yet")
+        i = self.request.planning_fit()
+        if i.span_min < TRUST_MIN_TAUS * i.tau_s / 60.0:
+            out.append(
+                f"the log spans {i.span_min:.0f} min, less than the identified tau "
+                f"({i.tau_s / 60.0:.0f} min): effects the model lacks cannot show yet"
+            )
+        if self.uncertainty is not None and not self.uncertainty.complete_everywhere:
+            out.append("not complete at every corner of the identified model's box")
+        if not all(r.prediction.complete for r in self.rivals):
+            out.append("not complete with a model that fits the log about as well")
+        return tuple(out)
 
     def to_frame(self) -> pd.DataFrame:
         """Per bin: levels at ``M``, missing at ``M``, predicted at the end (chosen run and
@@ -1059,6 +1079,12 @@ class ReplanResult:
         lines.extend(f"problem: {x}" for x in self.prediction.problems)
         if self.uncertainty is not None:
             lines.append(self.uncertainty.line())
+        if self.complete and not self.trusted_complete:
+            lines.append(
+                "*** predicted complete, but not a promise (exit code 1): "
+                + "; ".join(self.untrusted_reasons())
+                + "; re-plan again later in the run ***"
+            )
         lines.extend(x.line() for x in self.rivals if not x.prediction.complete)
         late = self.late_line()
         if late is not None:

@@ -1380,3 +1380,33 @@ def test_a_complete_plan_past_the_device_limit_is_not_kept(tmp_path):
     new = res.prediction.programme
     minutes = np.arange(0.0, 60.5, 0.5)
     np.testing.assert_allclose(new.chamber_at(minutes), plan_programme().chamber_at(minutes))
+
+
+def test_a_completion_from_a_young_log_or_a_failing_box_is_no_promise(plan):
+    """Red team: exit 0 ("complete") from 10-25 min of log, before a tau that changes with
+    temperature, a dT0 drift or a rate limit could show (17-45 % on the true device), and
+    exit 0 although the identified model's box broke the device limit. A completion is a
+    promise only from a log of at least one time constant, complete at every corner."""
+    from schedsyn import replan as rp
+
+    truth = ModelSpec(2400.0, 3.0)
+    late = prepare_replan(log_from_frame(effect_log(truth, seed=1), "clean"), plan, 60.0)
+    run = predict_run(late, plan.programme)
+    assert run.complete and late.identified.span_min >= late.identified.tau_s / 60.0
+    box = check_uncertainty(late, plan.programme)
+    assert box.complete_everywhere
+    result = ReplanResult(late, "keep", "test", run, run, uncertainty=box)
+    assert result.trusted_complete and result.untrusted_reasons() == ()
+    # the same run, with a box that fails somewhere: no promise, and said so
+    failing = replace(box, complete_everywhere=False)
+    result = ReplanResult(late, "keep", "test", run, run, uncertainty=failing)
+    assert result.complete and not result.trusted_complete
+    assert "not complete at every corner" in result.summary()
+    assert "*** predicted complete, but not a promise (exit code 1)" in result.summary()
+    # a log shorter than tau: no promise however tight its fit
+    young = replace(late, identified=replace(late.identified, span_min=20.0))
+    result = ReplanResult(young, "keep", "test", run, run, uncertainty=box)
+    assert not young.doubts() and not result.trusted_complete
+    (reason,) = result.untrusted_reasons()
+    assert "the log spans 20 min, less than the identified tau (40 min)" in reason
+    assert rp.TRUST_MIN_TAUS == 1.0
