@@ -1032,6 +1032,7 @@ class ReplanResult:
                 "uncertainty_box": None if self.uncertainty is None else self.uncertainty.to_dict(),
                 "rival_models": [r.to_dict() for r in self.rivals],
                 "trusted_complete": self.trusted_complete,
+                "untrusted_reasons": list(self.untrusted_reasons()) if self.complete else [],
             }
         )
         return json_safe(out)

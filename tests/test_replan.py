@@ -1403,6 +1403,9 @@ def test_a_completion_from_a_young_log_or_a_failing_box_is_no_promise(plan):
     assert result.complete and not result.trusted_complete
     assert "not complete at every corner" in result.summary()
     assert "*** predicted complete, but not a promise (exit code 1)" in result.summary()
+    assert result.to_json_dict()["untrusted_reasons"] == [
+        "not complete at every corner of the identified model's box"
+    ]
     # a log shorter than tau: no promise however tight its fit
     young = replace(late, identified=replace(late.identified, span_min=20.0))
     result = ReplanResult(young, "keep", "test", run, run, uncertainty=box)
