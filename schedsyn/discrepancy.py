@@ -1951,7 +1951,7 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
         )
     air_found: tuple[AirFinding, ...] = ()
     if has_air:
-        air_found = air_channel_findings(log, data, base, fits, sensor_noise_c(log.t_int_c))
+        air_found = air_channel_findings(log, data, base, fits, noise_c)
     chosen_fit = fits[chosen] if chosen != "none" else base
     if chosen == "chamber_cycling":
         share = _setpoint_share(data.programme, chosen_fit.model.parameters["period_s"])
@@ -1990,7 +1990,7 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
         warnings.append(gap_note)
     warnings.extend(undetermined(chosen_fit))
     if chosen != "none":
-        warnings.extend(_doubts(chosen_fit, data, res_after, sensor_noise_c(log.t_int_c)))
+        warnings.extend(_doubts(chosen_fit, data, res_after, noise_c))
     if chosen == "none" and not res_before.white:
         warnings.append(
             "the base-model residuals are not white but no candidate explains them well "
