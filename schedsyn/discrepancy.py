@@ -1887,6 +1887,7 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
         if h_rms < hb * (1.0 - HOLDOUT_MIN_GAIN):
             chosen, ha = cand.effect, h_rms
             break
+        reverse = ""
         if effect_size_c(cand, head) < noise_c:
             # the first part never exercises the effect (a rate limit reached only by the
             # last ramps): fitted there, it cannot predict the rest better. Held out the
@@ -1906,10 +1907,15 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
                     f"{settings.holdout_fraction:.0%} better ({f_b:.4f} -> {f_a:.4f} degC)"
                 )
                 break
+            reverse = (
+                f", nor, fitted on the last {1.0 - settings.holdout_fraction:.0%} (it does not "
+                f"show in the first), its held-out first {settings.holdout_fraction:.0%} "
+                f"({f_b:.4f} -> {f_a:.4f} degC)"
+            )
         warnings.append(
             f"{cand.effect} fits the log but does not predict its held-out last "
-            f"{settings.holdout_fraction:.0%} better ({hb:.4f} -> {h_rms:.4f} degC): "
-            "not taken"
+            f"{settings.holdout_fraction:.0%} better ({hb:.4f} -> {h_rms:.4f} degC)"
+            f"{reverse}: not taken"
         )
     if chosen != "none" and not EFFECTS[chosen].linear:
         fits[chosen] = polish_fit(fits[chosen], data)

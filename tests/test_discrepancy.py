@@ -16,7 +16,7 @@ import pandas as pd
 import pytest
 from independent import ode_trajectories
 
-from schedsyn import Programme, read_steps
+from schedsyn import Programme, discrepancy, read_steps
 from schedsyn.discrepancy import (
     DiagnoseSettings,
     analyse_residuals,
@@ -815,6 +815,24 @@ def test_a_limit_reached_only_in_the_held_out_part_is_checked_the_other_way_roun
     assert d.holdout_rms_after_c < 0.1 * d.holdout_rms_before_c
     assert "held-out (the first 162 min" in d.summary()
     assert json.loads(json.dumps(d.to_json_dict()))["holdout"]["part"] == "first"
+
+
+def test_a_warning_says_when_both_held_out_checks_failed(monkeypatch):
+    """The late limit of the test above, with the held-out checks asked for an
+    impossible gain: not taken, and the warning says that the check the other way round
+    was tried too (it had said only "does not predict its held-out last 30 %")."""
+    monkeypatch.setattr(discrepancy, "HOLDOUT_MIN_GAIN", 1.0)
+    truth = ModelSpec(
+        2400.0,
+        3.0,
+        "chamber_rate_limit",
+        {"max_cool_rate_c_per_min": 0.45, "max_heat_rate_c_per_min": 10.0},
+    )
+    frame = synth_effect_log(_late_fast_cooling(), truth, sample_s=10.0, noise_c=0.02, seed=4)
+    d = diagnose_frame(frame.drop(columns=["t_true_c", "g_true_c_per_min"]), SETTINGS)
+    assert d.effect == "none", d.summary()
+    said = [w for w in d.warnings if w.startswith("chamber_rate_limit fits the log but")]
+    assert said and "nor, fitted on the last 70%" in said[0], d.warnings
 
 
 def test_a_clean_log_of_a_late_fast_ramp_is_still_none():
