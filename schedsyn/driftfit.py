@@ -118,6 +118,9 @@ OUTLIER_BLOCK = 5
 OUTLIER_IQRS = 50.0
 #: More outliers than this share of the readings: the column is suspect, not a few glitches.
 OUTLIER_MAX_SHARE = 0.01
+#: A note says so when the regressors' errors make up more than this share of the
+#: coefficients' variance (:func:`regressor_error_covariance`).
+REGRESSOR_NOTE_SHARE = 0.25
 
 
 @dataclass(frozen=True, slots=True)
@@ -227,13 +230,22 @@ class Samples:
     var_t_c2: np.ndarray
     cov_tg: np.ndarray
     var_g: np.ndarray
+    #: paths of the estimates' errors, (m, n) each, degC and degC/min: draws of the
+    #: smoother's noise and the thermal model's uncertainty (:func:`_error_paths`), for
+    #: the regressors' share of the standard errors (:func:`regressor_error_covariance`);
+    #: None: the regressors are taken as exact
+    t_err_paths: np.ndarray | None = None
+    g_err_paths: np.ndarray | None = None
 
     @property
     def n(self) -> int:
         return int(self.time_s.size)
 
     def take(self, idx: np.ndarray) -> Samples:
-        return Samples(*(getattr(self, f.name)[idx] for f in dataclasses.fields(self)))
+        def pick(v: np.ndarray | None) -> np.ndarray | None:
+            return None if v is None else v[..., idx]
+
+        return Samples(**{f.name: pick(getattr(self, f.name)) for f in dataclasses.fields(self)})  # type: ignore[arg-type]
 
 
 def _powers(terms: tuple[str, ...]) -> list[tuple[int, int]]:
@@ -493,6 +505,9 @@ class PolyFit:
     #: ``"gls"`` (weighted by the white + walk noise model) or ``"ols"`` (also when the
     #: fitted walk was 0, where the two are the same)
     weighting: str = "ols"
+    #: the share of the coded coefficients' variance (trace) that the errors of T_hat and
+    #: g_hat cause (:func:`regressor_error_covariance`), 0..1
+    regressor_share: float = 0.0
 
     @property
     def std_errors(self) -> np.ndarray:
@@ -702,6 +717,11 @@ def fit_samples(
         samples.time_s, middle_x, walk_start_s
     )
     cov = a_inv @ middle @ a_inv
+    share = 0.0
+    if samples.t_err_paths is not None and samples.g_err_paths is not None:
+        cov_reg = regressor_error_covariance(samples, coding, terms_t, coef, middle_x @ a_inv)
+        cov = cov + cov_reg
+        share = float(np.trace(cov_reg) / np.trace(cov)) if np.trace(cov) > 0 else 0.0
     j_full = coded_to_physical(
         terms_t, coding.t_ref_c, coding.t_half_c, 0.0, coding.g_half_c_per_min
     )
@@ -717,12 +737,44 @@ def fit_samples(
         white_sigma_dph=sigma,
         walk_dph_per_rt_h=walk,
         walk_for_std_errors_dph_per_rt_h=walk_se,
+        regressor_share=share,
         residual_rms_dph=float(np.sqrt(np.mean(resid**2))),
         condition_number=float(np.linalg.cond(pieces.x)),
         n=samples.n,
         eiv=eiv,
         weighting=used,
     )
+
+
+def regressor_error_covariance(
+    samples: Samples, coding: Coding, terms: tuple[str, ...], coef: np.ndarray, gmap: np.ndarray
+) -> np.ndarray:
+    """The coded coefficients' covariance from the errors of the regressors T_hat, g_hat.
+
+    The fit ``c = G'd`` (``gmap`` is G, n x p) takes the estimated regressors as exact;
+    an error ``e`` in them changes the monomials by ``X(T_hat + e) - X(T_hat)`` and the
+    fitted drift's regressors by that times ``c``, so the coefficients move by
+    ``G' [X(T_hat + e) - X(T_hat)] c`` (first order). Summed over ``samples``' error paths
+    (their outer products sum to the errors' covariance, correlations over time included:
+    the smoother's noise is slow), the covariance this adds to the drift noise's. The
+    errors-in-variables correction removes the bias such errors cause, not their scatter.
+    Negligible for most gyros (a few mK times a temperature coefficient of 0.01-0.5 °/h/°C);
+    with 50 °/h/°C and 0.3 °/h/√Hz the standard errors that left it out were 4.5x too
+    small (RMS of the surface's error / sigma over six runs).
+    """
+    x0 = monomials(*coding.code(samples.t_c, samples.g_c_per_min), terms)
+    assert samples.t_err_paths is not None and samples.g_err_paths is not None
+    moves = np.array(
+        [
+            gmap.T
+            @ (
+                (monomials(*coding.code(samples.t_c + e_t, samples.g_c_per_min + e_g), terms) - x0)
+                @ coef
+            )
+            for e_t, e_g in zip(samples.t_err_paths, samples.g_err_paths, strict=True)
+        ]
+    ).reshape(-1, len(terms))
+    return moves.T @ moves
 
 
 #: A pass shorter than this share of the samples joins its predecessor (turnarounds).
@@ -1015,33 +1067,53 @@ IDENTIFIED_TAU_REL_STD = 0.2
 def estimator_model(
     log: MeasuredLog, method: str, params: ThermalParams | None
 ) -> tuple[ThermalParams, str]:
+    """The thermal model of the gradient estimator and where it comes from
+    (:func:`_estimator_model`, without the identified model's standard deviations)."""
+    params, source, _ = _estimator_model(log, method, params)
+    return params, source
+
+
+def _estimator_model(
+    log: MeasuredLog, method: str, params: ThermalParams | None
+) -> tuple[ThermalParams, str, tuple[float, float] | None]:
     """The thermal model of the gradient estimator and where it comes from.
 
     Given ``params`` are used as they are. Otherwise, for the model-based estimator, tau
     and dT0 are identified from the log (:func:`schedsyn.monitor.identify`, a fit of the
     first-order lag to the whole run): a device 200 s off the nominal tau gave the
     smoother 0.002 degC/min of systematic gradient error, which the error draws do not
-    see; identified, 0.00004. The kinematic estimator needs no model.
+    see; identified, 0.00004. The kinematic estimator needs no model. The third item is
+    the identified model's standard deviations ``(tau s, dT0 degC)``, or None (given,
+    nominal or kinematic).
     """
     if params is not None:
-        return params, "given"
+        return params, "given", None
     if method != "model":
-        return ThermalParams(), "not used (kinematic estimator)"
+        return ThermalParams(), "not used (kinematic estimator)", None
     nominal = ThermalParams()
     try:
         found = identify(log)
         params = ThermalParams(found.tau_s, found.dt0_c)
     except (SchedsynError, ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
-        return nominal, f"nominal (identifying it from the log failed: {exc})"
+        return nominal, f"nominal (identifying it from the log failed: {exc})", None
     if not found.tau_std_s <= IDENTIFIED_TAU_REL_STD * found.tau_s:
-        return nominal, (
-            f"nominal, tau {nominal.tau_s:g} s, dT0 {nominal.dt0_c:g} °C (the log does not "
-            f"determine tau: {found.tau_s:.0f} ± {found.tau_std_s:.2g} s; give --tau-s and "
-            "--dt0-c)"
+        return (
+            nominal,
+            (
+                f"nominal, tau {nominal.tau_s:g} s, dT0 {nominal.dt0_c:g} °C (the log does not "
+                f"determine tau: {found.tau_s:.0f} ± {found.tau_std_s:.2g} s; give --tau-s and "
+                "--dt0-c)"
+            ),
+            None,
         )
-    return params, (
-        f"identified from the log (tau {found.tau_s:.0f} ± {found.tau_std_s:.2g} s, "
-        f"dT0 {found.dt0_c:.2f} ± {found.dt0_std_c:.2g} °C)"
+    std = (found.tau_std_s, found.dt0_std_c)
+    return (
+        params,
+        (
+            f"identified from the log (tau {found.tau_s:.0f} ± {found.tau_std_s:.2g} s, "
+            f"dT0 {found.dt0_c:.2f} ± {found.dt0_std_c:.2g} °C)"
+        ),
+        (std if all(math.isfinite(v) and v >= 0 for v in std) else None),
     )
 
 
@@ -1060,6 +1132,58 @@ def choose_estimator(log: MeasuredLog, estimator: str = "auto") -> str:
     return "model" if ok else "kinematic"
 
 
+def noise_draws(
+    log: MeasuredLog, est: GradientEstimate, params: ThermalParams, n_draws: int = 8, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(e_t, e_g)``, each (n_draws, rows): draws of the smoother's noise in T_hat and g_hat.
+
+    Re-runs the smoother at the fitted noise levels on the readings plus white noise of
+    variance ``r`` (module docstring): the smoother is linear in the readings, so the
+    differences are draws of exactly its noise, correlated over time as it is.
+    """
+    rng = np.random.default_rng(seed)
+    finite = np.isfinite(log.t_int_c)
+    sd = math.sqrt(est.r)
+    e_t = np.zeros((n_draws, log.n_rows))
+    e_g = np.zeros((n_draws, log.n_rows))
+    for m in range(n_draws):
+        y = np.array(log.t_int_c, dtype=float)
+        y[finite] += sd * rng.standard_normal(int(finite.sum()))
+        y.setflags(write=False)
+        noisy = dataclasses.replace(log, t_int_c=y)
+        e2 = _estimate(noisy, est.method, params, q=est.q, r=est.r, quant_c=est.noise.quant_c)
+        e_t[m] = e2.t_est_c - est.t_est_c
+        e_g[m] = e2.g_est_c_per_min - est.g_est_c_per_min
+    return e_t, e_g
+
+
+def model_error_paths(
+    log: MeasuredLog, est: GradientEstimate, params: ThermalParams, std: tuple[float, float]
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(e_t, e_g)``, each (2, rows): how T_hat and g_hat move when the model-based
+    smoother's tau and dT0 (identified from the log) are each one standard deviation
+    (``std``: s, degC) off. Unlike the noise, such an error is the same for the whole run:
+    a tau 0.3 s off doubled T_hat's error on a 9-h run (1.3 mK against 0.6), which a
+    temperature coefficient of 50 °/h/°C turns into 0.07 °/h, far beyond the standard
+    errors that took T_hat as exact."""
+    e_t = np.zeros((2, log.n_rows))
+    e_g = np.zeros((2, log.n_rows))
+    for k, (tau_s, dt0_c) in enumerate(
+        ((params.tau_s + std[0], params.dt0_c), (params.tau_s, params.dt0_c + std[1]))
+    ):
+        moved = _estimate(
+            log,
+            est.method,
+            ThermalParams(tau_s, dt0_c),
+            q=est.q,
+            r=est.r,
+            quant_c=est.noise.quant_c,
+        )
+        e_t[k] = moved.t_est_c - est.t_est_c
+        e_g[k] = moved.g_est_c_per_min - est.g_est_c_per_min
+    return e_t, e_g
+
+
 def estimation_errors(
     log: MeasuredLog,
     est: GradientEstimate,
@@ -1067,13 +1191,13 @@ def estimation_errors(
     n_draws: int = 8,
     seed: int = 0,
     smooth_rows: int = 21,
+    draws: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-row ``(var T_hat, cov(T_hat, g_hat), var g_hat)`` of the smoother's noise.
 
-    Re-runs the smoother at the fitted noise levels on the readings plus white noise of
-    variance ``r`` (module docstring): the differences are draws of the estimator's noise.
-    The per-row moments are averaged over the draws and over a centred window of
-    ``smooth_rows`` rows (odd; the noise level changes slowly: gaps and the ends).
+    The per-row moments of :func:`noise_draws` (``draws``, when already drawn), averaged
+    over the draws and over a centred window of ``smooth_rows`` rows (odd; the noise
+    level changes slowly: gaps and the ends).
 
     The draws see only the readings' noise. The order-3 kinematic smoother also errs where
     its random-jerk model meets a ramp corner; its posterior variances are calibrated
@@ -1083,20 +1207,7 @@ def estimation_errors(
     to the draws: both keep the draws.)
     """
     smooth_rows = smooth_rows + 1 - smooth_rows % 2  # odd: a centred window
-    rng = np.random.default_rng(seed)
-    finite = np.isfinite(log.t_int_c)
-    sd = math.sqrt(est.r)
-    method = est.method
-    e_t = np.zeros((n_draws, log.n_rows))
-    e_g = np.zeros((n_draws, log.n_rows))
-    for m in range(n_draws):
-        y = np.array(log.t_int_c, dtype=float)
-        y[finite] += sd * rng.standard_normal(int(finite.sum()))
-        y.setflags(write=False)
-        noisy = dataclasses.replace(log, t_int_c=y)
-        e2 = _estimate(noisy, method, params, q=est.q, r=est.r, quant_c=est.noise.quant_c)
-        e_t[m] = e2.t_est_c - est.t_est_c
-        e_g[m] = e2.g_est_c_per_min - est.g_est_c_per_min
+    e_t, e_g = draws if draws is not None else noise_draws(log, est, params, n_draws, seed)
     moments = [np.mean(e_t**2, 0), np.mean(e_t * e_g, 0), np.mean(e_g**2, 0)]
     if smooth_rows > 1 and log.n_rows > smooth_rows:
         kernel = np.ones(smooth_rows) / smooth_rows
@@ -1311,10 +1422,14 @@ class DriftFit:
                 "white_sigma_dph": m.white_sigma_dph,
                 "bias_walk_dph_per_rt_h": m.walk_dph_per_rt_h,
                 "bias_walk_for_std_errors_dph_per_rt_h": m.walk_for_std_errors_dph_per_rt_h,
+                "regressor_error_share": m.regressor_share,
                 "standard_errors": (
                     "sandwich with a white + random-walk residual model; the walk is the "
                     "largest the run cannot rule out (restricted likelihood within "
-                    f"{WALK_UPPER_DELTA_M2LL:g} of its best in -2 log L)"
+                    f"{WALK_UPPER_DELTA_M2LL:g} of its best in -2 log L); plus the scatter "
+                    "the errors of the temperature and gradient estimates cause (their noise "
+                    "and the identified thermal model's uncertainty; regressor_error_share: "
+                    "its share of the coded coefficients' variance)"
                 ),
             },
             "weighting": {
@@ -1530,13 +1645,20 @@ def _samples_from_log(
             "t_int_c (output minus the known reference rate)"
         )
     method = choose_estimator(log, settings.estimator)
-    params, model_source = estimator_model(log, method, params)
+    params, model_source, model_std = _estimator_model(log, method, params)
     est = _estimate(log, method, params)
+    draws = noise_draws(log, est, params, settings.n_error_draws, settings.seed)
     var_t, cov_tg, var_g = (
-        estimation_errors(log, est, params, settings.n_error_draws, settings.seed)
+        estimation_errors(log, est, params, draws=draws)
         if settings.eiv == "als"
         else (np.zeros(log.n_rows),) * 3
     )
+    # the regressors' errors for the standard errors: paths whose outer products sum to
+    # their covariance (the noise draws scaled by 1/sqrt(m); one path per model parameter)
+    e_t, e_g = draws[0] / math.sqrt(draws[0].shape[0]), draws[1] / math.sqrt(draws[0].shape[0])
+    if model_std is not None:
+        m_t, m_g = model_error_paths(log, est, params, model_std)
+        e_t, e_g = np.vstack([e_t, m_t]), np.vstack([e_g, m_g])
     t, g, d = est.t_est_c, est.g_est_c_per_min, np.asarray(log.drift_dph, dtype=float)
     no_drift = ~np.isfinite(d)
     outliers: tuple = ()
@@ -1593,6 +1715,8 @@ def _samples_from_log(
         var_t[idx],
         cov_tg[idx],
         var_g[idx],
+        e_t[:, idx],
+        e_g[:, idx],
     )
     return s, est, method, without_drift, params, model_source, outliers, gap_notes
 
@@ -1745,6 +1869,13 @@ def fit_drift(
     # weighted by a walk fitted to its own residuals, the T-only cubic of a gyro with
     # gradient terms takes them for bias walk and follows them with its level
     reference = fit_samples(s, "t-only", coding, eiv=eiv, weighting="ols", walk_start_s=start_s)
+    if model.regressor_share > REGRESSOR_NOTE_SHARE:
+        notes.append(
+            f"the errors of the temperature and gradient estimates make up "
+            f"{model.regressor_share:.0%} of the coefficients' variance (the standard errors "
+            "count them): the drift changes so fast with T that the smoother's error of a "
+            "few mK shows in °/h; a less noisy or finer internal temperature sensor lowers it"
+        )
     if model.condition_number > 1e6:
         notes.append(
             f"the coded design is ill-conditioned (condition number {model.condition_number:.3g});"

@@ -604,6 +604,9 @@ def test_json_coefficients_reproduce_the_fit(grad_fit):
     np.testing.assert_allclose(by_hand, fit.predict(t, g), rtol=1e-9, atol=1e-12)
     assert doc["terms"] in TERM_SETS and doc["condition_number"] > 1
     assert len(doc["selection"]) == len(CANDIDATES)
+    # a FOG-like temperature coefficient: T_hat's mK errors are nothing in °/h
+    assert 0.0 < doc["noise"]["regressor_error_share"] < 0.01
+    assert not any("temperature and gradient estimates" in n for n in doc["notes"])
 
 
 def test_compensation_table_stays_inside_the_reached_gradients(grad_fit):
@@ -963,3 +966,65 @@ def test_no_dropped_terms_note_on_a_t_only_choice():
         fit = fit_drift(log, (-2.0, 33.0))
         assert fit.terms == parse_terms("t-only")
         assert not any(n.startswith("BIC chose") for n in fit.notes), fit.notes
+
+
+def test_regressor_error_covariance_matches_repeated_fits(programme, rng):
+    """The coefficients' scatter caused by slow errors in T_hat and g_hat alone (an exact
+    polynomial drift, no drift noise), over 300 fits, against the covariance
+    ``regressor_error_covariance`` predicts from other draws of the same errors."""
+    traj = simulate(programme, dt_min=1 / 3)
+    m = (traj.t_c >= REGION[0]) & (traj.t_c <= REGION[1])
+    t, g = traj.t_c[m], traj.g_c_per_min[m]
+    time_s = traj.time_min[m] * 60.0
+    coefs = {"1": 0.5, "t": 50.0, "t2": 0.05, "t3": -0.002, "g": 0.8, "g2": -0.2}
+    gyro = _gyro(coefs, white=0.0, walk=0.0)
+    d = gyro.drift_dph(t, g)
+    coding = Coding(CENTRE, 14.5, 1.0)
+    terms = TERM_SETS["full"]
+    n = t.size
+
+    def errors(k):  # slow errors: a smoothed walk of about 3 mK and its own g error
+        walk = np.cumsum(rng.standard_normal((k, n)), axis=1)
+        kernel = np.ones(31) / 31
+        slow = np.array([np.convolve(w - w.mean(), kernel, mode="same") for w in walk])
+        return 3e-3 * slow / slow.std(), 2e-4 * rng.standard_normal((k, n))
+
+    zeros = np.zeros(n)
+    e_t, e_g = errors(300)
+    fits = np.array([
+        fit_coefficients(Samples(time_s, t + a, g + b, d, zeros, zeros, zeros), terms, coding,
+                         eiv=False)
+        for a, b in zip(e_t, e_g, strict=True)
+    ])  # fmt: skip
+    p_t, p_g = errors(400)
+    s = Samples(time_s, t, g, d, zeros, zeros, zeros, p_t / 20.0, p_g / 20.0)
+    x = monomials(*coding.code(t, g), terms)
+    coef = np.linalg.solve(x.T @ x, x.T @ d)
+    cov = driftfit.regressor_error_covariance(s, coding, terms, coef, x @ np.linalg.inv(x.T @ x))
+    measured = np.std(fits, axis=0)
+    predicted = np.sqrt(np.diag(cov))
+    assert measured[1] > 1e-3, measured  # the errors do move the fit
+    np.testing.assert_allclose(predicted, measured, rtol=0.2)
+
+
+def test_standard_errors_count_the_temperature_estimates_error(programme):
+    """A temperature coefficient large against the drift noise (200 °/h/°C, 0.3 °/h/√Hz):
+    T_hat's error of about a mK moves the fit by more than the drift noise does, and the
+    standard errors count it (T_hat's noise and its identified model's uncertainty)."""
+    gyro = Gyro({"1": 5.0, "t": 200.0, "t2": 0.05, "t3": -0.002}, t_ref_c=CENTRE,
+                white_noise_dph_per_rt_hz=0.3, bias_walk_dph_per_rt_h=0.01,
+                sensor_noise_c=0.02, sensor_quant_c=0.0625)  # fmt: skip
+    z = []
+    for seed in range(6):
+        frame = gyro_log(programme, gyro, sample_s=10.0, seed=seed)
+        log = log_from_frame(frame[["time_s", "t_int_c", "tk_set_c", "drift_dph"]], "big tempco")
+        fit = fit_drift(log, REGION, FitSettings(terms="t-only"))
+        table = fit.compensation_frame()
+        t, g = table.t_c.to_numpy(), table.g_c_per_min.to_numpy()
+        err = fit.model.predict(t, g) - gyro.drift_dph(t, g)
+        z.append(err / fit.model.predict_std(t, g))
+        assert fit.model.regressor_share > 0.5
+        assert any("temperature and gradient estimates make up" in n for n in fit.notes)
+    rms_z = float(np.sqrt(np.mean(np.square(np.concatenate(z)))))
+    # six runs of the baseline: 0.80 (2.7 without the regressors' share; 1.3 at 50 °/h/°C)
+    assert 0.4 < rms_z < 1.6, rms_z
