@@ -329,3 +329,62 @@ def test_a_held_reading_that_then_jumps_is_excluded_and_named(tmp_path, capsys):
     doc = json.loads((out / "coefficients.json").read_text())
     (held,) = doc["log_readings"]["excluded_held_readings"]
     assert held["start_s"] == 1500.0 and held["end_s"] == 1700.0 and held["jump_c"] > 2.9
+
+
+# -- glitches at the log's ends, lines still being written (red team, 2026-12-03) ----------
+@pytest.mark.parametrize(
+    ("rows", "values"),
+    [([0], [85.0]), ([-1], [85.0]), ([0, 1], [35.0, 36.0]), ([-2], [-15.0]), ([-1], [1.0])],
+)
+def test_glitches_among_the_first_and_last_readings_are_excluded(rows, values):
+    """A DS18B20's 85 °C power-on value as the first reading had made the gradient
+    108 °C/min at the start and its sigma 9x too large over the whole log."""
+    f = _sample_run()
+    clean = log_from_frame(f)
+    n = len(f)
+    for r, val in zip(rows, values, strict=True):
+        f.loc[r % n, "t_int_c"] = val
+    log = log_from_frame(f)
+    assert sorted(g[0] for g in log.report.glitches) == sorted(r % n for r in rows)
+    assert "at the log's ends" in log.report.summary()
+    a, b = estimate_gradient(clean), estimate_gradient(log)
+    assert np.max(np.abs(a.g_est_c_per_min - b.g_est_c_per_min)) < 0.01
+    assert np.median(b.g_std_c_per_min) < 1.2 * np.median(a.g_std_c_per_min)
+
+
+def test_the_ends_of_coarse_or_cornering_logs_are_not_glitches():
+    """Random programmes cut at random rows, sampled every 1-600 s: extrapolated over
+    10 min, a corner just before the end bends the device by degrees; no end reading may
+    be named a glitch (without the pace condition 3 % of the 600-s logs had one)."""
+    from schedsyn.programme import Programme
+    from schedsyn.synth import synth_log
+
+    rng = np.random.default_rng(1)
+    for trial in range(150):
+        k = int(rng.integers(3, 12))
+        prog = Programme(rng.uniform(5, 90, k), rng.uniform(-1, 3, k))
+        sample = float(rng.choice([1.0, 10.0, 60.0, 120.0, 300.0, 600.0]))
+        frame = synth_log(prog, sample_s=sample, noise_c=float(rng.choice([0.0, 0.003, 0.05])),
+                          quant_c=float(rng.choice([0.0, 0.01, 0.0625])), seed=trial)  # fmt: skip
+        a = int(rng.integers(0, len(frame) // 2))
+        part = frame.iloc[a:]
+        if len(part) < 10:
+            continue
+        rows, _, _ = glitch_rows(part.time_s.to_numpy(), part.t_int_c.to_numpy())
+        ends = [r for r in rows if r < 2 or r >= len(part) - 2]
+        assert not ends, (trial, sample, ends)
+
+
+def test_a_last_line_without_a_line_end_is_dropped_only_from_a_live_log(tmp_path):
+    f = _good_frame(60)
+    text = f.to_csv(index=False)
+    path = tmp_path / "log.csv"
+    path.write_text(text + "600.0,2")  # a row being written
+    live = read_log(path, live=True)
+    assert live.n_rows == 60 and "('600.0,2') has no line end" in live.report.summary()
+    assert read_log(path).n_rows == 61  # a finished log: every line is data
+    path.write_text(text.rstrip("\n"))  # a complete last row without a line end
+    assert read_log(path, live=True).n_rows == 59
+    path.write_text(text)
+    done = read_log(path, live=True)
+    assert done.n_rows == 60 and "line end" not in done.report.summary()

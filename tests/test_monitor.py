@@ -299,3 +299,40 @@ def test_prediction_starts_from_the_given_state_like_an_ode_started_there():
     g_ode = (prog.chamber_at(times) + model.dt0_c - sol.y[0]) / tau
     np.testing.assert_allclose(grad, g_ode, atol=1e-5)
     assert abs(temp[0] - t_now) < 1e-9
+
+
+def test_a_last_line_still_being_written_is_left_out_and_said(plan_dir, tmp_path, capsys):
+    """Red team: the last line caught mid-write (``12000.0,-3``, no line end) was read as a
+    reading: the gradient now 102 °C/min, a false re-plan advice, exit 0 and no word."""
+    frame = run_log(200.0)
+    whole, cut = tmp_path / "whole", tmp_path / "cut"
+    rc, cap = _cli(frame, plan_dir, whole, capsys)
+    assert rc == 0 and "warning" not in cap.err
+    text = (tmp_path / "log.csv").read_text()
+    # another row begun but not finished: time and the first digits of t_int_c
+    last = frame.iloc[-1]
+    partial = f"{last.time_s + 10:.1f},{round(last.t_int_c) - 5}"
+    (tmp_path / "live.csv").write_text(text + partial)
+    rc = main(["monitor", str(tmp_path / "live.csv"), str(plan_dir), "--out", str(cut)])
+    cap = capsys.readouterr()
+    assert rc == 0
+    assert f"the last line ({partial!r}) has no line end" in cap.err
+    a = json.loads((whole / "monitor.json").read_text())
+    b = json.loads((cut / "monitor.json").read_text())
+    assert b["elapsed_min"] == a["elapsed_min"]
+    assert b["state_now"]["g_c_per_min"] == pytest.approx(a["state_now"]["g_c_per_min"], abs=1e-6)
+    assert b["predicted_if_unchanged"] == a["predicted_if_unchanged"]
+    assert any("no line end" in w for w in b["log_readings"]["warnings"])
+
+
+def test_an_end_glitch_is_excluded_and_named_by_monitor(plan_dir, tmp_path, capsys):
+    frame = run_log(200.0)
+    rc, _ = _cli(frame, plan_dir, tmp_path / "clean", capsys)
+    frame.loc[frame.index[-1], "t_int_c"] = 85.0  # a DS18B20's power-on value
+    rc, cap = _cli(frame, plan_dir, tmp_path / "glitch", capsys)
+    assert rc == 0 and "1 isolated glitch reading(s)" in cap.err
+    a = json.loads((tmp_path / "clean" / "monitor.json").read_text())
+    b = json.loads((tmp_path / "glitch" / "monitor.json").read_text())
+    assert b["state_now"]["g_c_per_min"] == pytest.approx(a["state_now"]["g_c_per_min"], abs=0.002)
+    assert b["predicted_if_unchanged"]["coverage"] == a["predicted_if_unchanged"]["coverage"]
+    assert [g["row"] for g in b["log_readings"]["excluded_glitches"]] == [len(frame)]

@@ -33,11 +33,13 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     plan = read_plan_dir(args.plan)
-    log = read_log(args.log)
+    log = read_log(args.log, live=True)
+    _common.log_warnings(log)
     report = monitor_run(log, plan)
     out = _common.out_dir(args.out, "out/monitor")
     inputs = [args.log, plan.path / "steps.csv", plan.path / "plan.json"]
-    write_json_atomic(out / "monitor.json", json_safe(report.to_json_dict()), inputs)
+    doc = {**report.to_json_dict(), "log_readings": _common.log_record(log)}
+    write_json_atomic(out / "monitor.json", json_safe(doc), inputs)
     write_frame_atomic(out / "bins.csv", report.to_frame(), inputs)
     write_frame_atomic(out / "series.csv", report.series, inputs)
     written = ["monitor.json", "bins.csv", "series.csv"]

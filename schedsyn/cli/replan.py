@@ -106,7 +106,8 @@ def run(args: argparse.Namespace) -> int:
             f"--out {out} is the plan folder being run (an input); write the re-plan to "
             "another folder"
         )
-    log = read_log(args.log)
+    log = read_log(args.log, live=True)
+    _common.log_warnings(log)
     progress = None
     if not args.quiet:
         tic = time.perf_counter()
