@@ -167,6 +167,34 @@ def test_resample_run_breaks_at_gaps():
     assert np.all(rep.pass_counts[[0, 1, 2, 9]] == 1)
 
 
+@pytest.mark.parametrize("kind", ["blank", "rows missing"])
+def test_resample_run_breaks_at_blank_readings_as_at_gaps(kind):
+    """Red team: an hour of blank t_int_c inside the region was counted as measured
+    passes (the smoother's guess), 40 % where the device reached 25 %; with the rows
+    missing instead, 0 %. Both are now the same: no pass where nothing was read."""
+    t = np.concatenate((np.arange(0, 600, 10.0), np.arange(600, 1200, 10.0),
+                        np.arange(1200, 1800, 10.0)))  # fmt: skip
+    temp = 20 - 0.01 * t
+    middle = (t >= 600) & (t < 1200)
+    if kind == "blank":
+        frame = pd.DataFrame({"time_s": t, "t_int_c": np.where(middle, np.nan, temp)})
+    else:
+        frame = pd.DataFrame({"time_s": t[~middle], "t_int_c": temp[~middle]})
+    log = log_from_frame(frame)
+    from schedsyn.estimate import estimate_gradient
+
+    dense = resample_run(log, estimate_gradient(log, q=1e-6, r=1e-4), dt_min=0.1)
+    rep = coverage_report(dense.t_c, dense.g_c_per_min, BinGrid(5.0, 15.0), levels_required=1)
+    assert np.all(rep.pass_counts[4:9] == 0)  # 9..14 degC: no reading there
+    assert np.all(rep.pass_counts[[0, 1, 2, 9]] == 1)
+    if kind != "blank":
+        return
+    # two blank rows are bridged, as a sampling step of 3 median steps is (no gap)
+    log = log_from_frame(frame.assign(t_int_c=np.where((t >= 300) & (t < 320), np.nan, temp)))
+    dense = resample_run(log, estimate_gradient(log, q=1e-6, r=1e-4), dt_min=0.1)
+    assert np.isfinite(dense.t_c).all()
+
+
 def test_compare_with_the_model_based_estimator(clean_log_path, tmp_path, capsys):
     log = read_log(clean_log_path)
     programme = read_steps(STEPS)
