@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from .coverage import CoverageReport, coverage_report
-from .errors import ParameterError
+from .errors import LogFormatError, ParameterError
 from .estimate import GradientEstimate, estimate_gradient, estimate_gradient_model
 from .grid import BinGrid
 from .logs import GAP_FACTOR, MeasuredLog
@@ -141,6 +141,43 @@ class RunComparison:
         )
 
 
+#: The log's first row must lie within this of the programme's start, min.
+RUN_START_TOL_MIN = 10.0
+#: The logged setpoint may differ from the step table's programme by this much (a
+#: coarsely logged or slightly late setpoint), degC.
+RUN_SETPOINT_TOL_C = 2.0
+
+
+def check_run_of(log: MeasuredLog, programme: Programme) -> None:
+    """Raise :class:`LogFormatError` (one line) unless ``log`` can be a run of ``programme``:
+    its ``time_s`` counts from the programme's start, and its logged setpoint (when it
+    has one) follows the programme. Red team: a log with Unix-epoch times, one shifted by
+    30 min and one of another programme (setpoint 23 °C apart) were compared without a
+    word (residual RMS 52 °C; "run 25 %")."""
+    if abs(float(log.time_min[0])) > RUN_START_TOL_MIN:
+        raise LogFormatError(
+            f"{log.source}: the log starts at time_s = {log.time_s[0]:g} s, but time_s must "
+            "count from the start of the step table's programme (0 s); shift time_s so the "
+            "programme starts at 0"
+        )
+    if log.tk_set_c is None:
+        return
+    ok = np.isfinite(log.tk_set_c) & (log.time_min <= programme.total_min)
+    if not ok.any():
+        return
+    at = log.time_min[ok]
+    gap = np.abs(log.tk_set_c[ok] - programme.chamber_at(at))
+    k = int(np.argmax(gap))
+    if gap[k] > RUN_SETPOINT_TOL_C:
+        planned = float(programme.chamber_at(at[k : k + 1])[0])
+        raise LogFormatError(
+            f"{log.source}: the logged setpoint tk_set_c = {log.tk_set_c[ok][k]:.2f} °C at "
+            f"{at[k]:.1f} min differs from the step table's programme ({planned:.2f} °C) by "
+            f"{gap[k]:.2f} °C > {RUN_SETPOINT_TOL_C:g} °C: the log is not a run of this step "
+            "table (another programme, or time_s not counted from its start)"
+        )
+
+
 def reading_gaps_s(log: MeasuredLog) -> tuple[tuple[float, float], ...]:
     """``(start_s, end_s)`` between consecutive finite ``t_int_c`` readings further apart
     than a sampling gap (``GAP_FACTOR`` x the median step) with blank readings between
@@ -222,6 +259,7 @@ def compare_run(
         Step of the dense plan simulation, min.
     """
     params = ThermalParams() if params is None else params
+    check_run_of(log, programme)
     if method == "kinematic":
         est = estimate_gradient(log, q=q, r=r)
     elif method == "model":

@@ -1,6 +1,7 @@
 """`schedsyn estimate` and `schedsyn compare`, in-process, plus the run-vs-plan API."""
 
 import json
+import re
 
 import numpy as np
 import pandas as pd
@@ -224,3 +225,40 @@ def test_compare_with_the_model_based_estimator(clean_log_path, tmp_path, capsys
         ]
     )
     assert rc == 0 and "model Kalman smoother" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ("epoch", r"starts at time_s = 1\.7e\+09 s, but time_s must count from the start"),
+        ("shift", r"starts at time_s = 1800 s"),
+        ("other", r"the logged setpoint tk_set_c = .* differs from the step table's programme"),
+    ],
+)
+def test_compare_refuses_a_log_that_is_not_a_run_of_the_step_table(
+    clean_log_path, tmp_path, capsys, change, message
+):
+    """Red team: Unix-epoch times, a log shifted by 30 min and a run of another programme
+    were compared without a word (residual RMS 52 °C; "planned 100 %, run 25 %")."""
+    frame = pd.read_csv(clean_log_path)
+    if change == "epoch":
+        frame["time_s"] += 1.7e9
+    elif change == "shift":
+        frame["time_s"] += 1800.0
+    else:
+        frame["tk_set_c"] = frame["tk_set_c"][::-1].to_numpy()
+    path = tmp_path / "log.csv"
+    frame.to_csv(path, index=False)
+    out = tmp_path / "out"
+    rc = main(["compare", str(path), STEPS, "--region", "-50", "-30", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()[-1]  # after the progress lines
+    assert rc == 2 and err.startswith("schedsyn compare: error:") and re.search(message, err), err
+    assert not out.exists()
+    # the run itself, its setpoint logged to 1 °C and 20 s late, is its step table's
+    ok = pd.read_csv(clean_log_path)
+    ok["tk_set_c"] = np.round(np.interp(ok["time_s"] - 20.0, ok["time_s"], ok["tk_set_c"]))
+    ok.to_csv(path, index=False)
+    assert main(["compare", str(path), STEPS, "--region", "-50", "-30", "--out", str(out)]) in (
+        0,
+        1,
+    )
