@@ -347,6 +347,12 @@ def _check_temperature(v: np.ndarray, col: str, source: str) -> None:
         hint = ""
         if hi > phi and lo > -60.0:
             hint = "; if the log is in Fahrenheit convert with (F - 32) * 5 / 9"
+        if idx.size <= max(GLITCH_MAX_FEW, GLITCH_MAX_SHARE * finite.size):
+            # a few: a sensor's error codes (a DS18B20 reads -127 when disconnected)
+            hint += (
+                f"; {idx.size} such reading(s): if they are a sensor's error codes, blank those "
+                "cells (a blank reading is left out and reported)"
+            )
         raise LogFormatError(
             f"{source}: row {r + 1} (line {r + 2}), column {col}: {v[r]:g} is not a plausible "
             f"temperature in °C (expected {plo:g} .. {phi:g}){hint}"
@@ -417,7 +423,8 @@ def _check_time_unit(
     if time_s.size > 1 and span_s < WARN_MIN_SPAN_S:
         return (
             f"the log spans only {span_s:.4g} s ({time_s.size} rows, median step "
-            f"{median_step_s:.3g} s); if time_s holds minutes, write seconds (minutes x 60)",
+            f"{median_step_s:.3g} s); if time_s holds minutes or hours, write seconds "
+            "(minutes x 60, hours x 3600)",
         )
     return ()
 

@@ -388,3 +388,15 @@ def test_a_last_line_without_a_line_end_is_dropped_only_from_a_live_log(tmp_path
     path.write_text(text)
     done = read_log(path, live=True)
     assert done.n_rows == 60 and "line end" not in done.report.summary()
+
+
+def test_a_sensor_error_code_is_refused_with_the_advice_to_blank_it():
+    f = _good_frame(200)
+    f.loc[100, "t_int_c"] = -127.0  # a DS18B20's "disconnected"
+    with pytest.raises(LogFormatError, match=r"-127 is not a plausible.*1 such reading\(s\).*"
+                       r"blank those cells"):  # fmt: skip
+        log_from_frame(f)
+    f["t_int_c"] = f["t_int_c"] * 9 / 5 + 32 + 150  # the whole column off: no such advice
+    with pytest.raises(LogFormatError, match=r"not a plausible") as err:
+        log_from_frame(f)
+    assert "blank those cells" not in str(err.value)
