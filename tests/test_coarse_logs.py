@@ -73,3 +73,34 @@ def test_quantisation_floor_on_a_noiseless_sensor():
     floor = 0.0625**2 / 12
     assert estimate_gradient(log).r >= floor
     assert estimate_gradient(log, quant_c=0.0).r < 0.95 * floor  # what the floor prevents
+
+
+def test_a_fast_sampled_quantised_staircase_is_not_followed_step_by_step():
+    """Red team: 20-min logs at 0.5 s of a 0.0625 degC sensor with 0.002 degC of noise.
+    Fitted on every reading, the likelihood chose q 170-510 (it followed the steps):
+    gradient error 0.15-0.19 degC/min RMS, 45-57 % within 2 sigma. One reading per step
+    of the staircase: a few thousandths, sigma honest."""
+    rng = np.random.default_rng(5)
+    switched = 0
+    for seed in range(10):
+        prog = Programme(rng.uniform(4, 15, 4), rng.uniform(-1, 2, 4))
+        frame = synth_log(prog, sample_s=0.5, noise_c=0.002, quant_c=0.0625, seed=seed)
+        frame = frame[frame.time_s <= 1200]
+        log = log_from_frame(frame.drop(columns=["t_true_c", "g_true_c_per_min"]))
+        est = estimate_gradient(log)
+        err = est.g_est_c_per_min - frame.g_true_c_per_min.to_numpy()
+        assert np.sqrt(np.mean(err**2)) < 0.01, seed
+        assert np.mean(np.abs(err) < 2 * est.g_std_c_per_min) > 0.8, seed
+        if est.staircase_readings:
+            switched += 1
+            assert "quantised staircase" in est.summary()
+            assert est.staircase_readings < 0.2 * log.n_rows
+    assert switched >= 3  # seeds 0, 2 and 8 follow the steps when fitted on every reading
+
+
+def test_a_coarse_sensor_on_two_values_is_quantised():
+    from schedsyn.estimate import quantisation_step
+
+    toggling = np.where(np.arange(200) % 7 < 3, 19.9375, 20.0)
+    assert quantisation_step(toggling) == pytest.approx(0.0625)
+    assert quantisation_step(toggling[:6]) == 0.0  # too few readings to tell
