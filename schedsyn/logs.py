@@ -766,6 +766,14 @@ class _Collector:
         notes = _check_time_unit(
             values["time_s"], values["t_int_c"], report.median_step_s, self.source
         )
+        finite_t = values["t_int_c"][np.isfinite(values["t_int_c"])]
+        if finite_t.size and float(np.ptp(finite_t)) == 0.0:
+            notes = (
+                *notes,
+                f"t_int_c reads {finite_t[0]:g} °C on every one of its {finite_t.size} readings: "
+                "a stuck or unconnected sensor? (a device in a running chamber moves; the "
+                "gradient estimated from it is 0 with a meaninglessly small sigma)",
+            )
         report = dataclasses.replace(report, warnings=notes)
         values["t_int_c"], report = _exclude_glitches(values, report, self.source)
         if len(self.extra_parts) > 1:

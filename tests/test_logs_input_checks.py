@@ -400,3 +400,10 @@ def test_a_sensor_error_code_is_refused_with_the_advice_to_blank_it():
     with pytest.raises(LogFormatError, match=r"not a plausible") as err:
         log_from_frame(f)
     assert "blank those cells" not in str(err.value)
+
+
+def test_a_sensor_that_never_changes_is_named():
+    f = _good_frame(100).assign(t_int_c=21.5)
+    assert any("reads 21.5 °C on every one of its 100 readings" in w
+               for w in log_from_frame(f).report.warnings)  # fmt: skip
+    assert not any("on every one" in w for w in log_from_frame(_good_frame(100)).report.warnings)
