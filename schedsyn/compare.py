@@ -49,6 +49,15 @@ class RunComparison:
         Coverage of the same working region by the plan and by the run.
     params : ThermalParams
         Model used for the simulation.
+    level_margin_c_per_min : float
+        Twice the standard deviation of the difference of two passes' estimated
+        gradients (median over the region's rows): how far a level separation measured
+        from the log may be from the device's.
+    run_coverage_low, run_coverage_high : CoverageReport or None
+        The run's coverage with the level separation widened / narrowed by that margin:
+        bins that flip between them are borderline, the run's true coverage most likely
+        lies between the two (red team: a 120-s log read 35 % where the device did 25 %,
+        two bins flipped by gradient errors of 1-2 sigma).
     """
 
     log: MeasuredLog
@@ -59,6 +68,16 @@ class RunComparison:
     planned_coverage: CoverageReport
     run_coverage: CoverageReport
     params: ThermalParams
+    level_margin_c_per_min: float = 0.0
+    run_coverage_low: CoverageReport | None = None
+    run_coverage_high: CoverageReport | None = None
+
+    @property
+    def borderline_bins(self) -> int:
+        """Bins covered with the narrowed separation but not with the widened one."""
+        if self.run_coverage_low is None or self.run_coverage_high is None:
+            return 0
+        return int((self.run_coverage_high.covered & ~self.run_coverage_low.covered).sum())
 
     @property
     def residual_c(self) -> np.ndarray:
@@ -124,6 +143,19 @@ class RunComparison:
             "run_coverage": self.run_coverage.coverage,
             "planned_min_levels": self.planned_coverage.min_levels,
             "run_min_levels": self.run_coverage.min_levels,
+            "level_margin_c_per_min": self.level_margin_c_per_min,
+            "run_coverage_low": None
+            if self.run_coverage_low is None
+            else self.run_coverage_low.coverage,
+            "run_coverage_high": None
+            if self.run_coverage_high is None
+            else self.run_coverage_high.coverage,
+            "borderline_bins": self.borderline_bins,
+            "run_coverage_range_meaning": (
+                "the run's coverage with the level separation widened (low) and narrowed "
+                "(high) by twice the standard deviation of the difference of two passes' "
+                "estimated gradients: bins that flip between them are borderline"
+            ),
         }
 
     def summary(self) -> str:
@@ -137,8 +169,19 @@ class RunComparison:
                 f"{self.max_abs_residual_c:.3f} °C",
                 "planned: " + self.planned_coverage.summary(),
                 "run:     " + self.run_coverage.summary(),
+                *self._range_lines(),
             ]
         )
+
+    def _range_lines(self) -> list[str]:
+        lo, hi = self.run_coverage_low, self.run_coverage_high
+        if lo is None or hi is None:
+            return []
+        return [
+            f"run, allowing for the gradient estimate (levels {self.level_margin_c_per_min:.3f} "
+            f"°C/min further apart or closer): {lo.coverage:.0%} .. {hi.coverage:.0%}; "
+            f"{self.borderline_bins} borderline bin(s)"
+        ]
 
 
 #: The log's first row must lie within this of the programme's start, min.
@@ -277,4 +320,21 @@ def compare_run(
     run_cov = coverage_report(
         run_dense.t_c, run_dense.g_c_per_min, grid, levels_required, delta_c_per_min
     )
-    return RunComparison(log, est, simulated, planned, run_dense, planned_cov, run_cov, params)
+    inside = (est.t_est_c >= grid.lo_c) & (est.t_est_c <= grid.hi_c)
+    sd = est.g_std_c_per_min[inside & np.isfinite(est.g_std_c_per_min)]
+    margin = 2.0 * math.sqrt(2.0) * float(np.median(sd)) if sd.size else 0.0
+    low = high = None
+    if margin > 0:
+        low = coverage_report(
+            run_dense.t_c, run_dense.g_c_per_min, grid, levels_required, delta_c_per_min + margin
+        )
+        high = coverage_report(
+            run_dense.t_c,
+            run_dense.g_c_per_min,
+            grid,
+            levels_required,
+            max(delta_c_per_min - margin, 0.05 * delta_c_per_min),
+        )
+    return RunComparison(
+        log, est, simulated, planned, run_dense, planned_cov, run_cov, params, margin, low, high
+    )

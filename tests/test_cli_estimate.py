@@ -14,6 +14,7 @@ from schedsyn.grid import BinGrid
 from schedsyn.logs import log_from_frame, read_log
 from schedsyn.params import ThermalParams
 from schedsyn.programme import read_steps
+from schedsyn.simulate import simulate
 from schedsyn.synth import synth_log
 
 STEPS = "data/baseline_exp1_steps.csv"
@@ -262,3 +263,28 @@ def test_compare_refuses_a_log_that_is_not_a_run_of_the_step_table(
         0,
         1,
     )
+
+
+def test_the_runs_coverage_range_holds_the_devices_coverage():
+    """Red team: a 120-s log read 35 % where the device did 25 % (two bins flipped by
+    gradient errors of 1-2 sigma against the 0.05 °C/min level separation). The range
+    with the separation widened and narrowed by the estimate's 2 sigma holds the device's
+    own coverage (counted from the noise-free truth); its margin shrinks with denser rows."""
+    programme = read_steps(STEPS)
+    grid = BinGrid(-50.0, -30.0)
+    truth = simulate(programme, dt_min=0.1)
+    true = coverage_report(truth.t_c, truth.g_c_per_min, grid).coverage
+    margins = {}
+    for sample_s in (10.0, 120.0):
+        for seed in range(3):
+            frame = synth_log(programme, sample_s=sample_s, seed=seed)
+            log = log_from_frame(frame.drop(columns=["t_true_c", "g_true_c_per_min"]))
+            cmp = compare_run(log, programme, grid=grid)
+            low, high = cmp.run_coverage_low, cmp.run_coverage_high
+            assert low is not None and high is not None
+            assert low.coverage <= true <= high.coverage, (sample_s, seed, low, true, high)
+            assert low.coverage <= cmp.run_coverage.coverage <= high.coverage
+            margins.setdefault(sample_s, []).append(cmp.level_margin_c_per_min)
+    assert 0 < max(margins[10.0]) < min(margins[120.0])
+    assert "borderline bin(s)" in cmp.summary()
+    assert cmp.summary_dict()["run_coverage_low"] == low.coverage
