@@ -92,6 +92,15 @@ def register(sub) -> None:
         help="kinematic model: 3 = the gradient's rate a random walk (default; smooth "
         "gradients that bend where the chamber changes rate), 2 = the gradient a random walk",
     )
+    p.add_argument(
+        "--sensor-tau-s",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="the temperature sensor's own time constant, s (kinematic estimator, order 3): "
+        "T and g are then the device's, T = Ts + S dTs/dt (default 0: the readings are the "
+        "device's temperature; `schedsyn diagnose` names such a lag second_time_constant)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress messages on stderr")
     p.set_defaults(func=run)
 
@@ -123,6 +132,11 @@ def run(args: argparse.Namespace) -> int:
     progress = None if args.quiet else StderrProgress("estimate")
     log = read_log(args.log, keep_extra=False, progress=progress)
     print_log_report(log)
+    if args.sensor_tau_s and args.method == "model":
+        raise ParameterError(
+            "--sensor-tau-s is for the kinematic estimator; the model-based one would need the "
+            "sensor in its thermal model (drop --method model)"
+        )
     if args.method == "model":
         params = _common.thermal_params(args)
         est = estimate_gradient_model(
@@ -136,7 +150,13 @@ def run(args: argparse.Namespace) -> int:
         )
     else:
         est = estimate_gradient(
-            log, q=args.q, r=args.r, every_s=args.every, progress=progress, order=args.order
+            log,
+            q=args.q,
+            r=args.r,
+            every_s=args.every,
+            progress=progress,
+            order=args.order,
+            sensor_tau_s=args.sensor_tau_s,
         )
     write_gradient_csv(out.path("gradient.csv"), est, [args.log], progress)
     if progress is not None:
