@@ -1721,6 +1721,16 @@ def _samples_from_log(
     return s, est, method, without_drift, params, model_source, outliers, gap_notes
 
 
+def _gradient_error_std(s: Samples) -> float:
+    """The median standard deviation of g_hat's error over the samples: its noise and,
+    where the error paths have them, the identified thermal model's uncertainty (the
+    noise alone said 6e-8 degC/min for a model-based smoother whose error was 1e-5)."""
+    var = np.asarray(s.var_g, dtype=float)
+    if s.g_err_paths is not None and s.g_err_paths.size:
+        var = np.maximum(var, np.sum(np.square(s.g_err_paths), axis=0))
+    return float(np.sqrt(np.median(var)))
+
+
 def drift_outliers(time_s: np.ndarray, drift_dph: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rows of ``drift_dph`` far from their neighbours, and how far in robust sigmas.
 
@@ -1893,7 +1903,7 @@ def fit_drift(
         selection=table,
         samples=s,
         domain=domain,
-        gradient_error_std_c_per_min=float(np.sqrt(np.median(s.var_g))),
+        gradient_error_std_c_per_min=_gradient_error_std(s),
         attenuation=var_e / var_g if var_g > 0 else math.nan,
         holdout=None,
         settings=settings,
