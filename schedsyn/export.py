@@ -1004,6 +1004,23 @@ def _limit_breaks(
     return tuple(out)
 
 
+def _device_start_note(note: str, limits: Limits) -> str:
+    """A codec's note with the device's start temperature the plan assumes: the codecs say
+    "the chamber and the device at START" (the chamber's start); a plan for a device that
+    is not soaked there (``t_init_c``) needs it at ``t_init_c`` (red team: an operator
+    following the note on a plan for a device at 28 °C, the chamber at 20, got 67 %)."""
+    if abs(limits.t_init_c - limits.start_c) < 1e-9:
+        return note
+    return re.sub(
+        r"the chamber and the device at (\S+) °C",
+        lambda m: (
+            f"the chamber at {m.group(1)} °C and the device at {limits.t_init_c:g} °C (the plan "
+            f"assumes the device there, not soaked at the chamber's {m.group(1)} °C)"
+        ),
+        note,
+    )
+
+
 def export_programme(
     programme: Programme,
     settings: ExportSettings,
@@ -1065,7 +1082,7 @@ def export_programme(
             f"{spec.first_number}..{last_allowed}; choose a lower first programme or "
             "a shorter programme"
         )
-    notes = list(codec.notes(parts, numbers, settings))
+    notes = [_device_start_note(n, limits) for n in codec.notes(parts, numbers, settings)]
     table_range_c = None if check is None else _device_range(programme, check)
     if check is not None and table_range_c is not None:
         notes += _table_device_notes(table_range_c, limits, check)

@@ -929,3 +929,17 @@ def test_a_programme_name_the_controller_cannot_hold_is_said(controller, max_len
     assert len(written) == max_len and f"written as {written!r}" in note
     fits = export_programme(table, ExportSettings(controller, name="W1"))
     assert not [n for n in fits.notes if "programme name" in n]
+
+
+@pytest.mark.parametrize("controller", CONTROLLER_KEYS)
+def test_the_start_note_gives_the_devices_start_temperature_the_plan_assumes(controller):
+    """Red team: a plan for a device at 28 °C in a chamber starting at 20 °C was exported
+    with "start ... with the chamber and the device at 20 °C"; followed, 67 %."""
+    prog = fine_baseline(np.random.default_rng(7))
+    soaked = export_programme(prog, ExportSettings(controller), limits=Limits())
+    text = " ".join(soaked.notes)
+    assert "the chamber and the device at 20 °C" in text, text
+    warm = export_programme(prog, ExportSettings(controller), limits=Limits(t_init_c=28.0))
+    text = " ".join(warm.notes)
+    assert "the chamber at 20 °C and the device at 28 °C" in text, text
+    assert "the chamber and the device at" not in text
