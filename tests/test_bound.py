@@ -163,6 +163,18 @@ def test_an_unreachable_bin_makes_the_bound_infinite():
     )
 
 
+@pytest.mark.parametrize(("dt0_c", "infinite"), [(-2.1, True), (-2.0, True), (-1.9, False)])
+def test_a_bin_the_device_cannot_finish_makes_the_bound_infinite(dt0_c, infinite):
+    """Red team: dT0 -2.1 °C with the chamber at 60 °C stops the device at 57.9 °C, so the
+    bin [57, 58) of a region up to 58 °C is never crossed; its bound was 726 min (the
+    bin's lower part is reachable). At -2.0 the device only tends to 58 °C."""
+    spec = ExperimentSpec("hot", 50.0, 58.0, 40.0, 62.0)
+    bound = duration_lower_bound(
+        spec, ThermalParams(2400.0, dt0_c), Limits(chamber_max_c=60.0, duration_max_min=800.0)
+    ).lower_bound_min
+    assert math.isinf(bound) == infinite, bound
+
+
 def test_paper_regions_bounds_are_below_the_plans_known_for_them():
     """W1 has a 480-min complete plan (README); its bound must lie below, and W2's below
     W2's known 480-min plan (issue 12)."""
@@ -349,3 +361,24 @@ def test_a_request_asked_twice_is_bounded_once_and_its_profiles_cannot_be_change
     profile = next(iter(first.profiles.values()))[0]
     with pytest.raises(ValueError, match="read-only"):
         profile[0] = 0.0
+
+
+def test_the_chamber_limit_said_to_be_needed_is_one_the_bound_allows():
+    """Red team: "a floor of at most -54.25 °C is needed" read as a fix, but the bound
+    there was 624 min against the 540-min budget. The floor said is now one where the
+    proven bound fits the budget, and 1.25 °C less far it does not."""
+    import re
+
+    from schedsyn.planner.explain import explain_shortfall
+
+    spec = ExperimentSpec("r09", -50.0, -40.0, -52.0, -30.0)
+    params, limits = ThermalParams(2400.0, 3.0), Limits(chamber_min_c=-45.0)
+    (note,) = [n for n in explain_shortfall(spec, params, limits) if "floor of at most" in n]
+    floor = float(re.search(r"a floor of at most (-?[\d.]+) °C is needed", note).group(1))
+    assert "necessary, not sufficient" in note
+
+    def bound(f):
+        return duration_lower_bound(spec, params, Limits(chamber_min_c=f)).lower_bound_min
+
+    assert bound(floor) <= limits.duration_max_min < bound(floor + 1.25)
+    assert floor < -54.25  # below the bare reach, where the bound was 624 min

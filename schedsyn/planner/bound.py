@@ -169,6 +169,11 @@ def _caps(
         stop_cap = _speed_for_stop(room, side.r_back, tau)
         cap = np.minimum(cap, np.where(ahead > 0, stop_cap, 0.0))
     v = np.max(np.maximum(cap, 0.0), axis=1)
+    # a sweep crossing a bin passes every point of it moving: where the chamber's limit
+    # stops the device short of the bin's far edge (T >= Tk_max + dT0 heating), no sweep
+    # of this direction crosses the bin at all (red team: dT0 -2.1 with the chamber at
+    # 60 °C stops the device at 57.9 °C; the bound for a region up to 58 °C was 726 min)
+    v = np.where(np.any(chamber <= 0.0, axis=1), 0.0, v)
     return v if side.d > 0 else v[::-1]
 
 

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
+import math
+
 from ..params import Limits, ThermalParams
 from .bands import BAND_SAFETY_C_PER_MIN
 from .physics import TURN_ACCEL_FRACTION, turning_speed
@@ -23,11 +26,11 @@ def explain_shortfall(spec: ExperimentSpec, params: ThermalParams, limits: Limit
     g_cool = (spec.working_lo_c - (limits.chamber_min_c + params.dt0_c)) / tau
     if g_cool <= 0:
         floor_t = limits.chamber_min_c + params.dt0_c
+        reach = spec.working_lo_c - spec.edge_margin_c - params.dt0_c - 1
         notes.append(
             f"the chamber floor {limits.chamber_min_c:g} °C cannot bring the device below "
-            f"{floor_t:g} °C (floor + dT0), so the bins below it are unreachable; a floor "
-            f"of at most {spec.working_lo_c - spec.edge_margin_c - params.dt0_c - 1:g} °C "
-            "is needed"
+            f"{floor_t:g} °C (floor + dT0), so the bins below it are unreachable; "
+            + _limit_needed(spec, params, limits, "chamber_min_c", reach, -1.0)
         )
     elif g_cool < n_cool * delta + HEADROOM_C_PER_MIN:
         notes.append(
@@ -46,11 +49,12 @@ def explain_shortfall(spec: ExperimentSpec, params: ThermalParams, limits: Limit
         )
     g_heat = (limits.chamber_max_c + params.dt0_c - spec.working_hi_c) / tau
     if g_heat <= 0:
+        reach = spec.working_hi_c + spec.edge_margin_c - params.dt0_c + 1
         notes.append(
             f"the chamber ceiling {limits.chamber_max_c:g} °C cannot bring the device above "
             f"{limits.chamber_max_c + params.dt0_c:g} °C (ceiling + dT0), so the bins above "
-            f"it are unreachable; a ceiling of at least "
-            f"{spec.working_hi_c + spec.edge_margin_c - params.dt0_c + 1:g} °C is needed"
+            "it are unreachable; "
+            + _limit_needed(spec, params, limits, "chamber_max_c", reach, 1.0)
         )
     elif g_heat < n_heat * delta + HEADROOM_C_PER_MIN:
         notes.append(
@@ -97,3 +101,56 @@ def explain_shortfall(spec: ExperimentSpec, params: ThermalParams, limits: Limit
             f"exceeds the device limits {limits.device_min_c:g} .. {limits.device_max_c:g} °C"
         )
     return notes
+
+
+#: How far past the reach (degC) :func:`_limit_needed` looks for a chamber limit the
+#: duration bound allows, and to what resolution.
+LIMIT_SEARCH_C = 40.0
+LIMIT_RESOLUTION_C = 0.25
+
+
+def _limit_needed(
+    spec: ExperimentSpec,
+    params: ThermalParams,
+    limits: Limits,
+    name: str,
+    reach_c: float,
+    sign: float,
+) -> str:
+    """What a chamber limit (``name``, moved in the direction ``sign``) must at least be:
+    past ``reach_c`` (the device must reach the region's edge) and far enough that the
+    proven duration bound fits the budget. Said as necessary, not sufficient (red team:
+    "a floor of at most -54.25 °C is needed" read as a fix, but the bound there was 624
+    min against a 540-min budget; planning found -57 °C)."""
+    from .bound import duration_lower_bound
+
+    word = "floor" if sign < 0 else "ceiling"
+    than = "at most" if sign < 0 else "at least"
+
+    def fits(value: float) -> bool:
+        try:
+            moved = dataclasses.replace(limits, **{name: value})
+        except (ValueError, TypeError):
+            return False
+        bound = duration_lower_bound(spec, params, moved).lower_bound_min
+        return math.isfinite(bound) and bound <= limits.duration_max_min
+
+    value = reach_c
+    if not fits(value):
+        far = reach_c + sign * LIMIT_SEARCH_C
+        if not fits(far):
+            return (
+                f"a {word} of {than} {reach_c:g} °C is needed to reach the region, and even "
+                f"{far:g} °C leaves the proven duration bound above the "
+                f"{limits.duration_max_min:g}-min budget (see --advise)"
+            )
+        near = value  # bisect: near does not fit, far does
+        while abs(far - near) > LIMIT_RESOLUTION_C:
+            mid = 0.5 * (near + far)
+            near, far = (near, mid) if fits(mid) else (mid, far)
+        value = math.floor(far) if sign < 0 else math.ceil(far)
+    return (
+        f"a {word} of {than} {value:g} °C is needed (to reach the region and for the proven "
+        f"duration bound to fit {limits.duration_max_min:g} min; necessary, not sufficient: "
+        "--advise plans with it to check)"
+    )
