@@ -18,6 +18,7 @@ from independent import chamber_knots, ode_trajectories, table_check
 from schedsyn.design import DesignSpace
 from schedsyn.params import Limits, ThermalParams
 from schedsyn.planner import ExperimentSpec, plan_experiment
+from schedsyn.planner.bound import duration_lower_bound
 from schedsyn.planner.informative import _log_det_and_gradient
 from schedsyn.terms import TERMS, parse_terms
 
@@ -175,5 +176,10 @@ def test_a_graded_plan_keeps_what_its_objective_did(plans):
     )
     assert graded is not None and graded.levels_planned == 3 and not graded.complete
     assert graded.notes[0] == "why not" and graded.notes[1].startswith("GRADED")
+    # proven or not, by the duration bound (red team: "the most the search fits" read as
+    # a proof where the bound was 142 of 540 min)
+    bound = duration_lower_bound(asked, ThermalParams(), LIMITS).lower_bound_min
+    said = "; proven: " if bound > LIMITS.duration_max_min else "; not proven: the duration bound"
+    assert said in graded.notes[1], (bound, graded.notes[1])
     kept = [n for n in graded.notes if n.startswith("informative: ")]
     assert kept == [n for n in informative.notes if n.startswith("informative: ")] != []

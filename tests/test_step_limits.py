@@ -71,7 +71,8 @@ def test_a_request_too_short_for_its_levels_gets_the_most_levels_every_bin_can_h
     plan = plan_experiment(spec, limits=limits)
     assert not plan.complete and plan.levels_planned is not None
     assert plan.levels_planned == 2  # 3 proven impossible
-    assert any(n.startswith("GRADED") for n in plan.notes)
+    (graded,) = [n for n in plan.notes if n.startswith("GRADED")]
+    assert "proven: no complete plan with 4 levels fits, the duration bound" in graded
     # proven impossible, 4 levels are not searched at all (the graded search starts below)
     assert any("4 levels were not searched" in n for n in plan.notes)
     check = table_check(plan.programme.to_csv(tmp_path / "g.csv"), (-8.0, -4.0), 4)

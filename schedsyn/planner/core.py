@@ -853,7 +853,7 @@ def _plan(
     plan = with_table_meta(_finished(plan, tic, effort))
     if require_complete and not complete:
         raise InfeasiblePlanError(
-            f"{spec.name}: the target cannot be met: {'; '.join(notes + problems)}; best "
+            f"{spec.name}: no complete plan was found: {'; '.join(notes + problems)}; best "
             f"reachable coverage is {cov.coverage:.0%}",
             best_coverage=cov.coverage,
             best_plan=plan,
@@ -1076,7 +1076,10 @@ def _fewer_levels(
         if not first and effort.spent():
             return None  # (not searched; the effort note says so)
         if progress:
-            progress(f"the target cannot be met: planning {levels} levels per bin instead")
+            progress(
+                f"no complete plan found with {spec.levels_required} levels per bin: "
+                f"planning {levels} instead"
+            )
         try:
             alt = _plan_nominal(  # complete or nothing (a partial plan kept: a last resort)
                 dataclasses.replace(spec, levels_required=levels),
@@ -1136,6 +1139,25 @@ def _graded(
     ):
         return plan
     searched = ", ".join(str(n) for n in fewer.searched)
+    bound_min = duration_lower_bound(spec, params, limits).lower_bound_min
+    if bound_min > limits.duration_max_min:
+        proof = (
+            f"proven: no complete plan with {spec.levels_required} levels fits, the duration "
+            + (
+                "bound is infinite"
+                if math.isinf(bound_min)
+                else f"bound {bound_min:.0f} min exceeds the budget"
+            )
+        )
+    else:
+        # red team: "the most the search fits in 540 min" read as a proof, and a
+        # request a simple generator covered with 6 levels in 449 min was sent to a
+        # faster chamber or 4 levels
+        proof = (
+            f"not proven: the duration bound, {bound_min:.0f} min, does not exclude "
+            f"{spec.levels_required} levels; a longer search (--effort-s) or --advise may "
+            "find more"
+        )
     return dataclasses.replace(
         fewer.plan,
         spec=spec,
@@ -1148,13 +1170,13 @@ def _graded(
             *notes,
             f"GRADED: no complete plan with {spec.levels_required} levels per bin "
             f"was found; this one plans {fewer.levels} in every bin (the most the search "
-            f"fits in {limits.duration_max_min:g} min; levels searched: {searched}): "
-            f"weakest bin {cov.min_levels} levels, {cov.coverage:.0%} of the bins at "
-            f"{spec.levels_required}",
+            f"found within {limits.duration_max_min:g} min; levels searched: {searched}; "
+            f"{proof}): weakest bin {cov.min_levels} levels, {cov.coverage:.0%} of the bins "
+            f"at {spec.levels_required}",
             # what the fewer-level plan's own objective did (it is the plan returned)
             *(n for n in fewer.plan.notes if n.startswith("informative:")),
         ),
-        duration_lower_bound_min=duration_lower_bound(spec, params, limits).lower_bound_min,
+        duration_lower_bound_min=bound_min,
     )
 
 
@@ -1365,7 +1387,7 @@ def _respec(plan: Plan, spec: ExperimentSpec, note: str, require_complete: bool)
     out = dataclasses.replace(plan, spec=spec, notes=(*plan.notes, note))
     if require_complete and not out.complete:
         raise InfeasiblePlanError(
-            f"{spec.name}: the target cannot be met: {'; '.join(out.notes)}",
+            f"{spec.name}: no complete plan was found: {'; '.join(out.notes)}",
             best_coverage=out.coverage.coverage,
             best_plan=out,
         )
