@@ -8,6 +8,7 @@ chamber path built from the typed temperatures) and its levels counted by its pl
 from __future__ import annotations
 
 import dataclasses
+import re
 import time
 from pathlib import Path
 
@@ -128,6 +129,22 @@ def test_too_short_budget_returns_none_after_its_lps(monkeypatch):
     monkeypatch.setattr(tt, "time", types.SimpleNamespace(monotonic=lambda: float(next(ticks))))
     assert timetable_search(SMALL, PARAMS, limits, max_lps=20, deadline_s=3.0) is None
     assert max(seen, default=0) < full / 2, (max(seen, default=0), full)
+
+
+def test_a_long_slp_says_where_it_is(monkeypatch):
+    """Red team: one timetable SLP ran 5 min 16 s (300 steps) without a word. Every
+    HEARTBEAT_S of wall time it says its step, LPs and merit (here a clock that reads 30 s
+    later at every look, so every step speaks)."""
+    import itertools
+    import types
+
+    ticks = itertools.count(step=30)
+    monkeypatch.setattr(tt, "time", types.SimpleNamespace(monotonic=lambda: float(next(ticks))))
+    said: list[str] = []
+    limits = Limits(duration_max_min=150.0)
+    timetable_search(SMALL, PARAMS, limits, max_lps=20, progress=said.append)
+    beats = [m for m in said if re.search(r"timetable: SLP .*: step \d+, \d+ LPs, merit", m)]
+    assert beats, said
 
 
 def test_refused_requests_return_none_at_once():

@@ -798,6 +798,10 @@ def _refusal(spec: ExperimentSpec, params: ThermalParams, limits: Limits) -> str
     return None
 
 
+#: The SLP says where it is at least this often on a long search, s.
+HEARTBEAT_S = 20.0
+
+
 def _slp(
     tp: _Timetable,
     x,
@@ -806,12 +810,19 @@ def _slp(
     max_iters: int = 400,
     rho_t: float = 3.0,
     rho_u: float = 0.5,
+    say: Callable[[str], None] | None = None,
+    label: str = "",
 ):
     m, v = tp.merit(x)
     stall = 0
-    for _ in range(max_iters):
+    last_said = time.monotonic()
+    for it in range(max_iters):
         if tp.clock.over(stop_lps):
             break
+        if say is not None and time.monotonic() - last_said > HEARTBEAT_S:
+            # a long SLP step was silent for minutes (red team: 5 min 16 s, 300 steps)
+            last_said = time.monotonic()
+            say(f"timetable: {label}: step {it}, {tp.n_lp} LPs, merit {m:.1f}")
         xn, pred = tp.lp(x, rho_t, rho_u)
         if xn is None:
             rho_t *= 0.5
@@ -1066,7 +1077,8 @@ def _search(
                     break
 
         say(f"timetable: SLP {st.name} x{scale} (up to {slice_lps:.0f} LPs)")
-        x, m, v = _slp(tp, x0, c_stop, on_better)
+        name = f"SLP {st.name} x{scale}"
+        x, m, v = _slp(tp, x0, c_stop, on_better, say=say, label=name)
         for _ in range(PENALTY_RAISES):  # stuck with violations left: weigh them more
             resid = sum(float(np.sum(v[k])) for k in v)
             if state["found"] is not None or resid < 1e-3 or float(x[-1]) > budget + 30.0:
@@ -1079,7 +1091,7 @@ def _search(
                 f"timetable: {st.name} x{scale}: end {x[-1]:.1f} min, violations "
                 f"{resid:.3g}: penalties x10"
             )
-            x, m, v = _slp(tp, x, c_stop, on_better, rho_t=1.0, rho_u=0.2)
+            x, m, v = _slp(tp, x, c_stop, on_better, rho_t=1.0, rho_u=0.2, say=say, label=name)
         for weight in L1_LOWER:  # converged just over the budget: trade steps for minutes
             if state["found"] is not None or float(x[-1]) > budget + 15.0:
                 break
@@ -1087,7 +1099,7 @@ def _search(
                 break
             tp.l1 = weight
             say(f"timetable: {st.name} x{scale}: end {x[-1]:.1f} min, l1 weight {weight:g}")
-            x, m, v = _slp(tp, x, c_stop, on_better, rho_t=1.0, rho_u=0.2)
+            x, m, v = _slp(tp, x, c_stop, on_better, rho_t=1.0, rho_u=0.2, say=say, label=name)
         if state["found"] is None or float(x[-1]) < state["found"][0].total_min - 0.5:
             state["checked_end"] = np.inf
             on_better(x)
