@@ -217,7 +217,9 @@ def check_run_of(log: MeasuredLog, programme: Programme) -> None:
             f"{log.source}: the logged setpoint tk_set_c = {log.tk_set_c[ok][k]:.2f} °C at "
             f"{at[k]:.1f} min differs from the step table's programme ({planned:.2f} °C) by "
             f"{gap[k]:.2f} °C > {RUN_SETPOINT_TOL_C:g} °C: the log is not a run of this step "
-            "table (another programme, or time_s not counted from its start)"
+            "table (another programme, or time_s not counted from its start; if tk_set_c "
+            "holds each step's target rather than the ramping setpoint, leave that column "
+            "out)"
         )
 
 
