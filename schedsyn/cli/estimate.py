@@ -99,7 +99,7 @@ def register(sub) -> None:
         metavar="S",
         help="the temperature sensor's own time constant, s (kinematic estimator, order 3): "
         "T and g are then the device's, T = Ts + S dTs/dt (default 0: the readings are the "
-        "device's temperature; `schedsyn diagnose` names such a lag second_time_constant)",
+        "device's temperature; schedsyn diagnose names such a lag second_time_constant)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress messages on stderr")
     p.set_defaults(func=run)
