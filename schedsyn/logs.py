@@ -528,11 +528,12 @@ def _end_glitches(
     four nearest readings further inside (none a suspect or an end glitch), extrapolated
     to it. The limit is :data:`END_GLITCH_LIMITS` glitch limits plus
     :data:`END_GLITCH_SCATTER` times the miss of the same extrapolation one reading
-    further in (a coarsely sampled bend extrapolates worse), and the miss must be more
-    than a device moves in the time to the next reading at a pace no chamber drives it
-    (:data:`WARN_DEVICE_RATE_C_PER_MIN`): at 5-10 min per reading a corner just before
-    the end bends the device by degrees, and extrapolation alone named ends of 3 % of
-    random 600-s logs glitches. Red team: a DS18B20's 85 °C
+    further in (a coarsely sampled bend extrapolates worse), and the reading must also
+    jump from the next one inside by more than any device moves in that time
+    (:data:`MAX_DEVICE_RATE_C_PER_MIN`; a thermal shock of a small device reaches 10
+    °C/min): extrapolated over 5-10 min,
+    or across a sampling gap, a smooth device misses by degrees (3 % of random 600-s logs;
+    a correct last reading 2 min after the one before it, "+147 °C"). Red team: a DS18B20's 85 °C
     power-on value as the first reading made the gradient 108 °C/min at the start and
     its sigma 9x too large over the whole log; an 85 °C last reading, 842 °C/min at the
     end."""
@@ -561,9 +562,10 @@ def _end_glitches(
             miss = abs(v[finite[near[0]]] - extrapolate(near[0], near[1:5]))
             off = float(v[finite[p]] - extrapolate(p, near[:4]))
             step_min = abs(float(t[finite[p]] - t[finite[near[0]]])) / 60.0
+            jump = abs(float(v[finite[p]] - v[finite[near[0]]]))
             if (
                 abs(off) > END_GLITCH_LIMITS * limit_c + END_GLITCH_SCATTER * miss
-                and abs(off) > WARN_DEVICE_RATE_C_PER_MIN * step_min
+                and jump > MAX_DEVICE_RATE_C_PER_MIN * step_min
             ):
                 flagged[p] = True
                 found.append((int(finite[p]), off))

@@ -407,3 +407,21 @@ def test_a_sensor_that_never_changes_is_named():
     assert any("reads 21.5 °C on every one of its 100 readings" in w
                for w in log_from_frame(f).report.warnings)  # fmt: skip
     assert not any("on every one" in w for w in log_from_frame(_good_frame(100)).report.warnings)
+
+
+@pytest.mark.parametrize("gap_s", [120.0, 600.0])
+def test_a_true_end_reading_after_a_sampling_gap_is_not_a_glitch(gap_s):
+    """Verification: a correct last (first) reading 2-10 min after the one before (after)
+    it was named a glitch ("+147 °C": the curve through four 1-s readings, extrapolated
+    across the gap); a reading is one only if it also jumps faster than any device."""
+    t = np.arange(0.0, 3600.0, 1.0)
+    t = np.concatenate(([t[0] - gap_s], t, [t[-1] + gap_s])) + gap_s
+    temp = -20.0 - 0.01 * (t / 60.0) ** 1.5
+    rng = np.random.default_rng(2)
+    f = pd.DataFrame({"time_s": t, "t_int_c": temp + rng.normal(0, 0.02, t.size)})
+    assert log_from_frame(f).report.glitches == ()
+    # but 100 °C in 2 min (50 °C/min) is a glitch after all; in 10 min (10 °C/min) a
+    # device in a thermal shock can move so fast
+    f.loc[len(f) - 1, "t_int_c"] += 100.0
+    flagged = [g[0] for g in log_from_frame(f).report.glitches]
+    assert flagged == ([len(f) - 1] if gap_s == 120.0 else []), flagged
