@@ -1753,7 +1753,8 @@ def estimate_gradient(
     if sensor_tau_s and order != 3:
         raise ParameterError(
             "sensor_tau_s needs the order-3 smoother (the device's gradient is the reading's "
-            "gradient plus tau times its rate of change); drop order=2"
+            "gradient plus tau times its rate of change); use order 3 (CLI: --order 3, the "
+            "default)"
         )
     tau_min = float(sensor_tau_s) / 60.0
     setup = _Setup(log.time_s, np.asarray(log.t_int_c, dtype=float), None, order=order)

@@ -902,7 +902,16 @@ def read_log(
             ) from None
     if collector is None:
         raise LogFormatError(f"{path}: not a readable CSV log (no header line)")
-    log = collector.finish()
+    try:
+        log = collector.finish()
+    except LogFormatError as exc:
+        if partial is None:
+            raise
+        left = partial.decode("utf-8", errors="replace").strip()[:40]
+        raise LogFormatError(
+            f"{exc} (the last line, {left!r}, has no line end and was left out as still "
+            "being written)"
+        ) from None
     if partial is not None:
         text = partial.decode("utf-8", errors="replace").strip()
         note = (

@@ -388,6 +388,12 @@ def test_a_last_line_without_a_line_end_is_dropped_only_from_a_live_log(tmp_path
     path.write_text(text)
     done = read_log(path, live=True)
     assert done.n_rows == 60 and "line end" not in done.report.summary()
+    # too little left once the line is left out: the error says a line was
+    path.write_text("time_s,t_int_c\n0,20.0\n10,20.1")
+    with pytest.raises(
+        LogFormatError, match=r"the last line, '10,20.1', has no line end and was left out"
+    ):
+        read_log(path, live=True)
 
 
 def test_a_sensor_error_code_is_refused_with_the_advice_to_blank_it():
