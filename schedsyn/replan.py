@@ -63,7 +63,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -1365,9 +1365,13 @@ def replan_run(
 
 
 def write_replan_dir(
-    out: Path | str, result: ReplanResult, inputs: Sequence[Path | str] = ()
+    out: Path | str,
+    result: ReplanResult,
+    inputs: Sequence[Path | str] = (),
+    extra: Mapping[str, Any] | None = None,
 ) -> list[Path]:
-    """Write ``DIR`` as a plan directory of the whole run, plus ``replan.json``.
+    """Write ``DIR`` as a plan directory of the whole run, plus ``replan.json`` (with
+    ``extra``'s items added, e.g. what was excluded from the log).
 
     The directory holds ``steps.csv`` (the whole run in the usual step-table format: the
     executed steps, then the new ones), ``plan.json`` (the original ``spec`` and
@@ -1428,7 +1432,7 @@ def write_replan_dir(
     written = [
         programme.to_csv(out / "steps.csv", inputs),
         write_json_atomic(out / "plan.json", json_safe(meta), inputs),
-        write_json_atomic(out / "replan.json", result.to_json_dict(), inputs),
+        write_json_atomic(out / "replan.json", {**result.to_json_dict(), **(extra or {})}, inputs),
         write_frame_atomic(out / "bins.csv", result.to_frame(), inputs),
     ]
     return written

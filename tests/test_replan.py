@@ -513,6 +513,7 @@ def test_a_device_turning_short_of_the_edge_is_re_planned_from_m_not_a_sweep_lat
     rc = main(["replan", str(log), str(plan_dir), "--at-min", "60", "--out", str(out), "--quiet"])
     capsys.readouterr()
     meta = json.loads((out / "replan.json").read_text())
+    assert meta["log_readings"]["excluded_glitches"] == []  # what the log lost, as monitor's
     tried = meta["planner_attempts"]
     # the sweep end was tried first and left bins short; then M
     assert [a["new_steps_from_min"] for a in tried] == [115.0, 60.0]

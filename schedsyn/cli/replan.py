@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
         progress=progress,
     )
     inputs = [args.log, plan.path / "steps.csv", plan.path / "plan.json"]
-    write_replan_dir(out, result, inputs)
+    write_replan_dir(out, result, inputs, {"log_readings": _common.log_record(log)})
     print(result.summary())
     print(f"wrote {out}/steps.csv, plan.json, replan.json, bins.csv")
     # complete, and from a fit that pins the device down: a guess is not a promise
