@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 import os
 import sys
+import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from functools import partial
@@ -347,7 +348,7 @@ def _run_local(func, items, workers, progress, desc) -> list[Any]:
                 out[futures[fut]] = fut.result()
                 bar.update(1)
     except BrokenProcessPool as exc:
-        pool.shutdown(wait=True, cancel_futures=True)
+        _stop_broken_pool(pool)
         raise EnvironmentFaultError(
             f"a worker process of the local pool died ({exc}): killed, or out of memory; "
             "when calling schedsyn from a script, guard its entry point with "
@@ -358,6 +359,34 @@ def _run_local(func, items, workers, progress, desc) -> list[Any]:
         raise
     pool.shutdown(wait=True)
     return out
+
+
+#: How long a broken pool's workers are killed and waited for, s.
+BROKEN_POOL_WAIT_S = 60.0
+
+
+def _stop_broken_pool(pool) -> None:
+    """Shut a pool with a dead worker down without hanging.
+
+    The executor's own clean-up terminates the other workers and joins them, but a worker
+    the terminate missed (CI, 2026-12-03: one still reading its call queue an hour later,
+    the suite hung) is joined forever. So the workers are killed here, again every half
+    second, until the executor's manager thread has finished (at most
+    :data:`BROKEN_POOL_WAIT_S`)."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    manager = getattr(pool, "_executor_manager_thread", None)
+    deadline = time.monotonic() + BROKEN_POOL_WAIT_S
+    while True:
+        for p in procs:
+            try:
+                if p.is_alive():
+                    p.kill()
+            except (OSError, ValueError, AttributeError):  # gone, or closed already
+                pass
+        if manager is None or not manager.is_alive() or time.monotonic() > deadline:
+            return
+        manager.join(timeout=0.5)
 
 
 def _run_dask(address: str, func, items, progress, desc) -> list[Any]:

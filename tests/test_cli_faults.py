@@ -381,3 +381,38 @@ def test_staging_left_by_a_dead_run_is_removed_beside_and_inside(tmp_path):
     out.discard()
     assert not beside.exists() and not inside.exists()
     assert other.exists() and alive.exists()
+
+
+def _deaf_to_sigterm() -> None:  # a pool worker the executor's terminate() misses
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    time.sleep(120)
+
+
+def test_a_broken_pools_straggler_is_killed_not_waited_for(monkeypatch):
+    """CI hung an hour (2026-12-03) in the executor's clean-up of a pool whose worker had
+    died: it joins the other workers, and one its terminate() had missed was still
+    reading its call queue. The pool is now shut down by killing its workers until the
+    executor's manager thread is done; a worker deaf to SIGTERM stands in for the one
+    missed, the manager thread for the executor's join."""
+    import multiprocessing
+    import threading
+    import types
+
+    from schedsyn import sweep
+
+    monkeypatch.setattr(sweep, "BROKEN_POOL_WAIT_S", 20.0)
+    worker = multiprocessing.get_context("fork").Process(target=_deaf_to_sigterm)
+    worker.start()
+    time.sleep(0.3)
+    worker.terminate()  # missed
+    manager = threading.Thread(target=worker.join, daemon=True)
+    manager.start()
+    pool = types.SimpleNamespace(
+        _processes={worker.pid: worker},
+        _executor_manager_thread=manager,
+        shutdown=lambda **kw: None,
+    )
+    tic = time.monotonic()
+    sweep._stop_broken_pool(pool)
+    assert not worker.is_alive() and not manager.is_alive()
+    assert time.monotonic() - tic < 10.0
