@@ -369,7 +369,7 @@ def _stop_broken_pool(pool) -> None:
     """Shut a pool with a dead worker down without hanging.
 
     The executor's own clean-up terminates the other workers and joins them, but a worker
-    the terminate missed (CI, 2026-12-03: one still reading its call queue an hour later,
+    the terminate missed (CI, 2026-12-03: one still reading its call queue 10 min later,
     the suite hung) is joined forever. So the workers are killed here, again every half
     second, until the executor's manager thread has finished (at most
     :data:`BROKEN_POOL_WAIT_S`)."""
