@@ -214,10 +214,10 @@ def check_run_of(log: MeasuredLog, programme: Programme) -> None:
         return
     at = log.time_min[ok]
     logged = log.tk_set_c[ok]
-    lags_min = np.arange(0.0, RUN_SETPOINT_LAG_MAX_S + 1e-9, 5.0) / 60.0
-    worst = [float(np.max(np.abs(logged - programme.chamber_at(at - lag)))) for lag in lags_min]
-    if min(worst) <= RUN_SETPOINT_TOL_C:
-        return
+    # the first lag that fits ends the search (lag 0 on a run logged on time: one pass)
+    for lag_min in np.arange(0.0, RUN_SETPOINT_LAG_MAX_S + 1e-9, 5.0) / 60.0:
+        if float(np.max(np.abs(logged - programme.chamber_at(at - lag_min)))) <= RUN_SETPOINT_TOL_C:
+            return
     gap = np.abs(logged - programme.chamber_at(at))
     k = int(np.argmax(gap))
     planned = float(programme.chamber_at(at[k : k + 1])[0])
