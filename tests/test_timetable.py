@@ -97,6 +97,57 @@ def test_region_holding_the_start_with_odd_levels(tmp_path):
     assert_complete_independently(res, spec, PARAMS, limits, tmp_path)
 
 
+@pytest.mark.slow
+def test_hot_edge_just_below_the_device_limit(tmp_path):
+    """Red team r05: the hot edge 0.3 degC below the device limit (``[40, 44]`` degC,
+    device 44.3), 6 levels in 540 min. The tracked starts overshoot the limit (45.0 degC:
+    the fast ranks reach the hot edge sep apart); the LPs kept the limit hard only where
+    the iterate was already inside, and the merit did not count it, so every SLP
+    converged at 44.8-45.0 degC and no rounded table passed (the campaign printed 2
+    levels). With the excess in the merit and soft rows in the LP: complete (223 min)."""
+    spec = ExperimentSpec(
+        name="tt-hot-edge",
+        working_lo_c=40.0,
+        working_hi_c=44.0,
+        approx_lo_c=30.0,
+        approx_hi_c=44.3,
+        levels_required=6,
+        delta_c_per_min=0.05,
+        segment_min=3,
+    )
+    limits = Limits(device_max_c=44.3, duration_max_min=540.0)
+    res = timetable_search(spec, PARAMS, limits, max_lps=200, first_found=True)
+    assert res is not None
+    assert_complete_independently(res, spec, PARAMS, limits, tmp_path)
+
+
+def test_the_merit_counts_the_device_limit():
+    """A start beyond the device limit costs in the merit (else the SLP stays outside)."""
+    spec = dataclasses.replace(SMALL, approx_hi_c=10.5)
+    st = tt.structures(spec.levels_required, +1)[0]
+    hot = Limits(duration_max_min=200.0, device_max_c=10.4)
+    roomy = Limits(duration_max_min=200.0)
+    costs = []
+    for limits in (hot, roomy):
+        su = tt._Setup(
+            spec,
+            PARAMS,
+            limits,
+            tt.FirstOrderLag(PARAMS),
+            spec.grid.edges_c.astype(float),
+            spec.delta_c_per_min + tt.SAFETY_C_PER_MIN,
+            spec.edge_margin_c + tt.DEPTH_PAD_C,
+        )
+        u, end_at = tt.track(su, st, tt.starting_speeds(su, st, 1.0), 120)
+        tp = tt._Timetable(su, st, 120)
+        x = np.concatenate([u, np.zeros(tp.nt), [end_at * su.seg]])
+        temp = tp.fine_a_t @ u + tp.fine_b_t
+        costs.append((float(temp.max()), float(tp.evaluate(x)["device"].sum())))
+    (t_max, excess_hot), (_, excess_roomy) = costs
+    assert t_max > 10.4 + 0.1  # the tracked start overshoots the tight limit
+    assert excess_hot > 0.0 and excess_roomy == 0.0
+
+
 def test_budget_below_the_bound_returns_none_at_once():
     limits = Limits(duration_max_min=120.0)  # the proven bound for SMALL is 137 min
     tic = time.monotonic()

@@ -455,7 +455,9 @@ class _Timetable:
         self.iend = self.nu + self.nt
         self.nx = self.iend + 1
         self.end_margin = min(0.1, 0.4 * lim.end_tol_c)
-        self.weights = dict(cross=60.0, level=3000.0, mono=300.0, turn=60.0, end=60.0, outside=60.0)
+        self.weights = dict(
+            cross=60.0, level=3000.0, mono=300.0, turn=60.0, end=60.0, outside=60.0, device=60.0
+        )
         self.n_lp = 0
         self.l1 = L1_WEIGHT
         # level rows: ("diff", bin, k_fast, p, k_slow, p) / ("sum", bin, k_cool, p, k_heat, p)
@@ -515,10 +517,12 @@ class _Timetable:
         Ad = np.zeros((td.size, self.nx))
         Ad[:, : self.nu] = rd.a_t
         self.dev_rows = (self.A_fixed.shape[0], self.A_fixed.shape[0] + 2 * td.size)
-        self.A_fixed = np.vstack([self.A_fixed, Ad, -Ad])
-        self.b_fixed = np.concatenate(
-            [self.b_fixed, lim.device_max_c - 0.1 - rd.b_t, -(lim.device_min_c + 0.1 - rd.b_t)]
+        self.A_dev = np.vstack([Ad, -Ad])
+        self.b_dev = np.concatenate(
+            [lim.device_max_c - 0.1 - rd.b_t, -(lim.device_min_c + 0.1 - rd.b_t)]
         )
+        self.A_fixed = np.vstack([self.A_fixed, self.A_dev])
+        self.b_fixed = np.concatenate([self.b_fixed, self.b_dev])
         self.A_fixed = sp.csr_matrix(self.A_fixed)
         self.t_fine = np.arange(0.0, self.nu * su.seg, 0.1)
         r_fine = self.resp(self.t_fine)  # only T is needed on the fine grid (memory)
@@ -580,6 +584,12 @@ class _Timetable:
                 outside.append(float(np.maximum(0.0, -beyond[inner]).sum()) * 0.4)
         _, _, tke = self.resp([t_end]).evaluate(u)
         end = max(0.0, abs(tke[0] - lim.end_c) - (lim.end_tol_c - self.end_margin))
+        # beyond the device limits (less 0.1 degC) at the LP's device samples: the LP keeps
+        # these rows hard only where the iterate is inside, so a start that overshoots
+        # (the tracked start at a device limit 0.3 degC past the edge: 45.0 against 44.3)
+        # must be steered back by the merit, or the SLP converges outside and every
+        # rounded table fails the check
+        device = np.maximum(0.0, self.A_dev[:, : self.nu] @ u - self.b_dev)
         return dict(
             cross=cross,
             level=lev,
@@ -587,6 +597,7 @@ class _Timetable:
             turn=np.array(turn),
             outside=np.array(outside),
             end=np.array([end]),
+            device=device,
         )
 
     def merit(self, x):
@@ -682,6 +693,10 @@ class _Timetable:
         tol = lim.end_tol_c - self.end_margin - END_EXTRA_C * lim.end_tol_c
         soft(row, lim.end_c + tol - const, W["end"])
         soft(-row, -(lim.end_c - tol - const), W["end"])
+        # device limits: soft at the limit (the hard rows below stop at the iterate)
+        A = np.zeros((self.A_dev.shape[0], nx))
+        A[:, :nu] = self.A_dev[:, :nu]
+        soft(A, self.b_dev, W["device"])
         # fewer steps: |u[j+1] - u[j]|
         A = np.zeros((nu - 1, nx))
         A[np.arange(nu - 1), np.arange(1, nu)] = 1.0
