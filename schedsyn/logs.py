@@ -429,6 +429,106 @@ def _check_time_unit(
     return ()
 
 
+# -- a column in Fahrenheit within the plausible degC range ---------------------------------
+# A device follows its chamber one to one: T = lag(Tk) + dT0 with any tau. A t_int_c
+# column in Fahrenheit moves 1.8x as far, against a chamber column in Fahrenheit 1/1.8.
+# Compared are fits with the slope fixed at 1, 1.8 and 1/1.8 (each with a free offset, the
+# start transient fixed by the first readings, the best tau): one of the Fahrenheit fits
+# must leave at most this share of the 1:1 fit's squared residual. On the 83 red-team logs
+# of 2 h or more (one or two poles, sensor lags, drifts, gaps, glitches; 2026-12-03) the
+# share was 2.9 or more in degC; converted to F, median 4e-4, 90 % below 0.11, max 0.35
+# (a device with a second time constant of 900 s also reaches 0.36), ...
+FAHRENHEIT_SSR_RATIO = 0.3
+#: ... and explain at least this share of t_int_c's variance, ...
+FAHRENHEIT_MIN_R2 = 0.95
+#: ... and the chamber have moved at least this much, degC, ...
+FAHRENHEIT_MIN_CHAMBER_SPAN_C = 10.0
+#: ... over a log at least this long (a 30-min log of a device cooling from 60 degC in a
+#: chamber at -20..15 left the Fahrenheit fit 0.87 of the 1:1 fit's residual), s.
+FAHRENHEIT_MIN_SPAN_S = 7200.0
+#: Device time constants the fit tries (a fast board to a heavy IMU, factors of sqrt 2), s.
+FAHRENHEIT_TAUS_S = tuple(150.0 * 2.0 ** (k / 2) for k in range(13))
+#: Grid points of the resampled chamber temperature, and rows fitted (at most).
+FAHRENHEIT_GRID_POINTS = 20_000
+#: The slopes compared: degC / degC, degF / degC (t_int_c), degC / degF (the chamber).
+UNIT_SLOPES = {"celsius": 1.0, "t_int_c_fahrenheit": 1.8, "chamber_fahrenheit": 1.0 / 1.8}
+
+
+def unit_fits(
+    time_s: np.ndarray, t_int_c: np.ndarray, tk_c: np.ndarray
+) -> dict[str, tuple[float, float]] | None:
+    """Per hypothesis of :data:`UNIT_SLOPES`, ``(r2, tau_s)`` of the best fit over
+    ``FAHRENHEIT_TAUS_S`` of ``t_int_c ~ slope * lag(tk_c, tau) + c0 (1 - exp(-t/tau)) +
+    c1 exp(-t/tau)``.
+
+    ``lag`` is the first-order lag of the chamber temperature (linear between readings,
+    exact discretisation on a uniform grid) started where the chamber starts; ``c1`` is
+    fixed by the first readings (a device that starts elsewhere), ``c0`` is free. None
+    where fewer than 20 rows have both readings, the chamber moved less than
+    ``FAHRENHEIT_MIN_CHAMBER_SPAN_C`` or the log spans less than ``FAHRENHEIT_MIN_SPAN_S``.
+    """
+    from scipy.signal import lfilter
+
+    ok = np.isfinite(time_s) & np.isfinite(t_int_c) & np.isfinite(tk_c)
+    if int(ok.sum()) < 20:
+        return None
+    t, y, x = time_s[ok], t_int_c[ok], tk_c[ok]
+    if float(np.ptp(x)) < FAHRENHEIT_MIN_CHAMBER_SPAN_C or float(np.ptp(y)) <= 0.0:
+        return None
+    if float(t[-1] - t[0]) < FAHRENHEIT_MIN_SPAN_S:
+        return None
+    if t.size > FAHRENHEIT_GRID_POINTS:  # a long fast log: evenly spread rows suffice
+        pick = np.linspace(0, t.size - 1, FAHRENHEIT_GRID_POINTS).astype(int)
+        t, y, x = t[pick], y[pick], x[pick]
+    n = int(min(FAHRENHEIT_GRID_POINTS, max(2, t.size)))
+    grid = np.linspace(t[0], t[-1], n)
+    h = float(t[-1] - t[0]) / (n - 1)
+    xg = np.interp(grid, t, x) - x[0]
+    sst = float(np.sum((y - y.mean()) ** 2))
+    y0 = float(np.median(y[:5]))  # the start, robust to one noisy reading
+    best = {name: (-math.inf, math.nan) for name in UNIT_SLOPES}
+    for tau in FAHRENHEIT_TAUS_S:
+        e = math.exp(-h / tau)
+        k = tau / h * (1.0 - e)
+        lagged = np.interp(t, grid, lfilter([1.0 - k, k - e], [1.0, -e], xg))
+        decay = np.exp(-(t - t[0]) / tau)
+        for name, slope in UNIT_SLOPES.items():
+            # y = slope * lag + offset (1 - decay) + (y0 - slope x0) decay, lag from x0
+            # (``lagged`` is lag - x0): the start transient is fixed by the first
+            # readings, the offset (dT0, and 32 F) is free
+            rest = y - slope * lagged - y0 * decay
+            c0 = float(rest @ (1.0 - decay)) / max(float((1.0 - decay) @ (1.0 - decay)), 1e-12)
+            r2 = 1.0 - float(np.sum((rest - c0 * (1.0 - decay)) ** 2)) / sst
+            if r2 > best[name][0]:
+                best[name] = (r2, tau)
+    return best
+
+
+def _check_fahrenheit(values: dict[str, np.ndarray], source: str) -> None:
+    """Refuse a temperature column in Fahrenheit that the plausible range lets through
+    (a run at 10-40 degC reads 50-104 F), told by how far the device moves against its
+    chamber."""
+    for col in ("tk_set_c", "tk_air_c"):
+        if col not in values:
+            continue
+        fits = unit_fits(values["time_s"], values["t_int_c"], values[col])
+        if fits is None:
+            continue
+        r2_c = fits["celsius"][0]
+        for name, what in (
+            ("t_int_c_fahrenheit", "t_int_c"),
+            ("chamber_fahrenheit", col),
+        ):
+            r2, tau_s = fits[name]
+            if r2 >= FAHRENHEIT_MIN_R2 and 1.0 - r2 <= FAHRENHEIT_SSR_RATIO * (1.0 - r2_c):
+                raise LogFormatError(
+                    f"{source}: column {what} looks like Fahrenheit: t_int_c follows {col} "
+                    f"{UNIT_SLOPES[name]:.2f}:1 (fitted lag, tau ~{tau_s:.0f} s: "
+                    f"{100 * r2:.1f} % of its variance; 1:1, as a device in °C follows its "
+                    f"chamber in °C: {100 * r2_c:.1f} %); convert {what} with (F - 32) * 5 / 9"
+                )
+
+
 def glitch_rows(time_s: np.ndarray, values_c: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """Isolated glitch readings: ``(rows, off_c, limit_c)``.
 
@@ -778,6 +878,7 @@ class _Collector:
             )
         report = dataclasses.replace(report, warnings=notes)
         values["t_int_c"], report = _exclude_glitches(values, report, self.source)
+        _check_fahrenheit(values, self.source)  # glitches blanked: they hide the fit
         if len(self.extra_parts) > 1:
             extra = pd.concat(self.extra_parts, ignore_index=True)
         elif self.extra_parts:

@@ -1,16 +1,21 @@
 """The measured-log reader: contracts, clear errors, NaN/gap reports, synthetic logs."""
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from independent import chamber_knots, ode_trajectories
 
 from schedsyn.errors import LogFormatError, ParameterError
 from schedsyn.logs import MeasuredLog, log_from_frame, read_log
 from schedsyn.programme import read_steps
 from schedsyn.simulate import simulate
 from schedsyn.synth import synth_log
+
+DATA = Path(__file__).resolve().parents[1] / "data"
 
 
 def _frame(n=20, dt=10.0, **extra):
@@ -109,6 +114,56 @@ def test_kelvin_and_fahrenheit_are_caught():
         log_from_frame(hot)
     # the real range -50..+60 degC is accepted (over 3 h: a rate a device can follow)
     log_from_frame(_frame(dt=600.0).assign(t_int_c=np.linspace(-52.0, 62.0, 20)))
+
+
+def _fahrenheit(c):
+    return c * 1.8 + 32.0
+
+
+def test_fahrenheit_inside_the_plausible_range_is_caught():
+    """The sample run (W1, -51..20 degC) in Fahrenheit reads -60..68: plausible as degC,
+    but the device would move 1.8x as far as its chamber drives it (or 1/1.8 with the
+    chamber in F)."""
+    f = pd.read_csv(DATA / "sample_run_exp1.csv")
+    log_from_frame(f)  # in degC: read
+    with pytest.raises(LogFormatError, match=r"t_int_c looks like Fahrenheit.*1\.80:1"):
+        log_from_frame(f.assign(t_int_c=_fahrenheit(f["t_int_c"])))
+    with pytest.raises(LogFormatError, match=r"tk_set_c looks like Fahrenheit.*0\.56:1"):
+        log_from_frame(f.assign(tk_set_c=_fahrenheit(f["tk_set_c"])))
+    with pytest.raises(LogFormatError, match=r"tk_air_c looks like Fahrenheit"):
+        log_from_frame(f.drop(columns="tk_set_c").assign(tk_air_c=_fahrenheit(f["tk_air_c"])))
+
+
+@pytest.mark.parametrize(
+    "tau_s, tau2_s, caught_in_f",
+    [(1200.0, 0.0, True), (2400.0, 300.0, True), (6000.0, 0.0, True), (2400.0, 900.0, False)],
+)
+def test_devices_in_celsius_are_not_taken_for_fahrenheit(tau_s, tau2_s, caught_in_f):
+    """A device unlike the model (another tau, a second thermal mass) still follows its
+    chamber 1:1: no Fahrenheit error (simulated apart, by tests/independent.py). A second
+    time constant of 900 s is the closest call: in degC the Fahrenheit fit leaves 2.1x the
+    1:1 fit's residual; read in F, 0.36x (not refused: the rule asks 0.3)."""
+    knots_t, knots_tk = chamber_knots(DATA / "baseline_exp1_steps.csv")
+    t_min, temp, _ = ode_trajectories(knots_t, knots_tk, tau_s, 3.0, dt_min=0.5, tau2_s=tau2_s)
+    rng = np.random.default_rng(7)
+    f = pd.DataFrame(
+        {
+            "time_s": 60.0 * t_min,
+            "t_int_c": temp[0] + rng.normal(0.0, 0.02, t_min.size),
+            "tk_set_c": np.interp(t_min, knots_t, knots_tk),
+        }
+    )
+    log = log_from_frame(f)
+    assert log.n_rows == t_min.size
+    if caught_in_f:  # the same device read in Fahrenheit
+        with pytest.raises(LogFormatError, match="t_int_c looks like Fahrenheit"):
+            log_from_frame(f.assign(t_int_c=_fahrenheit(f["t_int_c"])))
+
+
+def test_a_chamber_that_hardly_moves_tells_nothing_about_units():
+    """Below 10 degC of chamber movement the slope is not identified: no check."""
+    f = _frame(n=200, dt=30.0, tk_set_c=np.linspace(20.0, 25.0, 200))
+    log_from_frame(f.assign(t_int_c=_fahrenheit(f["tk_set_c"])))
 
 
 def test_too_short_log():
