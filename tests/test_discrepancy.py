@@ -328,9 +328,10 @@ def test_a_heating_limit_under_a_programme_that_ramps_both_ways_is_found():
 
 
 def test_an_effect_that_stands_in_for_something_else_is_flagged():
-    """The device's temperature logged in degF, the setpoint in degC: no effect of the
-    library explains it, and the best one ends at the edge of its search range with
-    hundreds of times the noise left. Named without a word before; now both are said."""
+    """The device's temperature logged with a gain 1.5x off (a miscalibrated sensor), the
+    setpoint right: no effect of the library explains it, and the best one ends at the
+    edge of its search range with many times the noise left. Named without a word before;
+    now both are said. (The first case was a log in degF: the reader refuses that now.)"""
     from scipy.integrate import solve_ivp
 
     knots_min = np.array([0, 60, 120, 200, 260, 320, 380.0])
@@ -348,10 +349,13 @@ def test_an_effect_that_stands_in_for_something_else_is_flagged():
     frame = pd.DataFrame(
         {
             "time_s": t_min * 60.0,
-            "t_int_c": temp_c * 9.0 / 5.0 + 32.0,  # the mistake
+            "t_int_c": temp_c * 9.0 / 5.0 + 32.0,  # in degF
             "tk_set_c": np.interp(t_min, knots_min, knots_c),
         }
     )
+    with pytest.raises(LogFormatError, match="t_int_c looks like Fahrenheit"):
+        diagnose_frame(frame, SETTINGS)
+    frame["t_int_c"] = 1.5 * temp_c + 5.0  # the mistake
     d = diagnose_frame(frame, SETTINGS)
     assert d.effect != "none"
     assert any("edge of its search range" in w for w in d.warnings), d.warnings
