@@ -1572,7 +1572,13 @@ class DriftFit:
         return lines
 
 
-def _bins_check(t: np.ndarray, region: tuple[float, float], min_points: int, source: str):
+def _bins_check(
+    t: np.ndarray,
+    region: tuple[float, float],
+    min_points: int,
+    source: str,
+    step_s: float = math.nan,
+):
     lo, hi = region
     n_bins = max(int(math.ceil(hi - lo - 1e-9)), 1)
     k = np.clip(np.floor(t - lo).astype(int), 0, n_bins - 1)
@@ -1588,12 +1594,34 @@ def _bins_check(t: np.ndarray, region: tuple[float, float], min_points: int, sou
             spans.append(f"{lo + start:g} .. {min(lo + prev + 1, hi):g}")
             if b is not None:
                 start = prev = int(b)
+        reached = [j for j in short if counts[j] > 0 or (t.min() < lo + j and t.max() > lo + j + 1)]
+        sparse = ""
+        if reached and step_s > SPARSE_STEP_S:
+            # the run went through them: the sampling is what is short (red team: a 60-s
+            # log told to narrow a region its run had crossed)
+            sparse = (
+                f"; the run passes through {len(reached)} of them, but the log samples every "
+                f"{step_s:.0f} s (a pass through a 1 °C bin at 0.5 °C/min gives "
+                f"{120.0 / step_s:.1g} samples): log faster, or lower --min-points-per-bin"
+            )
         raise ParameterError(
             f"{source}: too few samples in the region {lo:g} .. {hi:g} °C: the 1 °C bins "
-            f"{', '.join(spans[:5])} °C have fewer than {min_points} samples each; narrow "
-            "--region to where the run went (or lower --min-points-per-bin)"
+            f"{', '.join(spans[:5])} °C have fewer than {min_points} samples each"
+            + (sparse or "; narrow --region to where the run went (or lower --min-points-per-bin)")
         )
 
+
+#: A log sampled more slowly than this is told that its sampling, not the region, leaves
+#: bins short, s.
+SPARSE_STEP_S = 20.0
+#: The white noise of the drift below this (angle random walk, deg/sqrt(h)) is no gyro's
+#: (the best navigation gyros: ~1e-4): a note asks whether drift_dph is in deg/s.
+MIN_PLAUSIBLE_ARW_DEG_PER_RT_H = 2e-5
+#: A held-out log fitted this much worse (RMS about its mean) than the fitted run's own
+#: residuals gets a note.
+HOLDOUT_WORSE = 2.0
+#: A requested T-only fit where BIC prefers gradient terms by more than this gets a note.
+T_ONLY_NOTE_DELTA_BIC = 10.0
 
 #: The kinematic smoother only interpolates where ``t_int_c`` is blank: drift rows farther
 #: than this from every reading are left out of the fit (and said so), s. (Red team: a
@@ -1718,7 +1746,9 @@ def _samples_from_log(
         )
     in_region = np.isfinite(t) & np.isfinite(g) & (t >= lo) & (t <= hi)
     without_drift = (int((no_drift & in_region).sum()), int(no_drift.sum()))
-    _bins_check(t[inside], region, settings.min_points_per_bin, log.source)
+    steps = np.diff(np.asarray(log.time_s, dtype=float))
+    step_s = float(np.median(steps)) if steps.size else math.nan
+    _bins_check(t[inside], region, settings.min_points_per_bin, log.source, step_s)
     idx = np.flatnonzero(inside)
     s = Samples(
         np.asarray(log.time_s, dtype=float)[idx],
@@ -1802,6 +1832,8 @@ def _domain(s: Samples, region: tuple[float, float], t_step: float) -> pd.DataFr
     lo, hi = region
     n = max(int(math.floor((hi - lo) / t_step + 1e-9)), 0)
     temps = lo + t_step * np.arange(n + 1)
+    if hi - temps[-1] > 1e-9:  # the region's far end, where the steps do not reach it
+        temps = np.append(temps, hi)
     rows = []
     for t in temps:
         near = np.abs(s.t_c - t) <= 0.5 * t_step
@@ -1878,12 +1910,25 @@ def fit_drift(
         names = CANDIDATES
     else:
         requested = parse_terms(settings.terms)
-        # the reference and the requested set
+        # the reference and the requested set (and g1 beside a T-only request: whether the
+        # run shows gradient terms the cubic would take for bias walk)
         names = tuple(dict.fromkeys(["t-only", term_set_name(requested)]))
+        if names == ("t-only",):
+            names = ("t-only", "g1")
     chosen, table = select_terms(s, names, coding, eiv=eiv, folds=settings.cv_folds)
     if settings.terms != "auto":
         chosen = term_set_name(parse_terms(settings.terms))
         table["chosen"] = table["candidate"] == chosen
+        if chosen == "t-only":
+            rows = table.set_index("candidate")
+            if "g1" in rows.index and bool(rows.loc["g1", "determined"]):
+                gain = float(rows.loc["t-only", "bic"] - rows.loc["g1", "bic"])
+                if gain > T_ONLY_NOTE_DELTA_BIC:
+                    notes.append(
+                        f"--terms t-only: BIC prefers the first-order gradient terms (g1) by "
+                        f"{gain:.0f}; the T-only cubic takes their effect for bias walk and "
+                        "its standard errors do not count it (--terms auto selects)"
+                    )
     start_s = float(np.asarray(log.time_s, dtype=float)[0])
     model = fit_samples(
         s, chosen, coding, eiv=eiv, weighting=settings.weighting, walk_start_s=start_s
@@ -1899,6 +1944,21 @@ def fit_drift(
             "count them): the drift changes so fast with T that the smoother's error of a "
             "few mK shows in °/h; a less noisy or finer internal temperature sensor lowers it"
         )
+    if hi - lo < 1.0:
+        notes.append(
+            f"the region {lo:g} .. {hi:g} °C is narrower than one 1 °C bin: the T terms are "
+            "barely determined there (see their standard errors); widen --region"
+        )
+    steps_s = np.diff(s.time_s)
+    if steps_s.size:
+        arw = model.white_sigma_dph * math.sqrt(float(np.median(steps_s)) / 3600.0)
+        if arw < MIN_PLAUSIBLE_ARW_DEG_PER_RT_H:
+            notes.append(
+                f"the drift's white noise is {model.white_sigma_dph:.3g} °/h per reading, an "
+                f"angle random walk of {arw:.2g} °/√h, below any gyro's (the best navigation "
+                "gyros: ~1e-4 °/√h): is drift_dph in °/s (multiply by 3600) or a simulation "
+                "without noise?"
+            )
     if model.condition_number > 1e6:
         notes.append(
             f"the coded design is ill-conditioned (condition number {model.condition_number:.3g});"
@@ -1942,7 +2002,21 @@ def fit_drift(
         if note is not None:
             fit = dataclasses.replace(fit, notes=(*fit.notes, note))
     if holdout is not None:
-        fit = dataclasses.replace(fit, holdout=evaluate_holdout(fit, holdout, params))
+        h = evaluate_holdout(fit, holdout, params)
+        fit = dataclasses.replace(fit, holdout=h)
+        centred = math.sqrt(max(h.rms_dph**2 - h.mean_dph**2, 0.0))
+        if centred > HOLDOUT_WORSE * fit.model.residual_rms_dph:
+            fit = dataclasses.replace(
+                fit,
+                notes=(
+                    *fit.notes,
+                    f"the held-out log is fitted {centred / fit.model.residual_rms_dph:.1f}x "
+                    f"worse than this run (residual RMS about its mean {centred:.3g} against "
+                    f"{fit.model.residual_rms_dph:.3g} °/h): another gyro, a drift the model "
+                    "misses, or conditions the fitted run did not see; the compensation may "
+                    "not carry over",
+                ),
+            )
     return fit
 
 

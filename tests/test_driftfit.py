@@ -795,14 +795,14 @@ def test_a_partly_blank_setpoint_column_says_why_the_kinematic_smoother_is_used(
 
 
 def test_a_region_narrower_than_the_tables_step_still_plots(programme):
-    """One temperature in the compensation table: the surface plot contours over the
-    region's two edges (it raised TypeError inside matplotlib, after the table was
-    written)."""
+    """A region narrower than the table's 1 degC step: the table has its two ends (it had
+    one temperature, and the surface plot raised TypeError inside matplotlib, after the
+    table was written)."""
     from schedsyn import fitplots
 
     frame = gyro_log(programme, _gyro(T_COEFS), sample_s=10.0, seed=4)
     fit = fit_drift(log_from_frame(frame, "narrow"), (-36.0, -35.5))
-    assert len(fit.domain) == 1
+    assert list(fit.domain["t_c"]) == [-36.0, -35.5]
     ax = fitplots.fit_surface_plot(fit)
     assert ax.collections  # the contours and the samples
     import matplotlib.pyplot as plt
@@ -1061,3 +1061,60 @@ def test_standard_errors_count_the_temperature_estimates_error(programme):
     rms_z = float(np.sqrt(np.mean(np.square(np.concatenate(z)))))
     # six runs of the baseline: 0.80 (2.7 without the regressors' share; 1.3 at 50 °/h/°C)
     assert 0.4 < rms_z < 1.6, rms_z
+
+
+def _w3_log(gyro, seed, sample_s=10.0, scale=1.0):
+    prog = read_steps("tests/data/plans/w3_steps.csv")
+    frame = gyro_log(prog, gyro, sample_s=sample_s, seed=seed)
+    frame = frame.drop(columns=["t_true_c", "g_true_c_per_min", "drift_true_dph", "bias_walk_dph"])
+    frame["drift_dph"] *= scale
+    return log_from_frame(frame, f"w3-{seed}")
+
+
+def test_a_drift_in_degrees_per_second_is_questioned():
+    """Red team: drift_dph logged in deg/s (3600x too small) was fitted without a word."""
+    gyro = _w3_gyro(4)
+    assert not any("°/s" in n for n in fit_drift(_w3_log(gyro, 4), (-2.0, 33.0)).notes)
+    fit = fit_drift(_w3_log(gyro, 4, scale=1.0 / 3600.0), (-2.0, 33.0))
+    note = next(n for n in fit.notes if "°/s" in n)
+    arw = fit.model.white_sigma_dph * math.sqrt(10.0 / 3600.0)
+    assert arw < driftfit.MIN_PLAUSIBLE_ARW_DEG_PER_RT_H and f"{arw:.2g} °/√h" in note
+
+
+def test_the_held_out_check_says_when_another_log_is_fitted_much_worse():
+    """Red team: another gyro held out gave 9x the fit's residual and no verdict."""
+    gyro = _w3_gyro(5)
+    log = _w3_log(gyro, 5)
+    same = fit_drift(log, (-2.0, 33.0), holdout=_w3_log(gyro, 6))
+    assert not any("held-out log is fitted" in n for n in same.notes), same.notes
+    other = fit_drift(log, (-2.0, 33.0), holdout=_w3_log(_w3_gyro(7), 6))
+    h = other.holdout
+    ratio = math.sqrt(h.rms_dph**2 - h.mean_dph**2) / other.model.residual_rms_dph
+    assert ratio > driftfit.HOLDOUT_WORSE
+    assert any(f"fitted {ratio:.1f}x worse" in n for n in other.notes), other.notes
+
+
+def test_a_t_only_request_on_a_gradient_gyro_says_what_it_misses():
+    fit = _w3_random_gyro_fit(0, terms="t-only")
+    assert fit.terms == parse_terms("t-only")
+    row = fit.selection.set_index("candidate")
+    gain = row.loc["t-only", "bic"] - row.loc["g1", "bic"]
+    assert gain > driftfit.T_ONLY_NOTE_DELTA_BIC
+    assert any(f"prefers the first-order gradient terms (g1) by {gain:.0f}" in n for n in fit.notes)
+
+
+def test_a_region_narrower_than_a_bin_is_said_and_its_far_end_tabled():
+    """Red team: --region 10.3 11.2 was fitted without a word and the table stopped at
+    10.3 (the grid steps 1 degC from LO)."""
+    fit = fit_drift(_w3_log(_w3_gyro(0), 0), (10.3, 11.2))
+    assert any("narrower than one 1 °C bin" in n for n in fit.notes)
+    assert sorted(set(fit.compensation_frame()["t_c"])) == [10.3, 11.2]
+
+
+def test_a_sparse_log_is_told_its_sampling_leaves_bins_short():
+    """Red team: a 60-s log was told to narrow a region its run had crossed."""
+    log = _w3_log(_w3_gyro(0), 0, sample_s=60.0)
+    with pytest.raises(
+        ParameterError, match=r"passes through \d+ of them, but the log samples every 60 s"
+    ):
+        fit_drift(log, (-2.0, 33.0), FitSettings(min_points_per_bin=40))
