@@ -1968,6 +1968,22 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
                 "has the wrong gain or phase at that frequency (e.g. a missing time "
                 "constant) than a chamber controller cycling"
             )
+    if chosen == "second_time_constant" or (chosen == "chamber_lag" and not has_air):
+        # two first-order lags in a row commute: chamber air -> device -> sensor reads as
+        # chamber -> mass -> device (red team: a 90-s sensor lag named a second time
+        # constant of 89.9 s without a word); for planning the two differ: a slow sensor
+        # leaves the device itself on the plan's first-order model
+        lag_s = max(
+            (v for k, v in chosen_fit.model.parameters.items() if k.endswith("_s") and v > 0),
+            default=math.nan,
+        )
+        warnings.append(
+            f"a temperature sensor that lags the device by {lag_s:.0f} s (its own time "
+            f"constant) gives exactly the same readings as this {chosen}: if the sensor is "
+            "slow, the device itself follows the plan's model and only the reading lags "
+            f"(estimate --sensor-tau-s {lag_s:.0f} undoes it); the sensor's datasheet or "
+            "a step test of the sensor alone tells them apart"
+        )
     if chosen == "selfheat_slope":
         # dT0 = dt0 + s (T - 20) is a gain 1/(1-s) with tau/(1-s): so is a sensor that
         # reads G (T - 20) off around 20 degC with the device's own tau (stress test)

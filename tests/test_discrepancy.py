@@ -124,9 +124,14 @@ def test_lag_vs_second_mass_needs_the_air_channel():
     assert "chamber_lag" in without.ambiguous_with
     assert any("cannot be told apart" in w for w in without.warnings)
     assert without.parameters["tau2_s"] == pytest.approx(400.0, rel=0.05)
+    # a sensor lagging the device reads the same (red team: named without a word)
+    lag = f"lags the device by {without.parameters['tau2_s']:.0f} s"
+    assert any(lag in w and "--sensor-tau-s" in w for w in without.warnings), without.warnings
     with_air = diagnose_frame(_lag_log(True), SETTINGS)
     assert with_air.effect == "chamber_lag"
     assert "second_time_constant" not in with_air.ambiguous_with
+    # the air channel shows the lag: not a sensor's
+    assert not any("lags the device" in w for w in with_air.warnings), with_air.warnings
     assert with_air.parameters["tau_chamber_s"] == pytest.approx(400.0, rel=0.05)
     # held out: fitted on the first 70 %, the augmented model predicts the rest better
     assert with_air.holdout_rms_after_c < 0.5 * with_air.holdout_rms_before_c

@@ -78,6 +78,9 @@ def findings(d) -> list[str]:
         f"fitted device model: tau {_pm(d.model.tau_s, se.get('tau_s'), '.1f')} s, "
         f"dT0 {_pm(d.model.dt0_c, se.get('dt0_c'), '.3f')} °C"
         + (" (with the effect below)" if d.effect != "none" else ""),
+        # red team: a sensor reading 0.5 degC high came out as dT0 3.5 without a word
+        "dT0 includes any constant offset of the temperature sensor (the log cannot tell "
+        "them apart; a reference thermometer can)",
     ]
     if d.effect != "none":
         base = d.base_fit
