@@ -962,6 +962,34 @@ class MonitorReport:
         return "\n".join(lines)
 
 
+#: The identified model's parameters are varied by this many standard errors for the
+#: device-limit envelope of the prediction.
+LIMIT_ENVELOPE_SIGMAS = 2.0
+
+
+def _limit_envelope(
+    ident: Identified, plan: PlanRecord, now: float, t_now: float, rest: np.ndarray
+) -> tuple[float, float, str]:
+    """Lowest and highest device temperature predicted over ``rest`` with tau and dT0 at
+    the corners of +-``LIMIT_ENVELOPE_SIGMAS`` standard errors, and the corner of the
+    highest excess in words."""
+    k = LIMIT_ENVELOPE_SIGMAS
+    lim = plan.limits
+    lo, hi, worst, excess = math.inf, -math.inf, "", -math.inf
+    for s_tau in (-k, k):
+        for s_dt0 in (-k, k):
+            tau = max(ident.tau_s + s_tau * ident.tau_std_s, 0.1 * ident.tau_s)
+            dt0 = ident.dt0_c + s_dt0 * ident.dt0_std_c
+            t_r, _ = predict_from_state(
+                ModelSpec(tau, dt0), ident.t0_c, plan.programme, now, t_now, rest
+            )
+            lo, hi = min(lo, float(t_r.min())), max(hi, float(t_r.max()))
+            e = max(float(t_r.max()) - lim.device_max_c, lim.device_min_c - float(t_r.min()))
+            if e > excess:
+                excess, worst = e, f"tau {tau:.0f} s, dT0 {dt0:.2f} °C"
+    return lo, hi, worst
+
+
 def monitor_run(
     log: MeasuredLog,
     plan: PlanRecord,
@@ -1052,6 +1080,22 @@ def monitor_run(
             f"{t_rest.max():.1f} °C, outside its limits {plan.limits.device_min_c:g} .. "
             f"{plan.limits.device_max_c:g} °C"
         )
+    elif rest.size and not effect.material:
+        # red team: at 30 min (tau 1937 +- 114 s, dT0 -0.53 +- 1.42 degC; the device's 3.0)
+        # the prediction stayed inside the limits and the device went 3.9 degC past one;
+        # the model within two standard errors of the fit already reached past it
+        far_lo, far_hi, worst = _limit_envelope(ident, plan, now, t_now, rest)
+        lim = plan.limits
+        if (
+            far_hi > lim.device_max_c + DEVICE_LIMIT_TOL_C
+            or far_lo < lim.device_min_c - DEVICE_LIMIT_TOL_C
+        ):
+            notes.append(
+                f"*** within two standard errors of the identified model ({worst}) the device "
+                f"may reach {far_lo:.1f} .. {far_hi:.1f} °C over the rest, outside its limits "
+                f"{lim.device_min_c:g} .. {lim.device_max_c:g} °C: the log does not yet rule "
+                "out a breach; watch again soon, or re-plan the rest with a margin"
+            )
     if ident.span_min < 0.75 * ident.tau_s / 60.0:
         notes.append(
             f"the log spans {ident.span_min:.0f} min, less than 3/4 of the identified tau: "

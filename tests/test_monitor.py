@@ -234,6 +234,48 @@ def test_a_run_on_track_that_would_leave_the_device_limits_says_re_plan(plan_dir
     assert touch.replan_at_min is None
 
 
+def test_a_breach_the_young_fit_cannot_rule_out_is_said(tmp_path):
+    """Red team: at 30 min (tau 1937 +- 114 s, dT0 -0.53 +- 1.42 degC) the prediction
+    stayed inside the device limits and the device went 3.9 degC past one; the model
+    within two standard errors already reached past it. Here: a device limit 0.5 degC
+    above the true peak (29.0 degC), a 25-min noisy log (central prediction inside, the
+    envelope past it) and a 100-min one (envelope inside); the envelope is recomputed
+    from the stated standard errors."""
+    from schedsyn.effects import ModelSpec
+    from schedsyn.monitor import predict_from_state
+
+    path = write_plan_dir(tmp_path / "plan")
+    meta = json.loads((path / "plan.json").read_text())
+    meta["limits"]["device_max_c"] = 29.5
+    (path / "plan.json").write_text(json.dumps(meta))
+    plan = read_plan_dir(path)
+    young = monitor_run(log_from_frame(run_log(25.0, noise_c=0.1)), plan, find_effect=False)
+    assert young.predicted_device_max_c < 29.5 + 0.1
+    i = young.identified
+    rest = young.dense["time_min"][young.dense["predicted"]].to_numpy()
+    highest = max(
+        float(
+            predict_from_state(
+                ModelSpec(i.tau_s + a * i.tau_std_s, i.dt0_c + b * i.dt0_std_c),
+                i.t0_c,
+                plan.programme,
+                young.elapsed_min,
+                young.t_now_c,
+                rest,
+            )[0].max()
+        )
+        for a in (-2.0, 2.0)
+        for b in (-2.0, 2.0)
+    )
+    assert highest > 29.5 + 0.1
+    assert any(
+        n.startswith("*** within two standard errors") and f".. {highest:.1f} °C" in n
+        for n in young.notes
+    ), young.notes
+    old = monitor_run(log_from_frame(run_log(100.0, noise_c=0.1)), plan, find_effect=False)
+    assert not any("within two standard errors" in n for n in old.notes), old.notes
+
+
 @pytest.mark.parametrize(
     "change, words",
     [
