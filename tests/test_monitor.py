@@ -234,6 +234,24 @@ def test_a_run_on_track_that_would_leave_the_device_limits_says_re_plan(plan_dir
     assert touch.replan_at_min is None
 
 
+@pytest.mark.parametrize("gap_min", [(40.0, 120.0), (80.0, 120.0)])
+def test_a_sampling_gap_over_corners_does_not_bias_the_identified_model(plan_dir, gap_min):
+    """Red team: a 30-min gap (setpoint not logged either) over corners of the programme
+    put tau 3.7 and dT0 5 standard errors off and named a false dT0 drift: the fit drew the
+    setpoint across the gap as a line or one guessed corner. The plan's programme is known:
+    tau and dT0 within 3 of their standard errors, no effect (before: tau 2277 s, dT0 0.54
+    degC and second_time_constant over 40-120 min; 2409 s, 2.86 and selfheat_slope over
+    80-120)."""
+    a, b = gap_min
+    frame = run_log(200.0, noise_c=0.02)
+    frame = frame[(frame["time_s"] < a * 60.0) | (frame["time_s"] > b * 60.0)]
+    report = monitor_run(log_from_frame(frame), read_plan_dir(plan_dir))
+    i = report.identified
+    assert abs(i.tau_s - 2400.0) < 3.0 * i.tau_std_s, (i.tau_s, i.tau_std_s)
+    assert abs(i.dt0_c - 3.0) < 3.0 * i.dt0_std_c, (i.dt0_c, i.dt0_std_c)
+    assert report.effect.effect == "none"
+
+
 def test_a_breach_the_young_fit_cannot_rule_out_is_said(tmp_path):
     """Red team: at 30 min (tau 1937 +- 114 s, dT0 -0.53 +- 1.42 degC) the prediction
     stayed inside the device limits and the device went 3.9 degC past one; the model
