@@ -236,6 +236,10 @@ class Samples:
     #: None: the regressors are taken as exact
     t_err_paths: np.ndarray | None = None
     g_err_paths: np.ndarray | None = None
+    #: T_hat lagged by each of :data:`LACK_OF_FIT_LAGS_S`, (k, n), degC: lagged over the
+    #: whole log (a lag over the region's samples alone restarts at every re-entry); None:
+    #: lagged over the samples
+    t_lag_paths: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -957,9 +961,41 @@ def _determined(samples: Samples, coding: Coding, terms: tuple[str, ...], eiv: b
 
 #: Lack of fit: the full cubic's BIC lowered by more than this by a flexible extension.
 LACK_OF_FIT_DELTA_BIC = 10.0
+#: Time constants of the lag between the sensed and the gyro's own temperature tried by
+#: the lack-of-fit check, s (a second thermal mass between the temperature sensor and the
+#: sensing element; red team: 300-1200 s, taken for bias walk without a word).
+LACK_OF_FIT_LAGS_S = (300.0, 600.0, 1200.0)
+#: Samples further apart than this restart the lag (the run left the region), s.
+LAG_RESTART_S = 600.0
 #: Interior knots of the cubic spline in coded T, and of the kinks in coded g.
 LACK_OF_FIT_T_KNOTS = (-0.6, -0.2, 0.2, 0.6)
 LACK_OF_FIT_G_KINKS = (-0.5, 0.5)
+
+
+def lagged(time_s: np.ndarray, x: np.ndarray, tau_s: float) -> np.ndarray:
+    """First-order lag of ``x`` (linear between samples, exact), restarted at ``x`` after
+    a gap longer than :data:`LAG_RESTART_S`."""
+    y = np.empty_like(x, dtype=float)
+    if x.size == 0:
+        return y
+    y[0] = x[0]
+    dt = np.diff(time_s)
+    if dt.size and float(np.ptp(dt)) <= 1e-9 * float(dt[0]) and dt[0] <= LAG_RESTART_S:
+        # uniform sampling (most logs): the same recursion as a linear filter, fast
+        from scipy.signal import lfilter, lfiltic
+
+        e0 = math.exp(-float(dt[0]) / tau_s)
+        k0 = tau_s / float(dt[0]) * (1.0 - e0)
+        b, a = [1.0 - k0, k0 - e0], [1.0, -e0]
+        return lfilter(b, a, x, zi=lfiltic(b, a, [x[0]], [x[0]]))[0]
+    e = np.exp(-dt / tau_s)
+    k = np.where(dt > 0, tau_s / np.maximum(dt, 1e-12) * (1.0 - e), 1.0)
+    for i in range(1, x.size):
+        if dt[i - 1] > LAG_RESTART_S:
+            y[i] = x[i]
+        else:
+            y[i] = e[i - 1] * y[i - 1] + (1.0 - k[i - 1]) * x[i] + (k[i - 1] - e[i - 1]) * x[i - 1]
+    return y
 
 
 def lack_of_fit(samples: Samples, coding: Coding) -> dict[str, float]:
@@ -975,7 +1011,12 @@ def lack_of_fit(samples: Samples, coding: Coding) -> dict[str, float]:
     full cubic is not determined by its samples, or no extension column adds to it (a
     run that only heats has no step at g = 0 to find).
     """
-    nan = {"delta_bic_t": math.nan, "delta_bic_g": math.nan}
+    nan = {
+        "delta_bic_t": math.nan,
+        "delta_bic_g": math.nan,
+        "delta_bic_lag": math.nan,
+        "lag_s": math.nan,
+    }
     full_terms = parse_terms("full")
     if not _determined(samples, coding, full_terms, True):
         return nan
@@ -1018,6 +1059,21 @@ def lack_of_fit(samples: Samples, coding: Coding) -> dict[str, float]:
     ):
         z = extended(columns)
         out[key] = math.nan if z is None else bic(z) - base
+    # (c) the drift follows a lagged temperature: the same polynomial in (T_lag, g)
+    best_lag, best_d = math.nan, math.nan
+    for i, tau_s in enumerate(LACK_OF_FIT_LAGS_S):
+        t_lag = (
+            samples.t_lag_paths[i]
+            if samples.t_lag_paths is not None
+            else lagged(samples.time_s, samples.t_c, tau_s)
+        )
+        x_lag, _ = coding.code(t_lag, samples.g_c_per_min)
+        z = monomials(x_lag, y, full_terms)
+        z = z / np.maximum(np.abs(z).max(axis=0), 1e-300)
+        d = bic(z) - base
+        if math.isfinite(d) and not d >= best_d:
+            best_lag, best_d = tau_s, d
+    out["delta_bic_lag"], out["lag_s"] = best_d, best_lag
     return out
 
 
@@ -1033,6 +1089,15 @@ def _lack_of_fit_note(found: dict[str, float]) -> str | None:
             f"with g that the polynomial does not follow (a step at g = 0 -- heating and "
             f"cooling differ, e.g. hysteresis -- and kinks lower the BIC by "
             f"{-found['delta_bic_g']:.0f})"
+        )
+    lag = found.get("delta_bic_lag", math.nan)
+    if lag < -LACK_OF_FIT_DELTA_BIC and not lag > min(
+        found.get("delta_bic_t", math.inf), found.get("delta_bic_g", math.inf)
+    ):
+        parts.append(
+            f"with a temperature that lags the measured one by about {found['lag_s']:.0f} s "
+            f"(the same polynomial in the lagged temperature lowers the BIC by {-lag:.0f}: a "
+            "thermal mass between the temperature sensor and the sensing element?)"
         )
     if not parts:
         return None
@@ -1472,8 +1537,9 @@ class DriftFit:
                 **self.lack_of_fit,
                 "threshold": -LACK_OF_FIT_DELTA_BIC,
                 "meaning": "BIC of the full cubic extended by a spline in T (t) or a step "
-                "and kinks in g (g), minus the cubic's; below the threshold the drift is "
-                "not a polynomial there",
+                "and kinks in g (g), or of the full cubic in a temperature lagged by lag_s "
+                "(lag), minus the cubic's; below the threshold the drift is not a "
+                "polynomial in (T, g) there",
             },
             "reference_t_only": {
                 "coefficients": dict(zip(ref.terms, map(float, ref.coefficients_dph), strict=True)),
@@ -1750,8 +1816,11 @@ def _samples_from_log(
     step_s = float(np.median(steps)) if steps.size else math.nan
     _bins_check(t[inside], region, settings.min_points_per_bin, log.source, step_s)
     idx = np.flatnonzero(inside)
+    time_all = np.asarray(log.time_s, dtype=float)
+    known = np.isfinite(t)
+    t_filled = np.interp(time_all, time_all[known], t[known]) if known.any() else t
     s = Samples(
-        np.asarray(log.time_s, dtype=float)[idx],
+        time_all[idx],
         t[idx],
         g[idx],
         d[idx],
@@ -1760,6 +1829,7 @@ def _samples_from_log(
         var_g[idx],
         e_t[:, idx],
         e_g[:, idx],
+        np.array([lagged(time_all, t_filled, tau)[idx] for tau in LACK_OF_FIT_LAGS_S]),
     )
     return s, est, method, without_drift, params, model_source, outliers, gap_notes
 
