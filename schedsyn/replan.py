@@ -52,10 +52,12 @@ What :func:`replan_run` then decides:
 * The best of the plan unchanged and the continuations tried is chosen
   (:meth:`RunPrediction.preference`: within limits, complete, coverage, lowest level
   count, fewest levels missing), the plan unchanged on a tie or when no continuation
-  fits; every attempt is kept (``planner_attempts`` in ``replan.json``). The device's
-  limits come first: a continuation that breaks them less than the plan is taken
-  whatever the coverage options say, and when every run at hand breaks them the chamber
-  goes straight home (:func:`safe_return`) if that breaks them less.
+  fits; every attempt is kept (``planner_attempts`` in ``replan.json``). A continuation
+  whose table breaks a limit (``max_steps``...) is never chosen
+  (:func:`refuse_continuation`). The device's limits come first: a
+  continuation that breaks them less than the plan is taken whatever the coverage
+  options say, and when every run at hand breaks them the chamber goes straight home
+  (:func:`safe_return`) if that breaks them less.
 """
 
 from __future__ import annotations
@@ -447,6 +449,12 @@ class RunPrediction:
     device_min_c: float
     device_max_c: float
     problems: tuple[str, ...]
+    #: what of the plan's limits the *new* steps' table breaks (``max_steps``,
+    #: ``min_step_min``, rates, duration: the planner's own check of a continuation,
+    #: :func:`with_table_problems`); also in ``problems``. A rest with any is never
+    #: chosen: the controller cannot be loaded with it (red team: W4 at minute 30, a
+    #: 117-step rest against ``max_steps`` 80 was taken with ``problems`` empty).
+    table_problems: tuple[str, ...] = ()
 
     @property
     def complete(self) -> bool:
@@ -585,6 +593,27 @@ def predict_run(request: ReplanRequest, programme: Programme) -> RunPrediction:
             f"{lim.device_max_c:g} °C"
         )
     return RunPrediction(programme, cov, lo, hi, tuple(problems))
+
+
+def with_table_problems(run: RunPrediction, table: Sequence[str]) -> RunPrediction:
+    """``run`` with ``table`` (what its new steps' table breaks) added to its problems."""
+    table = tuple(x for x in table if x not in run.table_problems)
+    if not table:
+        return run
+    return replace(
+        run,
+        problems=(*run.problems, *table),
+        table_problems=(*run.table_problems, *table),
+    )
+
+
+def planner_table_problems(planned: Any) -> tuple[str, ...]:
+    """What of the plan's limits the planner says its continuation's table breaks
+    (``Plan.violations``: step count, step length, rates, duration), leaving out the
+    device's limits, which :func:`predict_run` judges with the model used."""
+    if planned is None:
+        return ()
+    return tuple(v for v in planned.violations if not v.startswith("the device reaches"))
 
 
 #: A re-planned run is also predicted at the corners of the identified model's box: tau and
@@ -821,6 +850,8 @@ class PlannerAttempt:
             "predicted_coverage": None if pr is None else pr.coverage.coverage,
             "predicted_min_levels": None if pr is None else pr.coverage.min_levels,
             "duration_min": None if pr is None else pr.programme.total_min,
+            "steps": None if pr is None else pr.programme.n_segments,
+            "problems": [] if pr is None else list(pr.problems),
             "error": self.error,
             "planner_s": self.planner_s,
         }
@@ -853,8 +884,43 @@ def _plan_from(
     except InfeasiblePlanError as exc:
         return PlannerAttempt(start, None, None, str(exc), time.perf_counter() - tic, planned_with)
     seconds = time.perf_counter() - tic
-    prediction = predict_run(request, planned.programme)
+    prediction = with_table_problems(
+        predict_run(request, planned.programme), planner_table_problems(planned)
+    )
     return PlannerAttempt(start, planned, prediction, None, seconds, planned_with)
+
+
+Key = tuple[bool, bool, float, int, int]
+
+
+def refuse_continuation(
+    run: RunPrediction, key: Key, unchanged: RunPrediction, unchanged_key: Key
+) -> str | None:
+    """Why a continuation ``run`` (judged ``key``, :meth:`RunPrediction.preference` at its
+    worst over the model used and its rivals) may not be chosen over the plan unchanged
+    (judged ``unchanged_key``), or ``None``.
+
+    * A table that breaks a limit of the plan (:attr:`RunPrediction.table_problems`:
+      ``max_steps`` above all) cannot be loaded: never chosen.
+    * A plan unchanged that breaks a limit can make a rest that covers less the better
+      choice; the caller's reason then says which limit, with which model.
+    """
+    if run.table_problems:
+        return f"its new steps break a limit ({run.table_problems[0]})"
+    return None
+    if not key[0]:
+        return "it is predicted to break a limit the plan unchanged keeps"
+    if not key[1] and key[2] < unchanged_key[2] - 1e-12:
+        return (
+            f"it is predicted to cover {key[2]:.0%} of the bins, the plan unchanged "
+            f"{unchanged_key[2]:.0%}"
+        )
+    floor = min(unchanged_key[3], unchanged.coverage.levels_required)
+    if key[3] < floor:
+        return (
+            f"it leaves its weakest bin with {key[3]} levels, the plan unchanged {unchanged_key[3]}"
+        )
+    return None
 
 
 #: Rival models a re-plan also plans new steps for (the ones that disagree most with the
@@ -932,6 +998,8 @@ class ReplanResult:
     replan_s: float = 0.0
     planner_s: float = 0.0
     attempts: tuple[PlannerAttempt, ...] = ()
+    #: why continuations the planner returned were not taken (:func:`refuse_continuation`)
+    refused: tuple[str, ...] = ()
     uncertainty: UncertaintyCheck | None = None
     rivals: tuple[RivalPrediction, ...] = ()
     lead_min: float = 0.0
@@ -1025,6 +1093,7 @@ class ReplanResult:
                 "unchanged_plan": self.unchanged.to_dict(),
                 "planner": self._planner_dict(),
                 "planner_attempts": [a.to_dict() for a in self.attempts],
+                "refused_continuations": list(self.refused),
                 "new_steps_from_min": self.new_steps_from_min,
                 "lead_min": self.lead_min,
                 "replan_s": self.replan_s,
@@ -1078,6 +1147,7 @@ class ReplanResult:
                 + (f" and {len(short) - 10} more" if len(short) > 10 else "")
             )
         lines.extend(f"problem: {x}" for x in self.prediction.problems)
+        lines.extend(f"not taken: {x}" for x in self.refused)
         if self.uncertainty is not None:
             lines.append(self.uncertainty.line())
         if self.complete and not self.trusted_complete:
@@ -1117,6 +1187,17 @@ def _model_text(model: ModelSpec) -> str:
         return base
     pars = ", ".join(f"{k} {v:.4g}" for k, v in model.parameters.items())
     return f"{base} + {model.effect} ({pars})"
+
+
+def _limit_text(unchanged: RunPrediction, rivals: Sequence[tuple[str, ReplanRequest]]) -> str:
+    """Which limit the plan unchanged is predicted to break, and with which model."""
+    if unchanged.problems:
+        return f"{unchanged.problems[0]} (the model used)"
+    for label, rq in rivals:
+        broken = predict_run(rq, unchanged.programme).problems
+        if broken:
+            return f"{broken[0]} (with the rival model {label})"
+    return "it breaks a limit"
 
 
 def replan_run(
@@ -1215,6 +1296,7 @@ def replan_run(
     worst_text = " at its worst over the model used and the rivals" if rivals else ""
     planned, error, planner_s, new_from = None, None, 0.0, None
     attempts: list[PlannerAttempt] = []
+    refused: list[str] = []
     if keep_if_complete and unchanged_key[0] and unchanged_key[1]:
         choice = "keep"
         reason = (
@@ -1228,6 +1310,8 @@ def replan_run(
             if unchanged_key[1]
             else f"reaches {unchanged_key[2]:.0%}{worst_text}"
         )
+        if not unchanged_key[0]:  # say which limit, and under which model
+            before += f", and {_limit_text(unchanged, rivals)}"
         best: tuple[RunPrediction, Any, float] | None = None
         best_key = None
         # new steps for the rival that disagrees most only: several rivals (4 on a W4 log
@@ -1249,9 +1333,19 @@ def replan_run(
                 run = (
                     attempt.prediction
                     if rq is request
-                    else predict_run(request, attempt.prediction.programme)
+                    else with_table_problems(
+                        predict_run(request, attempt.prediction.programme),
+                        attempt.prediction.table_problems,
+                    )
                 )
                 key = judged(run)
+                refusal = refuse_continuation(run, key, unchanged, unchanged_key)
+                if refusal is not None:
+                    from_text = f"from minute {start:g}" + (
+                        "" if label == "identified" else f" (planned for {label})"
+                    )
+                    refused.append(f"the continuation {from_text} is not taken: {refusal}")
+                    continue
                 if best_key is None or key > best_key:
                     best, best_key = (run, attempt.plan, start), key
                 if best_key[0] and best_key[1]:
@@ -1267,7 +1361,10 @@ def replan_run(
                 "min): no new sweep can begin"
             )
         elif best is None:
-            error = "; ".join(f"from minute {a.start_min:g}: {a.error}" for a in attempts)
+            error = "; ".join(
+                [f"from minute {a.start_min:g}: {a.error}" for a in attempts if a.error] + refused
+            )
+        none_fits = "no continuation is taken" if refused else "no continuation fits"
         if best is not None:
             planned = best[1]
         new = None if best is None else best[0]
@@ -1287,7 +1384,7 @@ def replan_run(
         if safe is not None and device_excess_c(safe, plan.limits) < least - PREDICTED_DEVICE_TOL_C:
             choice, chosen, new_from = "new", safe, request.at_min + float(lead_min)
             why = (
-                f"no continuation fits ({error}) and the plan unchanged is predicted to "
+                f"{none_fits} ({error}) and the plan unchanged is predicted to "
                 f"take the device {excess:.1f} °C past its limit"
                 if new is None
                 else "the planner's best continuation is predicted to take the device "
@@ -1330,10 +1427,24 @@ def replan_run(
                 f" (min {best_key[3]} levels){worst_text} in {new.programme.total_min:g} "
                 f"min; the plan unchanged {before}"
             )
+            if not unchanged_key[0] and best_key[0]:
+                # a rest covering less is taken only for the device's limits: say so
+                worse = (
+                    f", less than the plan unchanged ({unchanged_key[2]:.0%}), "
+                    if best_key[2] < unchanged_key[2]
+                    else ""
+                )
+                reason = (
+                    f"the plan unchanged {before}; the planner's continuation keeps the "
+                    f"device within its limits{' under every model' if rivals else ''} and "
+                    f"is predicted to reach {best_key[2]:.0%} (min {best_key[3]} levels)"
+                    f"{worst_text}{worse or ' '}in {new.programme.total_min:g} min"
+                    + (": taken for the device's limits" if worse else "")
+                )
         else:
             choice, chosen = "keep", unchanged
             why = (
-                f"no continuation fits ({error})"
+                f"{none_fits} ({error})"
                 if new is None or best_key is None
                 else f"the planner's continuation would reach only {best_key[2]:.0%}"
                 f" (min {best_key[3]} levels){worst_text}"
@@ -1358,6 +1469,7 @@ def replan_run(
         replan_s=time.perf_counter() - tic,
         planner_s=planner_s,
         attempts=tuple(attempts),
+        refused=tuple(refused),
         uncertainty=check_uncertainty(request, chosen.programme),
         rivals=predict_rivals(request, chosen.programme),
         lead_min=float(lead_min),
