@@ -53,8 +53,9 @@ What :func:`replan_run` then decides:
   (:meth:`RunPrediction.preference`: within limits, complete, coverage, lowest level
   count, fewest levels missing), the plan unchanged on a tie or when no continuation
   fits; every attempt is kept (``planner_attempts`` in ``replan.json``). A continuation
-  whose table breaks a limit (``max_steps``...) is never chosen
-  (:func:`refuse_continuation`). The device's limits come first: a
+  whose table breaks a limit (``max_steps``...) is never chosen, nor, while the plan
+  unchanged keeps the device's limits, one that covers less or leaves its weakest bin
+  with fewer levels (:func:`refuse_continuation`). The device's limits come first: a
   continuation that breaks them less than the plan is taken whatever the coverage
   options say, and when every run at hand breaks them the chamber goes straight home
   (:func:`safe_return`) if that breaks them less.
@@ -902,12 +903,18 @@ def refuse_continuation(
 
     * A table that breaks a limit of the plan (:attr:`RunPrediction.table_problems`:
       ``max_steps`` above all) cannot be loaded: never chosen.
-    * A plan unchanged that breaks a limit can make a rest that covers less the better
-      choice; the caller's reason then says which limit, with which model.
+    * While the plan unchanged is within the device's limits (under every model), a rest
+      predicted to cover less is never chosen, nor one that leaves its weakest bin with
+      fewer levels than the plan unchanged leaves its own (up to the requirement): a bin
+      with no level at all cannot be calibrated, and more complete bins elsewhere do not
+      make up for it (red team: W3, tau 3000 s, at minute 60, 73 % with bins 0..6 at 0
+      levels was taken over 53 % with every bin at 1 or more). Only a plan unchanged that
+      breaks a limit can make a worse rest the better choice (and the reason says so).
     """
     if run.table_problems:
         return f"its new steps break a limit ({run.table_problems[0]})"
-    return None
+    if not unchanged_key[0]:
+        return None
     if not key[0]:
         return "it is predicted to break a limit the plan unchanged keeps"
     if not key[1] and key[2] < unchanged_key[2] - 1e-12:
@@ -921,6 +928,17 @@ def refuse_continuation(
             f"it leaves its weakest bin with {key[3]} levels, the plan unchanged {unchanged_key[3]}"
         )
     return None
+
+
+def fewer_levels_bins(run: RunPrediction, unchanged: RunPrediction) -> list[tuple[float, int, int]]:
+    """``(bin_lo_c, levels, unchanged levels)`` of each bin ``run`` leaves short with fewer
+    levels than the plan unchanged would give it (up to the requirement)."""
+    c, u = run.coverage, unchanged.coverage
+    cap = np.minimum(u.levels, u.levels_required)
+    return [
+        (float(c.grid.lower_c[i]), int(c.levels[i]), int(u.levels[i]))
+        for i in np.flatnonzero(c.levels < cap)
+    ]
 
 
 #: Rival models a re-plan also plans new steps for (the ones that disagree most with the
@@ -1094,6 +1112,10 @@ class ReplanResult:
                 "planner": self._planner_dict(),
                 "planner_attempts": [a.to_dict() for a in self.attempts],
                 "refused_continuations": list(self.refused),
+                "bins_fewer_levels_than_unchanged": [
+                    {"bin_lo_c": lo, "levels": n, "unchanged_plan_levels": u}
+                    for lo, n, u in self.fewer_levels_bins()
+                ],
                 "new_steps_from_min": self.new_steps_from_min,
                 "lead_min": self.lead_min,
                 "replan_s": self.replan_s,
@@ -1147,6 +1169,16 @@ class ReplanResult:
                 + (f" and {len(short) - 10} more" if len(short) > 10 else "")
             )
         lines.extend(f"problem: {x}" for x in self.prediction.problems)
+        fewer = self.fewer_levels_bins()
+        if fewer:
+            lines.append(
+                f"*** the new steps leave {len(fewer)} bin(s) with fewer levels than the plan "
+                "unchanged would: "
+                + ", ".join(
+                    f"[{lo:g}, {lo + p.grid.bin_c:g}) {n} (plan {u})" for lo, n, u in fewer[:10]
+                )
+                + (f" and {len(fewer) - 10} more" if len(fewer) > 10 else "")
+            )
         lines.extend(f"not taken: {x}" for x in self.refused)
         if self.uncertainty is not None:
             lines.append(self.uncertainty.line())
@@ -1162,6 +1194,13 @@ class ReplanResult:
             lines.append(late)
         lines.extend(f"note: {n}" for n in r.notes)
         return "\n".join(lines)
+
+    def fewer_levels_bins(self) -> list[tuple[float, int, int]]:
+        """Bins the chosen new steps leave short with fewer levels than the plan unchanged
+        would give them (:func:`fewer_levels_bins`); ``[]`` when the plan is kept."""
+        if self.choice != "new":
+            return []
+        return fewer_levels_bins(self.prediction, self.unchanged)
 
     def late_line(self) -> str | None:
         """A ``***`` line when the re-plan took longer than the time before its new steps

@@ -118,6 +118,58 @@ def test_a_rest_taken_because_a_rival_breaks_the_limit_says_so(tmp_path, monkeyp
     assert "keeps the device within its limits under every model" in res.reason, res.reason
 
 
+def _slow_device_run(plan):
+    """The test plan at minute 60 of a device of tau 3600 s: the plan unchanged ends at
+    70 % with levels [2 2 2 3 4 4 4 4 4 3] (3 required)."""
+    frame = effect_log(ModelSpec(3600.0, 3.0), seed=1)
+    return log_from_frame(frame[frame.time_s <= 3600].reset_index(drop=True), "slow")
+
+
+def _rest_with_levels(monkeypatch, levels):
+    """The planner's continuation (every start) is the plan's own steps, predicted with
+    these levels per bin."""
+    import schedsyn.replan as replan_module
+
+    def crafted(rq, start, progress, say, label="identified"):
+        run = predict_run(rq, rq.plan.programme)
+        run = replace(run, coverage=replace(run.coverage, levels=np.array(levels)))
+        return PlannerAttempt(start, None, run, None, 0.0, label)
+
+    monkeypatch.setattr(replan_module, "_plan_from", crafted)
+
+
+def test_a_rest_that_leaves_a_bin_with_no_level_is_not_taken_for_more_coverage(
+    tmp_path, monkeypatch
+):
+    """Red team, W3 (tau 3000 s) at minute 60: 73 % with bins 0..6 at no level was taken
+    over 53 % with every bin at 1 or more. A bin with no level cannot be calibrated;
+    the weakest bin of the rest must not fall below the plan unchanged's."""
+    plan = read_plan_dir(write_plan_dir(tmp_path / "plan"))
+    log = _slow_device_run(plan)
+    _rest_with_levels(monkeypatch, [0, 0, 3, 3, 3, 3, 3, 3, 3, 3])  # 80 %, min 0
+    res = replan_run(log, plan, 60.0, find_effect=False)
+    assert res.unchanged.coverage.min_levels == 2 and res.unchanged.coverage.coverage < 0.8
+    assert res.choice == "keep", res.reason
+    assert "weakest bin with 0 levels, the plan unchanged 2" in res.reason, res.reason
+
+
+def test_a_rest_taken_with_fewer_levels_in_some_bins_names_them(tmp_path, monkeypatch):
+    """A rest that covers more bins at the same weakest level is taken, but the bins it
+    leaves short with fewer levels than the plan unchanged would are named (summary and
+    replan.json)."""
+    plan = read_plan_dir(write_plan_dir(tmp_path / "plan"))
+    log = _slow_device_run(plan)
+    _rest_with_levels(monkeypatch, [2, 3, 3, 3, 3, 3, 3, 3, 3, 2])  # 80 %, min 2
+    res = replan_run(log, plan, 60.0, find_effect=False)
+    assert res.choice == "new", res.reason
+    assert "leave 1 bin(s) with fewer levels than the plan unchanged would: [4, 5) 2 (plan 3)" in (
+        res.summary()
+    )
+    assert res.to_json_dict()["bins_fewer_levels_than_unchanged"] == [
+        {"bin_lo_c": 4.0, "levels": 2, "unchanged_plan_levels": 3}
+    ]
+
+
 @pytest.fixture
 def fake(tmp_path):
     """``fake(levels, problems=(), table=())``: the test plan's run at minute 60 predicted,
@@ -137,8 +189,9 @@ def fake(tmp_path):
 
 
 def test_the_rules_of_refuse_continuation(fake):
-    """The decision itself: a table past a limit is never taken, whatever the plan
-    unchanged does."""
+    """The decision itself: a table past a limit is never taken; while the plan unchanged
+    keeps the limits, neither is a rest covering less or weaker in its weakest bin; a plan
+    unchanged that breaks a limit lets a worse rest through (the caller says why)."""
     unchanged = fake([2, 2, 2, 3, 4, 4, 4, 4, 4, 3])
     ukey = unchanged.preference()
     ok = fake([2, 3, 3, 3, 3, 3, 3, 3, 3, 3])
@@ -146,6 +199,17 @@ def test_the_rules_of_refuse_continuation(fake):
     steps = fake([3] * 10, table=[TOO_MANY])
     assert "max_steps" in str(refuse_continuation(steps, steps.preference(), unchanged, ukey))
     assert not steps.complete
+    empty_bin = fake([0, 3, 3, 3, 3, 3, 3, 3, 3, 3])
+    assert "weakest bin with 0 levels" in str(
+        refuse_continuation(empty_bin, empty_bin.preference(), unchanged, ukey)
+    )
+    less = fake([2, 2, 2, 2, 2, 2, 2, 3, 3, 3])
+    assert "cover 30%" in str(refuse_continuation(less, less.preference(), unchanged, ukey))
+    # a complete rest is never refused for its weakest bin (it is at the requirement)
+    rich = fake([5, 5, 5, 5, 5, 5, 5, 5, 5, 5])
+    complete = fake([3] * 10)
+    assert refuse_continuation(complete, complete.preference(), rich, rich.preference()) is None
     # the plan unchanged breaks a limit: a worse rest within the limits may be taken
     hot = fake([2, 2, 2, 3, 4, 4, 4, 4, 4, 3], problems=["the device is predicted to reach"])
+    assert refuse_continuation(less, less.preference(), hot, hot.preference()) is None
     assert refuse_continuation(steps, steps.preference(), hot, hot.preference()) is not None
