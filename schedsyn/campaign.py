@@ -55,7 +55,13 @@ from .design import DesignSpace, plan_design, programme_design
 from .errors import InfeasiblePlanError, ParameterError, SchedsynError
 from .export import ExportSettings
 from .params import Limits, ThermalParams
-from .planner import ExperimentSpec, Plan, plan_experiment, planning_effort
+from .planner import (
+    ExperimentSpec,
+    Plan,
+    check_device_start,
+    plan_experiment,
+    planning_effort,
+)
 from .programme import read_steps
 from .progress import Progress
 from .simulate import simulate
@@ -157,6 +163,9 @@ class CampaignConfig:
                     f"experiment name {n!r} cannot name a folder; use letters, digits, '-' or '_'"
                 )
         object.__setattr__(self, "experiments", exps)
+        # a device starting past its own limit is bad input, refused before any planning
+        # (not after minutes of search ending in "lengthen the duration")
+        check_device_start(self.limits)
         for key in ("robust_tau_s", "robust_dt0_c"):
             v = getattr(self, key)
             if v is not None:

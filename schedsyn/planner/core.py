@@ -583,7 +583,7 @@ def _plan(
     the way (fewer levels, longer segments); ``search_stop`` ends the search for the
     requested plan itself."""
     tic = time.perf_counter()
-    check_request(spec, limits)
+    check_request(spec, limits, check_start=continuation is None)
     robust = robust_tau_s is not None or robust_dt0_c is not None
     if robust and model is not None:
         raise ParameterError(

