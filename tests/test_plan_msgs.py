@@ -71,3 +71,16 @@ def test_cli_plan_device_start_outside_limits_exits_2(tmp_path, capsys):
     assert code == 2
     err = capsys.readouterr().err
     assert "starts at 20 °C" in err and len(err.strip().splitlines()) == 1
+
+
+# -- 2. the campaign's closing "wrote" line --------------------------------------------------
+def test_wrote_line_names_only_what_was_written():
+    from schedsyn.cli.campaign import wrote_line
+
+    none = wrote_line("out/q17", [])
+    assert "<experiment>" not in none and "steps.csv" not in none
+    assert none.startswith("wrote out/q17/summary.csv, index.html")
+    one = wrote_line("out/c", ["W1"], ["jumo.csv"])
+    assert "out/c/W1/steps.csv, plan.json" in one and one.endswith("sheet.html, jumo.csv")
+    two = wrote_line("out/c", ["W1", "W3"])
+    assert "out/c/<experiment>/steps.csv" in two and two.endswith("for W1, W3")

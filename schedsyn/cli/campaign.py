@@ -30,6 +30,7 @@ options); 3 an environment fault (an output cannot be written, a worker process 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 
 from ..errors import ParameterError
 from . import _common
@@ -87,6 +88,25 @@ def campaign_outputs(config, advise: bool = False) -> list[str]:
     return ["summary.csv", "index.html"] + [
         f"{e.name}/{f}" for e in config.experiments for f in per_experiment
     ]
+
+
+def wrote_line(target, written: Sequence[str], exports: Sequence[str] = ()) -> str:
+    """The closing "wrote ..." line: only what was written.
+
+    An experiment that could not be planned gets no folder, so the line names the
+    experiment folders written, and none when no experiment was planned (red team: the
+    line promised ``<experiment>/steps.csv, plan.json ...`` after an infeasible one).
+    """
+    head = f"wrote {target}/summary.csv, index.html"
+    if not written:
+        return head + " (no experiment was planned: no step table written)"
+    files = ", ".join(
+        ["steps.csv", "plan.json", "program.png", "phase.png", "coverage.png", "sheet.html"]
+        + list(exports)
+    )
+    if len(written) == 1:
+        return f"{head} and {target}/{written[0]}/{files}"
+    return f"{head} and {target}/<experiment>/{files} for {', '.join(written)}"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -211,9 +231,11 @@ def run(args: argparse.Namespace) -> int:
             else f"{n_bad} of {len(result.plans)} experiments are NOT complete"
         )
         + soak_text,
-        f"wrote {out.target}/summary.csv, index.html and {out.target}/<experiment>/steps.csv, "
-        "plan.json, program.png, phase.png, coverage.png, sheet.html"
-        + "".join(f", {default_export_path('steps.csv', e.controller)}" for e in config.exports),
+        wrote_line(
+            out.target,
+            [s.name for s, p in zip(config.experiments, plans, strict=True) if p is not None],
+            [str(default_export_path("steps.csv", e.controller)) for e in config.exports],
+        ),
     )
     if lost:
         print(
