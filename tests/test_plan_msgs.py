@@ -7,6 +7,7 @@ incomplete status, split's NOT COVERED line when nothing was verified, the effor
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import pytest
@@ -84,3 +85,46 @@ def test_wrote_line_names_only_what_was_written():
     assert "out/c/W1/steps.csv, plan.json" in one and one.endswith("sheet.html, jumo.csv")
     two = wrote_line("out/c", ["W1", "W3"])
     assert "out/c/<experiment>/steps.csv" in two and two.endswith("for W1, W3")
+
+
+# -- 3. a broken limit dominates "incomplete", and is shown with enough digits -------------
+def _partial_plan(excess_c: float = 0.0009):
+    """A hand-made partial plan whose device dips ``excess_c`` below its lower limit."""
+    from schedsyn.planner import Plan, check_programme
+    from schedsyn.programme import Programme
+
+    prog = Programme([60.0, 110.0, 20.0, 30.0], [-1.0, 0.0, 3.0, 0.0])
+    params = ThermalParams()
+    spec = ExperimentSpec("P", 0.0, 10.0, -25.0, 15.0, levels_required=2)
+    *_, t_lo, _ = check_programme(prog, spec, Limits(), [params])
+    limits = Limits(device_min_c=round(t_lo + excess_c, 6))
+    cov, cov01, problems, lo, hi = check_programme(prog, spec, limits, [params])
+    plan = Plan(
+        spec, params, limits, prog, cov, cov01, False, "incomplete", 0.0, 0.0, 0.0, {}, {},
+        (params,), tuple(problems), t_min_c=lo, t_max_c=hi,
+    )  # fmt: skip
+    return plan, spec, params, limits, problems
+
+
+def test_device_violation_shows_the_excess_with_enough_digits():
+    *_, limits, problems = _partial_plan(0.0009)
+    (line,) = problems
+    assert "0.00090 °C below the lower limit" in line, line
+    assert f"{limits.device_min_c:.5f}" not in line.split("(")[0]  # not rounded onto it
+
+
+def test_a_partial_plan_that_breaks_a_limit_has_status_limits_violated():
+    from schedsyn.planner.core import _best_partial, _reported_for
+
+    plan, spec, params, limits, problems = _partial_plan(0.0009)
+    reported = _reported_for(plan, spec, params, limits, (), "PARTIAL: test (x")
+    assert reported.status == "limits violated" and not reported.complete
+    assert reported.violations == tuple(problems)
+    best = _best_partial([plan], spec, params, limits, ())
+    assert best is not None and best.status == "limits violated"
+    (note,) = [n for n in best.notes if n.startswith("PARTIAL")]
+    assert "no plan within the limits" in note and "BREAKS A LIMIT" in note, note
+    # and one within its limits stays "incomplete"
+    within = dataclasses.replace(plan, limits=Limits(), violations=())
+    ok = _reported_for(within, spec, params, Limits(), (), "PARTIAL: test (x")
+    assert ok.status == "incomplete" and ok.violations == ()

@@ -476,7 +476,13 @@ def with_end_soak(plan: Plan, model=None) -> Plan:
         coverage=cov,
         coverage_0p1=cov01,
         complete=complete,
-        status=plan.status if complete or not plan.complete else "incomplete",
+        status=(  # a broken limit dominates "incomplete"
+            plan.status
+            if complete
+            else "limits violated"
+            if problems
+            else (plan.status if not plan.complete else "incomplete")
+        ),
         violations=tuple(problems),
         notes=notes,
         t_min_c=t_lo,

@@ -11,6 +11,7 @@ fewer).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -222,6 +223,27 @@ def _worse(a: CoverageReport, b: CoverageReport) -> bool:
     )
 
 
+def device_limit_problem(t_lo: float, t_hi: float, limits: Limits, where: str = "") -> str:
+    """The violation line of a device reaching ``t_lo .. t_hi`` past its limits, with
+    the excess and enough digits to see it: rounded to 0.01 °C, a device 0.0009 °C below
+    4.7 °C read "reaches 4.70 .. 9.28 °C, outside its limits 4.7 .. 9.3 °C" (red team)."""
+    over = [
+        (ex, side)
+        for ex, side in (
+            (limits.device_min_c - t_lo, f"below the lower limit {limits.device_min_c:g} °C"),
+            (t_hi - limits.device_max_c, f"above the upper limit {limits.device_max_c:g} °C"),
+        )
+        if ex > DEVICE_TOL_C
+    ]
+    smallest = min((ex for ex, _ in over), default=1.0)
+    digits = min(6, max(2, 1 - math.floor(math.log10(smallest))))
+    excess = "; ".join(f"{ex:.{digits}f} °C {side}" for ex, side in over)
+    return (
+        f"the device reaches {t_lo:.{digits}f} .. {t_hi:.{digits}f} °C{where}, outside its "
+        f"limits {limits.device_min_c:g} .. {limits.device_max_c:g} °C ({excess})"
+    )
+
+
 def check_programme(
     programme: Programme,
     spec: ExperimentSpec,
@@ -274,10 +296,7 @@ def check_programme(
             if len(scenarios) == 1
             else f" (over the {len(scenarios)} design scenarios of the robust box)"
         )
-        problems.append(
-            f"the device reaches {t_lo:.2f} .. {t_hi:.2f} °C{where}, outside its limits "
-            f"{limits.device_min_c:g} .. {limits.device_max_c:g} °C"
-        )
+        problems.append(device_limit_problem(t_lo, t_hi, limits, where))
     assert worst is not None and worst01 is not None  # scenarios is not empty
     return worst, worst01, problems, float(t_lo), float(t_hi)
 

@@ -24,7 +24,13 @@ from ..model import LinearThermalModel, affine_response
 from ..params import Limits, ThermalParams
 from ..programme import Programme
 from ..simulate import dense_times
-from .check import CHECK_DT_MIN, DEVICE_TOL_C, REPORT_DELTA_C_PER_MIN, step_limit_problems
+from .check import (
+    CHECK_DT_MIN,
+    DEVICE_TOL_C,
+    REPORT_DELTA_C_PER_MIN,
+    device_limit_problem,
+    step_limit_problems,
+)
 from .lp import LpStats
 from .polish import polish
 from .request import Continuation, ExperimentSpec
@@ -110,10 +116,7 @@ def check_continuation(
         )
     t_lo, t_hi = float(temp[after].min()), float(temp[after].max())
     if t_lo < limits.device_min_c - DEVICE_TOL_C or t_hi > limits.device_max_c + DEVICE_TOL_C:
-        problems.append(
-            f"the device reaches {t_lo:.2f} .. {t_hi:.2f} °C after minute {at:g}, outside "
-            f"its limits {limits.device_min_c:g} .. {limits.device_max_c:g} °C"
-        )
+        problems.append(device_limit_problem(t_lo, t_hi, limits, f" after minute {at:g}"))
     return reports[0], reports[1], problems, t_lo, t_hi
 
 

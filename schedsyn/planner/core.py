@@ -1127,7 +1127,8 @@ def _graded(
     """
     if fewer is None:
         return plan
-    cov, cov01, _, _, _ = check_programme(fewer.plan.programme, spec, limits, [params])
+    cov, cov01, problems, _, _ = check_programme(fewer.plan.programme, spec, limits, [params])
+    violations = tuple(dict.fromkeys((*fewer.plan.violations, *problems)))
     if plan is not None and (
         not plan.violations,
         plan.coverage.min_levels,
@@ -1164,7 +1165,8 @@ def _graded(
         coverage=cov,
         coverage_0p1=cov01,
         complete=False,
-        status="incomplete",
+        status="limits violated" if violations else "incomplete",  # a broken limit dominates
+        violations=violations,
         levels_planned=fewer.levels,
         notes=(
             *notes,
@@ -1273,16 +1275,24 @@ def _best_partial(
 
     best = max(partials, key=rank)
     k = best.spec.levels_required
-    return _reported_for(
-        best,
-        spec,
-        params,
-        limits,
-        notes,
-        f"PARTIAL: no plan gives every bin even {k} levels within "
-        f"{limits.duration_max_min:g} min; this one gives {k} levels to "
-        f"{best.coverage.coverage:.0%} of the bins (the part of the region that fits",
-    )
+    lo, hi = best.spec.working_lo_c, best.spec.working_hi_c
+    part = "" if (lo, hi) == (spec.working_lo_c, spec.working_hi_c) else f" of [{lo:g}, {hi:g}] °C"
+    if best.violations:
+        # it may give every bin k levels, but not within the limits (red team: "no plan
+        # gives every bin even 2 levels ...; this one gives 2 levels to 100% of the bins")
+        head = (
+            f"PARTIAL: no plan within the limits gives every bin even {k} levels within "
+            f"{limits.duration_max_min:g} min; the best found gives {k} levels to "
+            f"{best.coverage.coverage:.0%} of the bins{part} but BREAKS A LIMIT (see the "
+            "violations; the part of the region that fits"
+        )
+    else:
+        head = (
+            f"PARTIAL: no plan gives every bin even {k} levels within "
+            f"{limits.duration_max_min:g} min; this one gives {k} levels to "
+            f"{best.coverage.coverage:.0%} of the bins{part} (the part of the region that fits"
+        )
+    return _reported_for(best, spec, params, limits, notes, head)
 
 
 def _reported_for(
@@ -1297,7 +1307,8 @@ def _reported_for(
     for ``spec``: coverage re-counted over the whole region at the requested levels,
     never complete; ``head`` (an open parenthesis, closed here with the weakest bin and
     the share at the requested levels) after ``notes``, then ``part``'s own notes."""
-    cov, cov01, _, _, _ = check_programme(part.programme, spec, limits, [params])
+    cov, cov01, problems, _, _ = check_programme(part.programme, spec, limits, [params])
+    violations = tuple(dict.fromkeys((*part.violations, *problems)))
     own = part.notes
     lo, hi = part.spec.working_lo_c, part.spec.working_hi_c
     if (lo, hi) != (spec.working_lo_c, spec.working_hi_c):
@@ -1312,7 +1323,8 @@ def _reported_for(
         coverage=cov,
         coverage_0p1=cov01,
         complete=False,
-        status="incomplete",
+        status="limits violated" if violations else "incomplete",  # a broken limit dominates
+        violations=violations,
         levels_planned=part.levels_planned or part.spec.levels_required,
         notes=(
             *notes,
