@@ -128,3 +128,49 @@ def test_a_partial_plan_that_breaks_a_limit_has_status_limits_violated():
     within = dataclasses.replace(plan, limits=Limits(), violations=())
     ok = _reported_for(within, spec, params, Limits(), (), "PARTIAL: test (x")
     assert ok.status == "incomplete" and ok.violations == ()
+
+
+# -- 5. the effort note says what stopped the search, in the limit's own unit ---------------
+def test_effort_note_names_its_unit_and_only_claims_the_limit_when_it_cut():
+    from schedsyn.planner.core import LP_NONZEROS_PER_EFFORT_S, _Effort
+    from schedsyn.planner.lp import lp_nonzeros_solved
+
+    work = 46 * LP_NONZEROS_PER_EFFORT_S  # 46 reference seconds of LP work done
+    cut = _Effort(lp_nonzeros_solved() - work, 45.0, None, answered=True)
+    assert cut.spent() and cut.hit_limit
+    assert "45 reference seconds of LP work" in cut.note()
+    assert "18 million constraint-matrix nonzeros" in cut.note()
+    assert "not wall or CPU time" in cut.note()
+    # the caller's stop is not the effort limit, though effort_s is set
+    caller = _Effort(lp_nonzeros_solved(), 45.0, lambda: True)
+    assert caller.spent() and caller.hit and not caller.hit_limit
+    assert "effort limit" not in caller.note() and "caller" in caller.note()
+    # no limit (--effort-s 0): never spent by effort
+    free = _Effort(lp_nonzeros_solved() - work, None, None, answered=True)
+    assert not free.spent() and not free.hit
+
+
+def test_graded_note_recommends_more_effort_only_when_the_limit_cut_the_search():
+    from schedsyn.planner.core import LP_NONZEROS_PER_EFFORT_S, _Effort, _Fewer, _graded
+    from schedsyn.planner.lp import lp_nonzeros_solved
+
+    plan, spec2, params, _, _ = _partial_plan(0.0)
+    plan = dataclasses.replace(plan, limits=Limits(), violations=())
+    spec = dataclasses.replace(spec2, levels_required=3)
+    fewer = _Fewer(2, plan, (2,))
+
+    def graded_note(effort):
+        out = _graded(None, spec, params, Limits(), (), fewer, effort)
+        assert out is not None
+        (note,) = [n for n in out.notes if n.startswith("GRADED")]
+        assert "not proven" in note, note  # (the bound does not exclude 3 levels)
+        return note
+
+    assert "--effort-s" not in graded_note(None)  # no limit: more effort changes nothing
+    ran_out = _Effort(lp_nonzeros_solved(), 45.0, None)
+    assert not ran_out.spent()
+    assert "--effort-s" not in graded_note(ran_out)  # searched to its end
+    cut = _Effort(lp_nonzeros_solved() - 46 * LP_NONZEROS_PER_EFFORT_S, 45.0, None)
+    cut.answered = True
+    assert cut.spent()
+    assert "--effort-s" in graded_note(cut)

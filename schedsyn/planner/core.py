@@ -81,7 +81,9 @@ class _Effort:
     work_tic: int
     effort_s: float | None
     stop: Callable[[], bool] | None
+    #: a search was stopped, by the effort limit (``hit_limit``) or the caller's ``stop``
     hit: bool = False
+    hit_limit: bool = False
     answered: bool = False
     #: what the optional searches that the limit stops are
     what: str = "some fewer-level counts or sub-regions"
@@ -91,23 +93,32 @@ class _Effort:
     end_soak: bool = False
 
     def spent(self) -> bool:
-        over = self.stop is not None and self.stop()
-        if (
+        by_caller = self.stop is not None and self.stop()
+        by_limit = (
             self.answered
             and self.effort_s is not None
             and lp_nonzeros_solved() - self.work_tic > self.effort_s * LP_NONZEROS_PER_EFFORT_S
-        ):
-            over = True
-        self.hit = self.hit or over
-        return over
+        )
+        self.hit_limit = self.hit_limit or by_limit
+        self.hit = self.hit or by_caller or by_limit
+        return by_caller or by_limit
 
     def note(self) -> str:
+        """What stopped the optional searches, in the limit's own unit (red team: "stopped
+        at its effort limit (effort_s = 45 s)" read as seconds after a 6-s plan: the limit
+        counts LP work, and probes the bounds prove infeasible count as solved at no cost
+        in time, so 45 reference seconds can pass in a few seconds of CPU)."""
+        if not self.hit_limit:
+            return "the search for other plans was stopped by the caller"
+        assert self.effort_s is not None  # (hit_limit needs a limit)
+        nonzeros = self.effort_s * LP_NONZEROS_PER_EFFORT_S
         return (
-            f"the search for other plans stopped at its effort limit (effort_s = "
-            f"{self.effort_s:g} s): {self.what} "
-            "were not searched; allow more with effort_s (CLI --effort-s, 0 = no limit)"
-            if self.effort_s is not None
-            else "the search for other plans was stopped by the caller"
+            f"the search for other plans stopped at its effort limit, effort_s = "
+            f"{self.effort_s:g} reference seconds of LP work ({nonzeros / 1e6:.3g} million "
+            "constraint-matrix nonzeros solved, counting the probes the bounds prove "
+            "infeasible as solved: not wall or CPU time, which can be far less): "
+            f"{self.what} were not searched; allow more with effort_s (CLI --effort-s, "
+            "0 = no limit)"
         )
 
 
@@ -630,7 +641,7 @@ def _plan(
                 progress(f"{spec.name}: {note}")
             found = _fewer_levels(spec, params, limits, progress, effort, partials=partials)
             searched_fewer = True
-            fewer = _graded(None, spec, params, limits, (note,), found)
+            fewer = _graded(None, spec, params, limits, (note,), found, effort)
             if fewer is None and math.isinf(proven):  # some bin cannot be reached at all
                 fewer = _plan_reachable_part(spec, params, limits, progress, effort, proven_note)
             if fewer is not None:
@@ -717,7 +728,7 @@ def _plan(
             )
         except InfeasiblePlanError as err:
             # nothing at all with these levels: fewer levels, if some count fits
-            fewer = _graded(None, spec, params, limits, tuple(notes), found)
+            fewer = _graded(None, spec, params, limits, tuple(notes), found, effort)
             if fewer is None:  # no count complete: the best part of the region, if any
                 why = [n for n in (proven_note, *notes) if n]
                 fewer = _best_partial(partials, spec, params, limits, tuple(why))
@@ -849,7 +860,7 @@ def _plan(
         # the notes about the request (why it cannot be met), not about the replaced plan
         about_request = explain_shortfall(spec, params, limits)
         about_request += [n for n in plan.notes if n.startswith("no complete plan exists")]
-        plan = _graded(plan, spec, params, limits, tuple(about_request), found) or plan
+        plan = _graded(plan, spec, params, limits, tuple(about_request), found, effort) or plan
     plan = with_table_meta(_finished(plan, tic, effort))
     if require_complete and not complete:
         raise InfeasiblePlanError(
@@ -1119,6 +1130,7 @@ def _graded(
     limits: Limits,
     notes: tuple[str, ...],
     fewer: _Fewer | None,
+    effort: _Effort | None = None,
 ) -> Plan | None:
     """The better of ``plan`` (the best found with the requested ``L`` levels; None:
     nothing at all) and the graded search's complete plan for fewer levels: the one
@@ -1154,10 +1166,17 @@ def _graded(
         # red team: "the most the search fits in 540 min" read as a proof, and a
         # request a simple generator covered with 6 levels in 449 min was sent to a
         # faster chamber or 4 levels
+        # a longer search only where the effort limit cut one (with --effort-s 0, or a
+        # search that ran to its end, more effort changes nothing)
+        more = (
+            "a longer search (--effort-s; this one stopped at its effort limit) or --advise "
+            "may find more"
+            if effort is not None and effort.hit_limit
+            else "--advise may find more"
+        )
         proof = (
             f"not proven: the duration bound, {bound_min:.0f} min, does not exclude "
-            f"{spec.levels_required} levels; a longer search (--effort-s) or --advise may "
-            "find more"
+            f"{spec.levels_required} levels; {more}"
         )
     return dataclasses.replace(
         fewer.plan,
