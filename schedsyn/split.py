@@ -188,9 +188,15 @@ class SplitResult:
                 "the fewest possible" if self.optimal else "the fewest schedsyn's greedy found"
             )
             out.append(f"{n} experiment(s) cover it, each verified by a complete plan ({verdict}):")
+        elif n == 0:  # (not "0 verified experiment(s) reach [-20, -20] °C")
+            out.append(
+                f"NOT COVERED: no experiment could be verified (no complete plan found) for "
+                f"[{lo:g}, {hi:g}] °C, after {self.plans} plan(s) in {self.wall_s:.0f} s:"
+            )
         else:
             out.append(
-                f"NOT COVERED: {n} verified experiment(s) reach [{lo:g}, {self.covered_to_c:g}] °C:"
+                f"NOT COVERED: {n} verified experiment(s) reach [{lo:g}, {self.covered_to_c:g}] "
+                f"of [{lo:g}, {hi:g}] °C:"
             )
         for e in self.experiments:
             s = e.spec
@@ -291,19 +297,75 @@ def _reach(req: _Request, a: float) -> float:
     return ok
 
 
-def _plan_job(job: tuple[_Request, float, float], progress) -> tuple[float, Plan | None]:
-    req, a, b = job
+#: Seconds between the "still planning" lines of one plan of the split.
+HEARTBEAT_S = 20.0
+
+
+class _Heartbeat:
+    """Progress of one plan of the split: a line when it starts, then one at most every
+    ``HEARTBEAT_S`` while the planner reports (its progress lines) or polls (its ``stop``),
+    naming the region, the time so far, the time budget and the planner's last line
+    (red team: one line, then nothing for 9 min). Picklable: made in the worker."""
+
+    def __init__(self, progress, a: float, b: float, deadline: float | None) -> None:
+        self.progress, self.region, self.deadline = progress, f"[{a:g}, {b:g}] °C", deadline
+        self.tic = self.last = time.time()
+        self.said = ""
+        progress(f"split: planning {self.region}")
+
+    def line(self, now: float) -> str:
+        budget = ""
+        if self.deadline is not None:
+            left = self.deadline - now
+            budget = (
+                f", {left:.0f} s of the time budget left"
+                if left >= 0
+                else f", {-left:.0f} s past the time budget (a plan under way is finished)"
+            )
+        last = f"; last: {self.said}" if self.said else ""
+        return f"split: {self.region} still planning, {now - self.tic:.0f} s{budget}{last}"
+
+    def beat(self) -> None:
+        now = time.time()
+        if now - self.last >= HEARTBEAT_S:
+            self.last = now
+            self.progress(self.line(now))
+
+    def say(self, msg: str) -> None:
+        self.said = msg if len(msg) <= 120 else msg[:117] + "..."
+        self.beat()
+
+    def stop(self) -> bool:  # asked before each candidate structure: never stops
+        self.beat()
+        return False
+
+
+def _plan_job(
+    job: tuple[_Request, float, float] | tuple[_Request, float, float, float | None], progress
+) -> tuple[float, Plan | None]:
+    req, a, b, *rest = job
+    deadline = rest[0] if rest else None
     spec = req.spec(a, b, name=f"[{a:g}, {b:g}]")
+    heart = None if progress is None else _Heartbeat(progress, a, b, deadline)
     try:
         # no effort limit: the split asks whether a complete plan exists, so the search
         # for the requested levels runs to its end even where the bound says it is unlikely;
         # not graded: a plan for fewer levels is of no use to it
-        plan = plan_experiment(spec, req.params, req.limits, effort_s=None, graded=False)
+        plan = plan_experiment(
+            spec,
+            req.params,
+            req.limits,
+            effort_s=None,
+            graded=False,
+            progress=None if heart is None else heart.say,
+            stop=None if heart is None else heart.stop,
+        )
     except InfeasiblePlanError:
         plan = None
     if progress is not None:
         state = "complete" if plan is not None and plan.complete else "not complete"
-        progress(f"split: [{a:g}, {b:g}] °C {state}")
+        took = "" if heart is None else f" ({time.time() - heart.tic:.0f} s)"
+        progress(f"split: [{a:g}, {b:g}] °C {state}{took}")
     return b, plan if plan is not None and plan.complete else None
 
 
@@ -425,7 +487,7 @@ def split_range(
             first = False
             results = run_map(
                 partial(_plan_job, progress=progress),
-                [(req, x, b) for b in probes],
+                [(req, x, b, deadline) for b in probes],
                 backend,
                 workers=min(n_par, len(probes)),
                 progress=False,

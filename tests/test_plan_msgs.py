@@ -174,3 +174,63 @@ def test_graded_note_recommends_more_effort_only_when_the_limit_cut_the_search()
     cut.answered = True
     assert cut.spent()
     assert "--effort-s" in graded_note(cut)
+
+
+# -- 4. split: the NOT COVERED line with nothing verified, and a heartbeat -------------------
+def _empty_split(**kw):
+    from schedsyn.split import SplitResult
+
+    fields = dict(
+        range_c=(-20.0, 35.0),
+        experiments=(),
+        covered=False,
+        covered_to_c=-20.0,
+        min_experiments=1,
+        uncoverable_bin_c=None,
+        proven_reaches=(),
+        params=ThermalParams(),
+        limits=Limits(),
+        settings={},
+        plans=1,
+        wall_s=533.0,
+        notes=("the plan or time budget ran out",),
+    )
+    return SplitResult(**{**fields, **kw})
+
+
+def test_split_not_covered_with_no_verified_experiment_names_the_range():
+    lines = _empty_split().lines()
+    (head,) = [ln for ln in lines if ln.startswith("NOT COVERED")]
+    assert "[-20, -20]" not in head and "0 verified" not in head, head
+    assert "no experiment could be verified" in head and "[-20, 35] °C" in head, head
+    assert "1 plan(s) in 533 s" in head
+
+
+def test_split_plan_says_where_it_is_while_it_runs(monkeypatch):
+    """A plan of the split reports its start, then a line every HEARTBEAT_S (from the
+    planner's progress lines and its stop polls), with the time budget."""
+    from schedsyn import split
+
+    clock = [1000.0]
+    monkeypatch.setattr(split.time, "time", lambda: clock[0])
+
+    def slow_plan(spec, params, limits, **kw):  # 100 s of "search" in 5-s polls
+        for k in range(20):
+            clock[0] += 5.0
+            if k % 2:
+                kw["progress"](f"sweep {k} placed")
+            else:
+                assert kw["stop"]() is False  # polled, never stops the plan
+        raise split.InfeasiblePlanError("nothing")
+
+    monkeypatch.setattr(split, "plan_experiment", slow_plan)
+    said: list[str] = []
+    req = split._Request(-20.0, 35.0, ThermalParams(), Limits(), {}, 10.0)
+    b, plan = split._plan_job((req, -20.0, 35.0, 1000.0 + 60.0), said.append)
+    assert (b, plan) == (35.0, None)
+    assert said[0] == "split: planning [-20, 35] °C"
+    beats = [s for s in said if "still planning" in s]
+    assert len(beats) == 5, said  # every 20 s of 100 s
+    assert "20 s, 40 s of the time budget left" in beats[0], beats[0]
+    assert "past the time budget" in beats[-1] and "last: sweep" in beats[-1]
+    assert said[-1] == "split: [-20, 35] °C not complete (100 s)"
