@@ -121,6 +121,52 @@ def test_hot_edge_just_below_the_device_limit(tmp_path):
     assert_complete_independently(res, spec, PARAMS, limits, tmp_path)
 
 
+@pytest.mark.slow
+def test_a_ceiling_just_past_the_region_with_no_self_heating(tmp_path):
+    """Red team q13: [30, 33] degC, tau 600 s, dT0 0, chamber ceiling 34 degC, 8 levels in
+    360 min. The tracked start kept the chamber 1 degC inside its ceiling, so the device
+    (dT0 0) never turned past 33 + depth and no start finished; and the 3/5 split found
+    nothing in its share of the LPs. With the margin half the room: complete; with a 2/6
+    split tried as well, sooner (14 s against 40 s; 314 min, their own generator 342)."""
+    spec = ExperimentSpec(
+        name="tt-ceiling",
+        working_lo_c=30.0,
+        working_hi_c=33.0,
+        approx_lo_c=20.0,
+        approx_hi_c=34.0,
+        levels_required=8,
+    )
+    params = ThermalParams(600.0, 0.0)
+    limits = Limits(chamber_max_c=34.0, duration_max_min=360.0)
+    said: list[str] = []
+    res = timetable_search(spec, params, limits, first_found=True, progress=said.append)
+    assert any("split 3/5 or 2/6" in m for m in said), said[:3]
+    assert res is not None
+    lev = assert_complete_independently(res, spec, params, limits, tmp_path)
+    assert lev.min() >= 8
+
+
+def test_the_tracked_start_keeps_room_to_turn_under_a_near_ceiling():
+    spec = dataclasses.replace(SMALL, approx_hi_c=15.0)
+    for ceiling, dt0, want in ((80.0, 3.0, 1.0), (11.0, 0.0, None)):
+        params = ThermalParams(2400.0, dt0)
+        su = tt._Setup(
+            spec,
+            params,
+            Limits(chamber_max_c=ceiling, start_c=0.0, end_c=0.0, t_init_c=0.0),
+            tt.FirstOrderLag(params),
+            spec.grid.edges_c.astype(float),
+            spec.delta_c_per_min + tt.SAFETY_C_PER_MIN,
+            spec.edge_margin_c + tt.DEPTH_PAD_C,
+        )
+        _, m_hi = tt._track_margins(su)
+        if want is not None:
+            assert m_hi == want
+        else:  # the chamber may go past the turn's depth: half the room is kept
+            room = ceiling + dt0 - (spec.working_hi_c + su.depth)
+            assert m_hi == pytest.approx(0.5 * room) and ceiling - m_hi > 10.0 + su.depth
+
+
 def test_the_merit_counts_the_device_limit():
     """A start beyond the device limit costs in the merit (else the SLP stays outside)."""
     spec = dataclasses.replace(SMALL, approx_hi_c=10.5)

@@ -327,6 +327,23 @@ def _profile(su: _Setup, d: int, e: float, c: float, f: float, n: int = 601):
     return x, np.minimum(np.minimum(up, dn), cap)
 
 
+#: The tracking start keeps the chamber this far inside its limits, degC, ...
+TRACK_CHAMBER_MARGIN_C = 1.0
+
+
+def _track_margins(su: _Setup) -> tuple[float, float]:
+    """(floor, ceiling) margins of the tracking start's chamber: ``TRACK_CHAMBER_MARGIN_C``,
+    or half the room beyond a turn where the chamber limit is closer (red team q13: a
+    ceiling 1 degC past the region's top with dT0 0; 1 degC inside it the device never
+    turned past the edge and no start finished)."""
+    lim, dt0 = su.limits, su.params.dt0_c
+    room_hi = lim.chamber_max_c + dt0 - (su.hi + su.depth)
+    room_lo = (su.lo - su.depth) - (lim.chamber_min_c + dt0)
+    return tuple(  # type: ignore[return-value]
+        min(TRACK_CHAMBER_MARGIN_C, max(0.05, 0.5 * room)) for room in (room_lo, room_hi)
+    )
+
+
 def track(su: _Setup, st: _Structure, speeds, n_seg: int):
     """Segment rates following the structure's target profiles, and the segment index
     where the last sweep ended (None if it did not within ``n_seg``)."""
@@ -354,6 +371,7 @@ def track(su: _Setup, st: _Structure, speeds, n_seg: int):
         target = float(stop_distance(e, rb, tau)) - pos
         return invert_increasing(lambda v: stop_distance(v, rb, tau), target, 5.0)
 
+    m_lo, m_hi = _track_margins(su)
     for j in range(n_seg):
         if phase == "pre":
             moving = max(b0 * g, 0.0)
@@ -393,7 +411,9 @@ def track(su: _Setup, st: _Structure, speeds, n_seg: int):
         else:
             uj = (gs - g * a) / (1 - a)
         uj = min(max(uj, lim.rate_min_c_per_min), lim.rate_max_c_per_min)
-        uj = min(max(uj, (lim.chamber_min_c + 1 - Tk) / seg), (lim.chamber_max_c - 1 - Tk) / seg)
+        uj = min(
+            max(uj, (lim.chamber_min_c + m_lo - Tk) / seg), (lim.chamber_max_c - m_hi - Tk) / seg
+        )
         u[j] = uj
         Tk1 = Tk + uj * seg
         gn = uj + (g - uj) * a
@@ -1003,9 +1023,17 @@ def _search(
                 n_o = min(fit[-first], L - 1)
                 n_f = L - n_o
             ok = [(n_f, n_o)]
+            # and one more level away from the capped direction: its ranks under the cap
+            # closer to its slowest (red team q13: 8 levels, 3 heating ranks fit; 3/5 found
+            # nothing, 2/6 is complete in 305 min)
+            if fit[first] < fit[-first] and n_f > 1 and n_o + 1 <= fit[-first]:
+                ok.append((n_f - 1, n_o + 1))
+            elif fit[-first] < fit[first] and n_o > 1 and n_f + 1 <= fit[first]:
+                ok.append((n_f + 1, n_o - 1))
             say(
                 f"timetable: first {'heating' if first > 0 else 'cooling'}: the edge bins "
-                f"hold {fit[-1]} cooling / {fit[1]} heating ranks: split {n_f}/{n_o}"
+                f"hold {fit[-1]} cooling / {fit[1]} heating ranks: split "
+                + " or ".join(f"{a}/{b}" for a, b in ok)
             )
         splits.append((first, ok))
     todo = [
