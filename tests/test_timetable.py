@@ -150,14 +150,8 @@ def test_the_tracked_start_keeps_room_to_turn_under_a_near_ceiling():
     spec = dataclasses.replace(SMALL, approx_hi_c=15.0)
     for ceiling, dt0, want in ((80.0, 3.0, 1.0), (11.0, 0.0, None)):
         params = ThermalParams(2400.0, dt0)
-        su = tt._Setup(
-            spec,
-            params,
-            Limits(chamber_max_c=ceiling, start_c=0.0, end_c=0.0, t_init_c=0.0),
-            tt.FirstOrderLag(params),
-            spec.grid.edges_c.astype(float),
-            spec.delta_c_per_min + tt.SAFETY_C_PER_MIN,
-            spec.edge_margin_c + tt.DEPTH_PAD_C,
+        su = _setup(
+            spec, params, Limits(chamber_max_c=ceiling, start_c=0.0, end_c=0.0, t_init_c=0.0)
         )
         _, m_hi = tt._track_margins(su)
         if want is not None:
@@ -175,15 +169,7 @@ def test_the_merit_counts_the_device_limit():
     roomy = Limits(duration_max_min=200.0)
     costs = []
     for limits in (hot, roomy):
-        su = tt._Setup(
-            spec,
-            PARAMS,
-            limits,
-            tt.FirstOrderLag(PARAMS),
-            spec.grid.edges_c.astype(float),
-            spec.delta_c_per_min + tt.SAFETY_C_PER_MIN,
-            spec.edge_margin_c + tt.DEPTH_PAD_C,
-        )
+        su = _setup(spec, PARAMS, limits)
         u, end_at = tt.track(su, st, tt.starting_speeds(su, st, 1.0), 120)
         tp = tt._Timetable(su, st, 120)
         x = np.concatenate([u, np.zeros(tp.nt), [end_at * su.seg]])
