@@ -135,14 +135,21 @@ def test_fahrenheit_inside_the_plausible_range_is_caught():
 
 
 @pytest.mark.parametrize(
-    "tau_s, tau2_s, caught_in_f",
-    [(1200.0, 0.0, True), (2400.0, 300.0, True), (6000.0, 0.0, True), (2400.0, 900.0, False)],
+    "tau_s, tau2_s, in_f",
+    [
+        (1200.0, 0.0, "refused"),
+        (2400.0, 300.0, "refused"),
+        (2400.0, 900.0, "refused or warned"),
+        (6000.0, 0.0, "warned"),
+    ],
 )
-def test_devices_in_celsius_are_not_taken_for_fahrenheit(tau_s, tau2_s, caught_in_f):
+def test_devices_in_celsius_are_not_taken_for_fahrenheit(tau_s, tau2_s, in_f):
     """A device unlike the model (another tau, a second thermal mass) still follows its
-    chamber 1:1: no Fahrenheit error (simulated apart, by tests/independent.py). A second
-    time constant of 900 s is the closest call: in degC the Fahrenheit fit leaves 2.1x the
-    1:1 fit's residual; read in F, 0.36x (not refused: the rule asks 0.3)."""
+    chamber 1:1: no Fahrenheit error or warning (simulated apart, by tests/independent.py).
+    Read in F, it is refused where the Fahrenheit fit leaves at most 0.1 of the 1:1 fit's
+    squared residual, else warned up to 0.3 (tau 6000 s lies between the fit's taus: 0.18;
+    a second time constant of 900 s: 0.097). A one-pole fit alone had refused two-pole
+    devices in degC (red team: 0.18-0.23)."""
     knots_t, knots_tk = chamber_knots(DATA / "baseline_exp1_steps.csv")
     t_min, temp, _ = ode_trajectories(knots_t, knots_tk, tau_s, 3.0, dt_min=0.5, tau2_s=tau2_s)
     rng = np.random.default_rng(7)
@@ -155,9 +162,31 @@ def test_devices_in_celsius_are_not_taken_for_fahrenheit(tau_s, tau2_s, caught_i
     )
     log = log_from_frame(f)
     assert log.n_rows == t_min.size
-    if caught_in_f:  # the same device read in Fahrenheit
-        with pytest.raises(LogFormatError, match="t_int_c looks like Fahrenheit"):
-            log_from_frame(f.assign(t_int_c=_fahrenheit(f["t_int_c"])))
+    assert not any("Fahrenheit" in w for w in log.report.warnings), log.report.warnings
+    try:
+        warned = log_from_frame(f.assign(t_int_c=_fahrenheit(f["t_int_c"]))).report.warnings
+        outcome = "warned" if any("t_int_c looks like Fahrenheit" in w for w in warned) else ""
+    except LogFormatError as err:
+        assert "t_int_c looks like Fahrenheit" in str(err)
+        outcome = "refused"
+    assert outcome and outcome in in_f, (outcome, in_f)
+
+
+def test_a_two_pole_device_on_a_wide_swing_is_read_as_celsius():
+    """Verification red team: six logs of two-pole devices on W3/W4 plans (the chamber
+    swinging -31..62 degC) were refused as Fahrenheit by the one-pole fit (shares
+    0.18-0.23). A second time constant of 500 s on W3's plan: one pole 0.30, with a second
+    pole in the fit 4000+: read, with no warning."""
+    knots_t, knots_tk = chamber_knots(Path(__file__).parent / "data/plans/w3_steps.csv")
+    t_min, temp, _ = ode_trajectories(knots_t, knots_tk, 2400.0, 3.0, dt_min=0.5, tau2_s=500.0)
+    f = pd.DataFrame(
+        {
+            "time_s": 60.0 * t_min,
+            "t_int_c": temp[0] + np.random.default_rng(7).normal(0.0, 0.02, t_min.size),
+            "tk_set_c": np.interp(t_min, knots_t, knots_tk),
+        }
+    )
+    assert not any("Fahrenheit" in w for w in log_from_frame(f).report.warnings)
 
 
 def test_a_chamber_that_hardly_moves_tells_nothing_about_units():
