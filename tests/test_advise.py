@@ -48,7 +48,9 @@ SHORT_DURATION_STEP = 55.0
 # within 130 min (above the bound) the request is not proven impossible: 3 levels are open
 PLANNABLE_LIMITS = dataclasses.replace(Limits(), duration_max_min=130.0)
 # a cold region with the chamber floor just below it: cooling gradients too small
-COLD = ExperimentSpec("cold", -48.0, -44.0, -52.0, -34.0, levels_required=2)
+# the region's edge at floor + dT0 (-49 degC): no floor of -52 can do, the advice finds
+# one that does (at -48 degC the timetable stage plans it complete since 2026-12-03)
+COLD = ExperimentSpec("cold", -49.0, -45.0, -52.0, -34.0, levels_required=2)
 COLD_LIMITS = dataclasses.replace(Limits(), chamber_min_c=-52.0)
 # bins below floor + dT0 = -49 degC cannot be reached at all
 UNREACHABLE = ExperimentSpec("unreachable", -50.0, -46.0, -52.0, -36.0, levels_required=3)
