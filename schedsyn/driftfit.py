@@ -84,6 +84,7 @@ from scipy.optimize import brentq, minimize_scalar
 from .errors import LogFormatError, ParameterError, SchedsynError
 from .estimate import GradientEstimate, estimate_gradient, estimate_gradient_model
 from .logs import MeasuredLog
+from .model import lag_foh
 from .monitor import identify
 from .params import ThermalParams
 from .terms import (
@@ -981,13 +982,8 @@ def lagged(time_s: np.ndarray, x: np.ndarray, tau_s: float) -> np.ndarray:
     y[0] = x[0]
     dt = np.diff(time_s)
     if dt.size and float(np.ptp(dt)) <= 1e-9 * float(dt[0]) and dt[0] <= LAG_RESTART_S:
-        # uniform sampling (most logs): the same recursion as a linear filter, fast
-        from scipy.signal import lfilter, lfiltic
-
-        e0 = math.exp(-float(dt[0]) / tau_s)
-        k0 = tau_s / float(dt[0]) * (1.0 - e0)
-        b, a = [1.0 - k0, k0 - e0], [1.0, -e0]
-        return lfilter(b, a, x, zi=lfiltic(b, a, [x[0]], [x[0]]))[0]
+        # uniform sampling (most logs): the model's first-order-hold lag, fast
+        return lag_foh(x, float(x[0]), tau_s, float(dt[0]))
     e = np.exp(-dt / tau_s)
     k = np.where(dt > 0, tau_s / np.maximum(dt, 1e-12) * (1.0 - e), 1.0)
     for i in range(1, x.size):

@@ -473,7 +473,7 @@ def unit_fits(
     where fewer than 20 rows have both readings, the chamber moved less than
     ``FAHRENHEIT_MIN_CHAMBER_SPAN_C`` or the log spans less than ``FAHRENHEIT_MIN_SPAN_S``.
     """
-    from scipy.signal import lfilter
+    from .model import lag_foh
 
     ok = np.isfinite(time_s) & np.isfinite(t_int_c) & np.isfinite(tk_c)
     if int(ok.sum()) < 20:
@@ -495,9 +495,7 @@ def unit_fits(
     best = {name: (-math.inf, math.nan) for name in UNIT_SLOPES}
 
     def lag(v: np.ndarray, tau: float) -> np.ndarray:
-        e = math.exp(-h / tau)
-        k = tau / h * (1.0 - e)
-        return lfilter([1.0 - k, k - e], [1.0, -e], v)
+        return lag_foh(v, float(v[0]), tau, h)
 
     # a second thermal mass (or a slow sensor) before the first: the two-pole devices
     # of a red team (W3/W4 plans, a second time constant of 500-900 s) left the 1:1
