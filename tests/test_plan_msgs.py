@@ -74,6 +74,76 @@ def test_cli_plan_device_start_outside_limits_exits_2(tmp_path, capsys):
     assert "starts at 20 °C" in err and len(err.strip().splitlines()) == 1
 
 
+@pytest.mark.parametrize(
+    ("lim", "dt0_c", "tau_s"),
+    [
+        ({}, 3.0, 2400.0),
+        ({"chamber_min_c": 18.5}, 3.0, 2400.0),  # the cooling stops at the floor
+        ({"t_init_c": 25.0, "rate_max_c_per_min": 0.5}, -4.0, 600.0),
+        ({"start_c": 30.0, "t_init_c": 10.0, "chamber_max_c": 31.0}, 1.0, 900.0),
+    ],
+)
+def test_start_excursion_is_the_ode_of_the_chambers_fastest_escape(lim, dt0_c, tau_s):
+    """Independent: solve_ivp of the device under the chamber cooling (heating) at its full
+    rate from t = 0 and holding at its floor (ceiling)."""
+    from scipy.integrate import solve_ivp
+
+    from schedsyn.planner import start_excursion_c
+
+    limits = Limits(**lim)
+    tau = tau_s / 60.0
+    peak, trough = start_excursion_c(ThermalParams(tau_s=tau_s, dt0_c=dt0_c), limits)
+    for rate, bound, got, pick in (
+        (limits.rate_min_c_per_min, limits.chamber_min_c, peak, max),
+        (limits.rate_max_c_per_min, limits.chamber_max_c, trough, min),
+    ):
+
+        def rhs(t, y, rate=rate, bound=bound):
+            tk = limits.start_c + rate * t
+            tk = max(tk, bound) if rate < 0 else min(tk, bound)
+            return [(tk + dt0_c - y[0]) / tau]
+
+        sol = solve_ivp(
+            rhs, (0.0, limits.duration_max_min), [limits.t_init_c], max_step=0.02, rtol=1e-10
+        )
+        assert got == pytest.approx(pick(sol.y[0]), abs=2e-4)
+
+
+def test_a_start_every_programme_takes_past_a_limit_is_refused_before_any_search(monkeypatch):
+    """Device at its ceiling at t = 0, the chamber at the same 20 degC and dT0 3: the device
+    warms ~0.1 degC before even the fastest cooling reaches it (red team q09c: searched 76 s,
+    then "infeasible" without naming the start)."""
+    import schedsyn.planner.core as core
+
+    def no_search(*a, **k):
+        raise AssertionError("searched a request every programme breaks")
+
+    monkeypatch.setattr(core, "synthesise", no_search)
+    monkeypatch.setattr(core, "search_robust", no_search)
+    spec = ExperimentSpec("q09c", 5.0, 15.0, 4.0, 16.0, levels_required=2)
+    limits = Limits(device_min_c=0.0, device_max_c=20.0)
+    with pytest.raises(ParameterError, match=r"device_max_c = 20 °C: .* reaches 20\.11 °C") as e:
+        plan_experiment(spec, ThermalParams(), limits)
+    assert "t_init_c" in str(e.value) and "dT0 = 3" in str(e.value)
+    # the same device with a robust box: named per scenario, even if the nominal one is fine
+    with pytest.raises(ParameterError, match=r"\(tau 2400 s, dT0 2 °C\): .* reaches 20\.048 °C"):
+        plan_experiment(spec, ThermalParams(dt0_c=0.0), limits, robust_dt0_c=(0.0, 2.0))
+    # heating side: the device at its floor with the chamber 1 degC below it
+    cold = Limits(device_min_c=20.0, device_max_c=40.0, start_c=19.0)
+    spec_hot = ExperimentSpec("q09d", 25.0, 35.0, 21.0, 39.0, levels_required=2)
+    with pytest.raises(ParameterError, match=r"past device_min_c = 20 °C"):
+        plan_experiment(spec_hot, ThermalParams(dt0_c=0.0), cold)
+
+
+def test_a_start_at_the_limit_that_the_chamber_can_hold_is_planned():
+    """No self-heating, device at its ceiling: the chamber cooling at once keeps it there
+    or below, so the request is not refused (its plan is the search's business)."""
+    from schedsyn.planner import check_start_excursion
+
+    check_start_excursion((ThermalParams(dt0_c=0.0),), Limits(device_max_c=20.0))
+    check_start_excursion((ThermalParams(dt0_c=-2.0),), Limits(device_max_c=20.0))
+
+
 # -- 2. the campaign's closing "wrote" line --------------------------------------------------
 def test_wrote_line_names_only_what_was_written():
     from schedsyn.cli.campaign import wrote_line

@@ -55,8 +55,10 @@ from .request import (
     Scenario,
     check_device_start,
     check_request,
+    check_start_excursion,
     planning_effort,
     robust_scenarios,
+    start_excursion_c,
 )
 from .robust import robustness_price
 
@@ -75,9 +77,11 @@ __all__ = [
     "check_programme",
     "check_device_start",
     "check_request",
+    "check_start_excursion",
     "duration_lower_bound",
     "explain_shortfall",
     "make_bands",
+    "start_excursion_c",
     "order_bands",
     "plan_experiment",
     "planning_effort",

@@ -29,7 +29,7 @@ from .informative import L1_WEIGHT_LADDER, informative_rates
 from .lp import Context, LpStats, lp_nonzeros_solved, require_solvable
 from .physics import LIMIT_FRACTION
 from .polish import honour_step_limits, merge_small_changes, polish, step_runs
-from .request import Continuation, ExperimentSpec, check_request
+from .request import Continuation, ExperimentSpec, check_request, check_start_excursion
 from .robust import box_note, box_scenarios, held_note, search_robust, verify_robust
 from .search import Search, Structure, split_note, subregions, synthesise, truncate
 
@@ -596,6 +596,12 @@ def _plan(
     tic = time.perf_counter()
     check_request(spec, limits, check_start=continuation is None)
     robust = robust_tau_s is not None or robust_dt0_c is not None
+    if continuation is None and model is None:  # (a given model's start is its own)
+        check_start_excursion(
+            box_scenarios(params, robust_tau_s, robust_dt0_c) if robust else (params,),
+            limits,
+            spec.name,
+        )
     if robust and model is not None:
         raise ParameterError(
             "robust planning uses the first-order model of each scenario; "

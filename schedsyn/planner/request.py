@@ -16,11 +16,14 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..grid import BinGrid
-from ..model import LinearThermalModel
+from ..model import LinearThermalModel, lag_foh, lag_free
 from ..params import Limits, ThermalParams
 from ..programme import Programme
 
 OBJECTIVES = ("shortest", "margin", "informative")
+# a start excursion past a device limit by more than this is refused up front (the plan
+# check's own tolerance is 1e-6 degC; the start check's lag grid is exact at its points)
+DEVICE_START_TOL_C = 1e-6
 
 
 @dataclass(frozen=True, slots=True)
@@ -191,6 +194,81 @@ def check_device_start(limits: Limits, name: str = "") -> None:
         "them from t = 0; set the start temperature inside the limits (t_init_c in a "
         "campaign's [limits]) or, if the device is rated for it, widen them "
         "(--device-min-c / --device-max-c; device_min_c / device_max_c in [limits])"
+    )
+
+
+START_CHECK_STEP_MIN = 0.05  # grid of the start excursion's lag (exact at the grid points)
+
+
+def start_excursion_c(params: ThermalParams, limits: Limits) -> tuple[float, float]:
+    """The least every programme must reach from the start: ``(peak_c, trough_c)``.
+
+    The device's temperature is monotone in the chamber's path, and the chamber's
+    lowest path from ``start_c`` cools at ``rate_min_c_per_min`` down to ``chamber_min_c``
+    and holds there. So at every time the device is at least where that path takes it, and
+    its peak over the run is at least that path's peak, ``peak_c`` (above the start when
+    ``start_c + dt0_c`` lies above ``t_init_c``: the device warms before the cooling
+    reaches it). Likewise ``trough_c`` from the highest path (heating at
+    ``rate_max_c_per_min`` up to ``chamber_max_c``): every programme goes at least that
+    low. Over ``duration_max_min``.
+    """
+    tau = params.tau_min
+    dur = limits.duration_max_min
+    s, t0, d = limits.start_c, limits.t_init_c, params.dt0_c
+    out = []
+    for rate, bound in (
+        (limits.rate_min_c_per_min, limits.chamber_min_c),
+        (limits.rate_max_c_per_min, limits.chamber_max_c),
+    ):
+        t_kink = min(dur, (bound - s) / rate) if rate != 0.0 else dur
+        n = max(1, math.ceil(t_kink / START_CHECK_STEP_MIN))
+        h = t_kink / n if t_kink > 0 else START_CHECK_STEP_MIN
+        ramp = lag_foh(s + rate * h * np.arange(n + 1) + d, t0, tau, h)
+        held = ramp
+        if t_kink < dur:  # then the chamber holds at its bound
+            t_rest = np.linspace(0.0, dur - t_kink, 2 + math.ceil((dur - t_kink) / h))
+            held = np.concatenate((ramp, lag_free(t_rest, bound + d, float(ramp[-1]), tau)[0]))
+        out.append(float(held.max() if rate < 0 else held.min()))
+    return out[0], out[1]
+
+
+def check_start_excursion(
+    scenarios: list[ThermalParams] | tuple[ThermalParams, ...], limits: Limits, name: str = ""
+) -> None:
+    """Refuse a start from which every programme takes the device past a limit.
+
+    A device starting at (or near) a limit with the chamber's start plus ``dt0_c`` beyond
+    it moves past the limit before any cooling or heating reaches it
+    (:func:`start_excursion_c`, a proof over every programme); the search would otherwise
+    run for minutes and end "infeasible" without naming the start.
+    """
+    worst: tuple[float, float, ThermalParams, int] | None = None  # excess, value, p, side
+    for p in scenarios:
+        peak, trough = start_excursion_c(p, limits)
+        for past, value, side in (
+            (peak - limits.device_max_c, peak, 0),
+            (limits.device_min_c - trough, trough, 1),
+        ):
+            if past > DEVICE_START_TOL_C and (worst is None or past > worst[0]):
+                worst = (past, value, p, side)
+    if worst is None:
+        return
+    past, value, p, side = worst
+    lim, key, path = (
+        (limits.device_max_c, "device_max_c", f"cooling at {limits.rate_min_c_per_min:g}")
+        if side == 0
+        else (limits.device_min_c, "device_min_c", f"heating at {limits.rate_max_c_per_min:g}")
+    )
+    which = f" (tau {p.tau_s:g} s, dT0 {p.dt0_c:g} °C)" if len(scenarios) > 1 else ""
+    dec = max(1, math.ceil(-math.log10(past)) + 1)  # enough digits to show the excess
+    raise ParameterError(
+        (f"{name}: " if name else "")
+        + f"every programme takes the device past {key} = {lim:g} °C{which}: it starts at "
+        f"{limits.t_init_c:g} °C with the chamber at {limits.start_c:g} °C and settles "
+        f"dT0 = {p.dt0_c:g} °C from it, so even {path} °C/min from t = 0 it reaches "
+        f"{value:.{dec}f} °C ({past:.2g} °C past the limit); start the device farther inside "
+        "its limits (t_init_c, start_c in a campaign's [limits]) or, if it is rated for it, "
+        "widen them (--device-min-c / --device-max-c)"
     )
 
 
