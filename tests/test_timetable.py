@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 from independent import chamber_knots, levels_per_bin, ode_trajectories
 
-from schedsyn.campaign import load_campaign
 from schedsyn.params import Limits, ThermalParams
 from schedsyn.planner import timetable as tt
 from schedsyn.planner.check import check_programme
@@ -316,14 +315,9 @@ def test_structures_split_odd_levels_and_alternate():
                     assert ranks == list(range(1, len(ranks) + 1))
 
 
-@pytest.mark.slow
-def test_w3_tau3600_complete_within_its_budget(tmp_path):
-    """A near miss of the planner: complete 6 levels within 540 min."""
-    cfg = load_campaign(ROOT / "data" / "bench" / "w3-tau3600.toml")
-    spec, params, limits = cfg.experiments[0], cfg.params, cfg.limits
-    res = timetable_search(spec, params, limits, first_found=True)
-    assert res is not None and res.duration_min <= 540
-    assert_complete_independently(res, spec, params, limits, tmp_path)
+# (w3-tau3600, the near miss the stage was built for -- 516 of 540 min, about a minute of
+# search -- is a row of scripts/bench_general.py and scripts/bench_timetable.py, each table
+# re-checked by scripts/check_tables.py; it left the suite to keep it well under 10 min)
 
 
 @pytest.mark.parametrize("seed", [3, 7])
