@@ -124,6 +124,40 @@ def test_a_continuation_is_held_to_the_step_limits_on_its_new_steps():
     assert any("1 step(s)" in p and "min_step_min = 45" in p for p in problems(min_step_min=45.0))
 
 
+@pytest.mark.parametrize("max_steps", [9, 5])
+def test_a_rest_with_too_many_steps_is_merged_or_coarsened_to_fit_max_steps(
+    nominal, max_steps, tmp_path
+):
+    """The rest from minute 100 has 13 new steps; with max_steps 9 (5) it used to come back
+    "limits violated" (unloadable: a re-plan could only keep the plan; red team, W4). Now
+    its steps are merged, or planned on coarser segments, to fit: complete by a scipy
+    integration of the whole run as typed, counted plainly, with the executed steps as
+    they were and no more new steps than allowed."""
+    import dataclasses
+
+    from independent import chamber_knots, levels_per_bin, ode_trajectories
+
+    at = 100.0
+    prefix = cut(nominal.programme, at)
+    cont = Continuation(prefix, measured(nominal.programme, PARAMS, at))
+    loose = plan_experiment(SPEC, PARAMS, LIMITS, continuation=cont)
+    n = prefix.n_segments
+    assert loose.programme.n_segments - n > max_steps  # the rest as planned has too many
+    spec = dataclasses.replace(SPEC, max_steps=max_steps)
+    plan = plan_experiment(spec, PARAMS, LIMITS, continuation=cont)
+    assert plan.status == "complete", (plan.status, plan.violations, plan.notes)
+    assert plan.programme.n_segments - n <= max_steps
+    np.testing.assert_array_equal(plan.programme.durations_min[:n], prefix.durations_min)
+    np.testing.assert_array_equal(plan.programme.rates_c_per_min[:n], prefix.rates_c_per_min)
+    path = tmp_path / "steps.csv"
+    plan.programme.to_csv(path)
+    knots_t, knots_tk = chamber_knots(path)
+    _, temp, grad = ode_trajectories(knots_t, knots_tk, PARAMS.tau_s, PARAMS.dt0_c)
+    lev = levels_per_bin(temp[0], grad[0], SPEC.working_lo_c, SPEC.working_hi_c, 0.05)
+    assert lev.min() >= SPEC.levels_required, lev
+    assert knots_t[-1] <= LIMITS.duration_max_min and abs(knots_tk[-1] - 20.0) <= 0.5
+
+
 def _lag(params):
     from schedsyn.model import FirstOrderLag
 

@@ -13,6 +13,7 @@ the new ones.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import replace
 
@@ -32,7 +33,7 @@ from .check import (
     step_limit_problems,
 )
 from .lp import LpStats
-from .polish import polish
+from .polish import honour_step_limits, polish, step_runs
 from .request import Continuation, ExperimentSpec
 from .search import (
     SUBREGION_CUTS,
@@ -128,6 +129,60 @@ def _cut(search: Search, limits: Limits) -> Structure | None:
     return truncate(search.ctx, search.overrun, max_seg)
 
 
+def _breaks_step_limits(programme: Programme, spec: ExperimentSpec, cont: Continuation) -> bool:
+    new = Programme(
+        programme.durations_min[cont.prefix.n_segments :],
+        programme.rates_c_per_min[cont.prefix.n_segments :],
+        cont.prefix.end_c,
+    )
+    return bool(step_limit_problems(new, spec))
+
+
+def _merge_steps(
+    search: Search,
+    u: np.ndarray,
+    spec: ExperimentSpec,
+    limits: Limits,
+    params: ThermalParams,
+    model: LinearThermalModel,
+    continuation: Continuation,
+    check: tuple,
+) -> tuple | None:
+    """The rest with its new steps merged to meet ``max_steps`` and ``min_step_min`` (the
+    controller is loaded with them), as a fresh plan's are (:func:`honour_step_limits`):
+    kept only when the merged table, re-checked, has no problem and covers at least as
+    much with as many levels in its weakest bin. ``(u, margins, programme, check)`` or None.
+    (Red team, W4 at minute 30: every continuation had 117 new steps against 80, so the
+    re-plan could only keep the plan.)"""
+    first = search.ctx.responses.n_fixed
+    # the executed steps' runs are history: the limit counts the new ones
+    executed = sum(1 for _, b in step_runs(u) if b < first)
+    durations = search.ctx.responses.durations
+    found: dict[str, tuple] = {}
+
+    def accept(v: np.ndarray) -> bool:
+        prog = continuation_programme(v, durations[: v.size], continuation, limits)
+        c = check_continuation(prog, spec, limits, params, model, continuation)
+        ok = (
+            not c[2]
+            and c[0].coverage >= check[0].coverage
+            and c[0].min_levels >= check[0].min_levels
+        )
+        if ok:
+            found["last"] = (prog, c)
+        return ok
+
+    min_seg = max(1, math.ceil(spec.min_step_min / spec.segment_min - 1e-9))
+    assert search.best is not None
+    res = honour_step_limits(
+        search.ctx, search.best[0], u, accept, spec.max_steps + executed, min_seg
+    )
+    if res is None:
+        return None
+    prog, c = found["last"]
+    return res[0], res[1], res[2], prog, c
+
+
 def sweeps_needed(spec: ExperimentSpec, continuation: Continuation) -> int:
     """The most levels any bin still lacks: the fewest new sweeps that can complete it."""
     have = [distinct_levels(g, spec.delta_c_per_min) for g in continuation.existing_gradients]
@@ -142,13 +197,17 @@ def plan_continuation(
     continuation: Continuation,
     progress: Callable[[str], None] | None,
     stats: LpStats,
-) -> tuple[Programme, float, float, Search | None, list[str], tuple]:
+) -> tuple[Programme, float, float, Search | None, list[str], tuple, bool]:
     """The best continuation: the fewest new sweeps that complete every bin, else the one
     that covers most; when not even the sweeps the bins need fit, the most that do (an
-    incomplete rest that still adds levels). Returns the programme, its margins, the
-    search it came from, notes and its :func:`check_continuation` result."""
+    incomplete rest that still adds levels). A rest whose new steps break ``max_steps`` or
+    ``min_step_min`` is merged to meet them where it stays as good; one that cannot be
+    ranks below every rest the controller can run. Returns the programme, its margins, the
+    search it came from, notes, its :func:`check_continuation` result and whether a
+    rest that covered more was spoilt by the step limits (coarser segments may help)."""
     need = sweeps_needed(spec, continuation)
     best: tuple | None = None
+    step_limited: list[float] = []  # coverage of rests the step limits spoilt
     notes: list[str] = []
     models: Sequence[LinearThermalModel] = [model]
 
@@ -165,7 +224,20 @@ def plan_continuation(
         durations = search.ctx.responses.durations[: u.size]
         programme = continuation_programme(u, durations, continuation, limits)
         check = check_continuation(programme, spec, limits, params, model, continuation)
-        key = (check[0].complete and not check[2], check[0].coverage, check[0].min_levels)
+        if search.best is not None and _breaks_step_limits(programme, spec, continuation):
+            merged = _merge_steps(search, u, spec, limits, params, model, continuation, check)
+            if merged is not None:
+                u, mg, mt, programme, check = merged
+            else:
+                step_limited.append(check[0].coverage)
+        # a rest the controller can run (no problem: step limits, device limits, duration)
+        # before one that covers more but cannot be loaded or breaks a limit
+        key = (
+            check[0].complete and not check[2],
+            not check[2],
+            check[0].coverage,
+            check[0].min_levels,
+        )
         return key, programme, mg, mt, search if search.best is not None else None, check
 
     for k in range(need, min(need + 2, spec.levels_required) + 1):
@@ -257,7 +329,10 @@ def plan_continuation(
             best_coverage=0.0,
         )
     _, programme, mg, mt, search, check = best
-    return programme, mg, mt, search, notes, check
+    spoilt = max(step_limited, default=-1.0) > check[0].coverage or (
+        bool(step_limited) and not check[0].complete
+    )
+    return programme, mg, mt, search, notes, check, spoilt
 
 
 def _subregion_specs(spec: ExperimentSpec, side: str) -> Iterator[ExperimentSpec]:

@@ -896,9 +896,46 @@ def _plan_continued(
             f"{limits.duration_max_min:g} min: nothing is left to plan"
         )
     model = model if model is not None else FirstOrderLag(params)
-    programme, mg, mt, search, notes, check = plan_continuation(
+    programme, mg, mt, search, notes, check, spoilt = plan_continuation(
         spec, params, limits, model, continuation, progress, stats
     )
+    if spoilt:  # merging steps was not enough: coarser control has fewer steps
+        for factor in COARSER_FACTORS:
+            seg = spec.segment_min * factor
+            if seg > MAX_SEGMENT_MIN:
+                break
+            if progress:
+                progress(
+                    f"a rest that covers more breaks max_steps = {spec.max_steps} or "
+                    f"min_step_min: trying {seg:g}-min segments"
+                )
+            try:
+                alt = plan_continuation(
+                    dataclasses.replace(spec, segment_min=seg),
+                    params,
+                    limits,
+                    model,
+                    continuation,
+                    progress,
+                    stats,
+                )
+            except InfeasiblePlanError:
+                continue
+            a_check = alt[5]
+            if a_check[2] or (
+                not check[2]
+                and (a_check[0].coverage, a_check[0].min_levels)
+                <= (check[0].coverage, check[0].min_levels)
+            ):
+                continue  # a rest that can be run, covering more (or the first that can)
+            programme, mg, mt, search, notes, check = alt[:6]
+            notes = [
+                *notes,
+                f"planned with {seg:g}-min segments: with {spec.segment_min:g}-min ones the "
+                "rest that covered most broke the step limits (max_steps / min_step_min)",
+            ]
+            if check[0].complete:
+                break
     cov, cov01, problems, t_lo, t_hi = check  # step limits: on the new steps (the check)
     complete = cov.complete and not problems
     if not cov.complete:
