@@ -1222,8 +1222,61 @@ def gap_q_extra(time_s: np.ndarray, y: np.ndarray, jump: float, scale_min: float
     return extra
 
 
+def _with_end_kinks(
+    time_s: np.ndarray,
+    kinks: list[tuple[float, float]],
+    rate_changes: list[tuple[float, float]],
+    window_min: float,
+) -> list[tuple[float, float]]:
+    """``kinks`` with the chamber's rate changes (``(time_min, jump_c_per_min)``, the log's
+    clock) within ``2 window_min`` of the log's end made kinks ``(time_min, jump /
+    END_KINK_TAU_MIN)``: the jump of the device's ``dg/dt = (U - g)/tau`` when the chamber
+    rate ``U`` jumps. A kink found within ``window_min`` of such a change is replaced by it,
+    its jump the larger of the two. :func:`detect_kinks` compares the rate ``a`` ``W``
+    after with ``W`` before; at the end nothing comes after, and the smoother extrapolated
+    the old ``a`` (red team: last-row errors 0.03-0.10 degC/min at sigma 0.003-0.006
+    within 3 min of a change; a kink found there was sized by ``a`` held at the end)."""
+    end_min = float(time_s[-1]) / 60.0
+    out = list(kinks)
+    for t_min, jump in rate_changes:
+        if not end_min - 2.0 * window_min < t_min < end_min or jump == 0.0:
+            continue
+        size = abs(jump) / END_KINK_TAU_MIN
+        near = [k for k in out if abs(k[0] - t_min) < window_min]
+        size = max([size] + [abs(k[1]) for k in near])
+        out = [k for k in out if abs(k[0] - t_min) >= window_min]
+        out.append((float(t_min), math.copysign(size, jump)))
+    return sorted(out)
+
+
+def setpoint_rate_changes(
+    time_s: np.ndarray, tk_set_c: np.ndarray | None
+) -> list[tuple[float, float]]:
+    """The rate changes of a logged piecewise-linear setpoint: ``(time_min, jump_c_per_min)``
+    per interior corner (:func:`schedsyn.discrepancy.setpoint_corners`, the log's clock in
+    minutes, the new rate minus the old); empty without a setpoint (or NaN in it)."""
+    if tk_set_c is None or len(time_s) < 3 or not np.all(np.isfinite(tk_set_c)):
+        return []
+    tb_min, yb_c = setpoint_corners(time_s, tk_set_c, SETPOINT_CORNER_TOL_C)
+    if tb_min.size < 3:
+        return []
+    rates = np.diff(yb_c) / np.diff(tb_min)
+    t0_min = float(time_s[0]) / 60.0
+    return [
+        (t0_min + float(tb_min[i]), float(rates[i] - rates[i - 1]))
+        for i in range(1, tb_min.size - 1)
+    ]
+
+
 def _kink_passes(
-    setup: _Setup, noise: NoiseLevels, refit: bool, rate, every: int, emit, progress
+    setup: _Setup,
+    noise: NoiseLevels,
+    refit: bool,
+    rate,
+    every: int,
+    emit,
+    progress,
+    rate_changes: list[tuple[float, float]] | None = None,
 ) -> tuple[list[tuple[float, float]], float | None]:
     """Smooth again with the gradient's rate free to jump at the kinks (order 3).
 
@@ -1232,12 +1285,17 @@ def _kink_passes(
     (:func:`detect_kinks`) and given their jump's variance (:func:`kink_q_extra`); ``q``
     is fitted again by ML when it was fitted (``refit``; ``r`` kept), and the new smoothed
     ``a`` searched for kinks at least ``2 W`` from those found, up to ``KINK_ROUNDS``
-    passes. Returns the kinks of the last pass and its ``q`` (None: no kink, no pass).
+    passes. ``rate_changes``: the chamber's known rate changes (``(time_min, jump_c_per_min)``);
+    those near the log's end that no kink found explains join the kinks
+    (:func:`_with_end_kinks`). Returns the kinks of the last pass and its ``q`` (None: no
+    kink, no pass).
     """
     rate_t_min = setup.time_s[::every] / 60.0
     q_now = noise.q
     scale = smoother_scale_min(setup.time_s, q_now, noise.r)
+    known = rate_changes or []
     kinks = detect_kinks(rate_t_min, rate, q_now, scale)
+    kinks = _with_end_kinks(setup.time_s, kinks, known, KINK_WINDOW_IN_L * scale)
     if not kinks:
         return [], None
     relay = None if progress is None else _relay(progress, "kinks: ")
@@ -1258,7 +1316,7 @@ def _kink_passes(
         ]
         if not more:
             break
-        kinks = sorted(kinks + more)
+        kinks = _with_end_kinks(setup.time_s, sorted(kinks + more), known, w)
     return kinks, q_now
 
 
@@ -1579,6 +1637,7 @@ def _estimate(
     params: ThermalParams | None,
     progress: Progress | None,
     sensor_tau_min: float = 0.0,
+    rate_changes: list[tuple[float, float]] | None = None,
 ) -> GradientEstimate:
     """Noise levels, then the chunked smoother; the kept rows go straight to the output.
 
@@ -1636,7 +1695,7 @@ def _estimate(
             emit_all(rows, sm, innov, svar, states=False)
 
         kinks, q_kinks = _kink_passes(
-            setup, noise, q is None, rate, rate_every, emit_states, progress
+            setup, noise, q is None, rate, rate_every, emit_states, progress, rate_changes
         )
         if kinks and q_kinks is not None:
             # a long blank stretch of t_int_c can hide a kink: the sigmas (only) from a
@@ -1708,6 +1767,8 @@ def estimate_gradient(
     progress: Progress | None = None,
     order: int = 3,
     sensor_tau_s: float = 0.0,
+    rate_change_times_s: np.ndarray | None = None,
+    rate_change_jumps_c_per_min: np.ndarray | None = None,
 ) -> GradientEstimate:
     """Kinematic Kalman smoother: no thermal model, the gradient a smooth random process.
 
@@ -1743,6 +1804,13 @@ def estimate_gradient(
         ``T = Ts + tau_s dTs/dt`` and ``g = dTs/dt + tau_s d²Ts/dt²`` (order 3 only).
         Red team: a 60-s sensor lag left the gradient of the reading 1.6 % within 2 sigma
         of the device's (0.0144 degC/min RMS); undone, 0.0012.
+    rate_change_times_s, rate_change_jumps_c_per_min : array, optional
+        The chamber programme's rate changes (the log's clock, s; new rate minus old,
+        degC/min), e.g. from the plan; by default those of the log's ``tk_set_c``
+        (:func:`setpoint_rate_changes`; none without it). Order 3: one within the last
+        few smoother scales of the log that no kink found explains is made a kink, so the
+        gradient's rate may jump there (the end's sigma then holds what the change can
+        have moved ``g``; the smoother alone extrapolates the old rate).
     """
     if order not in (2, 3):
         raise ParameterError(f"order must be 2 or 3, got {order!r}")
@@ -1757,12 +1825,25 @@ def estimate_gradient(
             "default)"
         )
     tau_min = float(sensor_tau_s) / 60.0
+    if rate_change_times_s is None:
+        changes = setpoint_rate_changes(log.time_s, log.tk_set_c)
+    else:
+        times = np.asarray(rate_change_times_s, dtype=float)
+        jumps = np.asarray(rate_change_jumps_c_per_min, dtype=float)
+        if times.shape != jumps.shape or not np.all(np.isfinite(times) & np.isfinite(jumps)):
+            raise ParameterError(
+                "rate_change_times_s and rate_change_jumps_c_per_min must be finite and of "
+                "one length"
+            )
+        changes = [(float(t) / 60.0, float(j)) for t, j in zip(times, jumps, strict=True)]
     setup = _Setup(log.time_s, np.asarray(log.t_int_c, dtype=float), None, order=order)
 
     def grad(rows, x1, x2, p11, p12, p22):
         return x2, p22
 
-    est = _estimate(log, setup, q, r, quant_c, every_s, grad, "kinematic", None, progress, tau_min)
+    est = _estimate(
+        log, setup, q, r, quant_c, every_s, grad, "kinematic", None, progress, tau_min, changes
+    )
     if q is not None:
         return est
     kept = staircase_readings(log.t_int_c, est.noise.quant_c)
@@ -1776,7 +1857,7 @@ def estimate_gradient(
     thin = dataclasses.replace(log, t_int_c=y)
     setup = _Setup(log.time_s, y, None, order=order)
     stepped = _estimate(thin, setup, q, r, est.noise.quant_c, every_s, grad, "kinematic", None,
-                        progress, tau_min)  # fmt: skip
+                        progress, tau_min, changes)  # fmt: skip
     if est.q > STAIRCASE_Q_RATIO * stepped.q or staircase_followed(est, stepped):
         return dataclasses.replace(stepped, staircase_readings=int(kept.sum()))
     return est
@@ -1796,6 +1877,11 @@ def staircase_followed(full: GradientEstimate, stepped: GradientEstimate) -> boo
         return False
     return bool(np.mean(d[ok] > STAIRCASE_DISAGREE_STD * s[ok]) > STAIRCASE_DISAGREE_SHARE)
 
+
+#: The device time constant that sizes a known chamber rate change near the log's end as
+#: a kink (:func:`_with_end_kinks`): ``dg/dt`` jumps by ``dU / tau``; the shortest of the
+#: devices benchmarked (1500-3600 s), so the jump's allowance is the largest of them.
+END_KINK_TAU_MIN = 1500.0 / 60.0
 
 #: A log is a staircase when at least half its readings lie in runs of one value this
 #: many rows long or longer.

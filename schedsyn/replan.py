@@ -96,6 +96,7 @@ from .monitor import (
     identify,
     json_safe,
     measured_run,
+    plan_rate_changes,
     predict_from_state,
     with_plan_setpoint,
 )
@@ -366,7 +367,10 @@ def prepare_replan(
         notes.append("the log has no tk_set_c: the plan's programme is taken as the setpoint")
     fit_log = with_plan_setpoint(cut, plan)
     ident = identify(fit_log)
-    est = estimate_gradient(cut)
+    change_s, jump_c_per_min = plan_rate_changes(plan)
+    est = estimate_gradient(
+        cut, rate_change_times_s=change_s, rate_change_jumps_c_per_min=jump_c_per_min
+    )
     ok = np.flatnonzero(np.isfinite(est.t_est_c))
     k = int(ok[-1])
     dt = at_min - float(cut.time_min[k])

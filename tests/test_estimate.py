@@ -772,3 +772,42 @@ def test_a_quantised_creep_at_the_end_of_a_hold_is_not_followed_step_by_step():
     assert est.staircase_readings > 0
     assert np.mean(np.abs(z[hold]) <= 2.0) > 0.9
     assert np.max(np.abs(z)) < 5.0
+
+
+def test_the_gradient_sigma_at_the_logs_end_holds_a_rate_change_just_before_it():
+    """A log ending 0.5-3 min after the chamber's rate changes by +4 or -3 degC/min: the
+    device's dg/dt = (U - g)/tau jumps there and the kinematic smoother, with no reading
+    after, extrapolated the old rate (red team: last-row errors 0.03-0.10 degC/min at
+    sigma 0.003-0.006, |z| 5-41; monitor/replan take that row as the state now). The
+    logged setpoint's change, or the plan's given explicitly, is made a kink there."""
+    tau_min, dt0_c = 40.0, 3.0
+    rng = np.random.default_rng(400)
+    worst = []
+    for rates, after_min in [
+        ((0.0, -1.0, 3.0), 1.0),
+        ((0.0, 2.0, -1.0), 0.5),
+        ((0.0, 2.0, -1.0), 2.0),
+    ]:
+        durations = np.array([20.0, 40.0, after_min])
+        time_min = np.arange(0.0, durations.sum() + 1e-9, 10.0 / 60.0)
+        temp_c, g_true, tk_c = _lag_closed_form(
+            durations, np.array(rates), 20.0, tau_min, dt0_c, time_min
+        )
+        frame = pd.DataFrame(
+            {
+                "time_s": time_min * 60.0,
+                "t_int_c": np.round(temp_c + 0.02 * rng.standard_normal(time_min.size), 2),
+                "tk_set_c": tk_c,
+            }
+        )
+        est = estimate_gradient(log_from_frame(frame))
+        worst.append(abs(est.g_est_c_per_min[-1] - g_true[-1]) / est.g_std_c_per_min[-1])
+        # no setpoint column: the plan's changes given
+        bare = log_from_frame(frame[["time_s", "t_int_c"]])
+        given = estimate_gradient(
+            bare,
+            rate_change_times_s=60.0 * np.cumsum(durations)[:-1],
+            rate_change_jumps_c_per_min=np.diff(rates),
+        )
+        worst.append(abs(given.g_est_c_per_min[-1] - g_true[-1]) / given.g_std_c_per_min[-1])
+    assert max(worst) < 2.5, worst
