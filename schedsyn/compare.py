@@ -190,6 +190,54 @@ RUN_SETPOINT_TOL_C = 2.0
 #: ... after allowing it to lag the programme by up to this (a controller's log of its
 #: setpoint a few tens of seconds late), s.
 RUN_SETPOINT_LAG_MAX_S = 120.0
+#: Without a setpoint column: the device's readings must be a first-order lag of the
+#: programme, its time constant anywhere in this range (s), its dT0 and its temperature at
+#: the programme's start free, within ...
+RUN_DEVICE_TAU_RANGE_S = (150.0, 9600.0)
+#: ... this RMS residual, degC (red team: a log of another programme 6.1 degC, one shifted
+#: by 30 min 8.7 degC at their best fits; the repository's sample run, tau and dT0 off the
+#: plan's, 0.02 degC at its best, 1.7 degC at the plan's own tau and dT0).
+RUN_DEVICE_FIT_RMS_MAX_C = 3.0
+#: The device check needs this many minutes of readings inside the programme (and at
+#: most this many readings are used, evenly strided).
+RUN_DEVICE_MIN_SPAN_MIN = 30.0
+RUN_DEVICE_MAX_ROWS = 5000
+
+
+def device_fit_rms_c(log: MeasuredLog, programme: Programme) -> tuple[float, float] | None:
+    """The best RMS residual, degC, of the log's ``t_int_c`` against a first-order lag of
+    ``programme`` (``tau dT/dt + T = Tk + dT0``) and its time constant, s: ``tau`` searched
+    over :data:`RUN_DEVICE_TAU_RANGE_S` (log-spaced grid, then refined), ``dT0`` and the
+    temperature at the programme's start by least squares (the response is linear in
+    both: ``T = T_0(t) + T0 e^(-t/tau) + dT0 (1 - e^(-t/tau))``, ``T_0`` the lag's response
+    from 0 degC with dT0 = 0). None when the log has too little inside the programme
+    (:data:`RUN_DEVICE_MIN_SPAN_MIN`)."""
+    from scipy.optimize import minimize_scalar
+
+    ok = np.isfinite(log.t_int_c) & (log.time_min <= programme.total_min)
+    t, y = log.time_min[ok], log.t_int_c[ok]
+    if t.size < 20 or float(t[-1] - t[0]) < RUN_DEVICE_MIN_SPAN_MIN:
+        return None
+    stride = max(1, -(-t.size // RUN_DEVICE_MAX_ROWS))
+    t, y = t[::stride], y[::stride]
+
+    def rms(log_tau_s: float) -> float:
+        tau_s = math.exp(log_tau_s)
+        base = simulate(programme, ThermalParams(tau_s=tau_s, dt0_c=0.0), times_min=t, t0_c=0.0)
+        e = np.exp(-t / (tau_s / 60.0))
+        a = np.column_stack((e, 1.0 - e))
+        coef, *_ = np.linalg.lstsq(a, y - base.t_c, rcond=None)
+        return float(np.sqrt(np.mean((y - base.t_c - a @ coef) ** 2)))
+
+    lo, hi = (math.log(v) for v in RUN_DEVICE_TAU_RANGE_S)
+    grid = np.linspace(lo, hi, 25)
+    values = [rms(v) for v in grid]
+    k = int(np.argmin(values))
+    a, b = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
+    best = minimize_scalar(rms, bounds=(a, b), method="bounded", options={"xatol": 1e-3})
+    if best.fun < values[k]:
+        return float(best.fun), math.exp(float(best.x))
+    return float(values[k]), math.exp(float(grid[k]))
 
 
 def check_run_of(log: MeasuredLog, programme: Programme) -> None:
@@ -208,6 +256,7 @@ def check_run_of(log: MeasuredLog, programme: Programme) -> None:
             "seconds from the programme's start (e.g. not clock or epoch time)"
         )
     if log.tk_set_c is None:
+        _check_device_follows(log, programme)
         return
     ok = np.isfinite(log.tk_set_c) & (log.time_min <= programme.total_min)
     if not ok.any():
@@ -228,6 +277,24 @@ def check_run_of(log: MeasuredLog, programme: Programme) -> None:
         f"{RUN_SETPOINT_LAG_MAX_S:g} s): the log is not a run of this step table (another "
         "programme, or time_s not counted from its start; if tk_set_c holds each step's "
         "target rather than the ramping setpoint, leave that column out)"
+    )
+
+
+def _check_device_follows(log: MeasuredLog, programme: Programme) -> None:
+    """Without a setpoint column: refuse a log whose device cannot be a first-order lag
+    of the programme (:func:`device_fit_rms_c` above :data:`RUN_DEVICE_FIT_RMS_MAX_C`).
+    Red team: a log of another programme (residual RMS 24 degC) and one shifted by 30
+    min (11.6 degC) were compared without a word."""
+    fit = device_fit_rms_c(log, programme)
+    if fit is None or fit[0] <= RUN_DEVICE_FIT_RMS_MAX_C:
+        return
+    raise LogFormatError(
+        f"{log.source}: the log has no tk_set_c, and its t_int_c cannot be a run of the step "
+        f"table's programme: the best first-order lag of it (tau {fit[1]:.0f} s in "
+        f"{RUN_DEVICE_TAU_RANGE_S[0]:g}..{RUN_DEVICE_TAU_RANGE_S[1]:g} s, dT0 and start "
+        f"temperature fitted) leaves {fit[0]:.1f} °C RMS (> {RUN_DEVICE_FIT_RMS_MAX_C:g} °C): "
+        "another programme, or time_s not counted from its start; check the step table "
+        "and the log's clock, or add the chamber setpoint as tk_set_c"
     )
 
 

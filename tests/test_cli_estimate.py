@@ -293,3 +293,32 @@ def test_the_runs_coverage_range_holds_the_devices_coverage():
     assert 0 < max(margins[10.0]) < min(margins[120.0])
     assert "borderline bin(s)" in cmp.summary()
     assert cmp.summary_dict()["run_coverage_low"] == low.coverage
+
+
+@pytest.mark.parametrize("change", ["shift", "other"])
+def test_compare_without_a_chamber_column_refuses_a_device_that_is_no_run_of_the_table(
+    clean_log_path, tmp_path, capsys, change
+):
+    """Red team: without tk_set_c nothing was checked: a log of another programme (RMS
+    residual 24 °C) and one shifted by 30 min (11.6 °C) were compared. Now the device's
+    readings must be a first-order lag of the programme (tau, dT0, start fitted). The
+    sample run (tau 2700 s, dT0 2 °C against the plan's 2400 s, 3 °C: 1.7 °C RMS at the
+    plan's values) is still compared."""
+    frame = pd.read_csv(clean_log_path)[["time_s", "t_int_c"]]
+    if change == "shift":
+        frame["time_s"] += 1800.0
+    else:
+        other = synth_log(read_steps("tests/data/plans/w2_steps.csv"), seed=3)
+        frame = other[["time_s", "t_int_c"]]
+    path = tmp_path / "log.csv"
+    frame.to_csv(path, index=False)
+    out = tmp_path / "out"
+    rc = main(["compare", str(path), STEPS, "--region", "-50", "-30", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert rc == 2 and err.startswith("schedsyn compare: error:"), err
+    assert "cannot be a run of the step table" in err and "add the chamber setpoint" in err
+    assert not out.exists()
+    sample = pd.read_csv(SAMPLE)[["time_s", "t_int_c"]]
+    sample.to_csv(path, index=False)
+    args = ["compare", str(path), STEPS, "--region", "-50", "-30", "--out", str(out)]
+    assert main(args) in (0, 1), capsys.readouterr().err
