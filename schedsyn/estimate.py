@@ -947,6 +947,11 @@ class _Setup:
     #: model-based: the rows whose step holds a setpoint corner and their exact input
     #: (:func:`corner_inputs`), replacing the linear one; None: Tk linear throughout
     corner_u: tuple[np.ndarray, np.ndarray] | None = None
+    #: model-based: variance of the chamber reading's white noise, degC^2 (a measured air
+    #: temperature; 0 for the programme's setpoint). It drives T through the input: each
+    #: step adds ``var S(h)^2`` to T's process noise (a reading enters the two steps it
+    #: bounds with weights summing to ``S``, so over many steps that is its share)
+    input_var_c2: float = 0.0
 
     @property
     def n(self) -> int:
@@ -1000,6 +1005,7 @@ class _Setup:
         h, idx = np.unique(h_rows, return_inverse=True)  # the distinct steps
         if self.model is not None:
             a, b, q11, q12, q22 = lag_transition(h, self.model, q)
+            q11 = q11 + self.input_var_c2 * (1.0 - a) ** 2
             f, _, qq = _embed(a, b, 0.0, q11, q12, q22)
         elif self.order == 2:
             a, b, q11, q12, q22 = kinematic_transition(h, q)
@@ -1053,7 +1059,17 @@ class _Setup:
             )[: idx.size]
             den = np.diff(self.time_s[idx], prepend=self.time_s[0]) / 60.0  # coarse steps
             extra = np.divide(num, den, out=np.zeros(idx.size), where=den > 0)
-        return _Setup(self.time_s[idx], self.y[idx], self.model, None, u, self.order, extra)
+        # the merged input averages ``step`` readings' noise: its variance ~ 1/step
+        return _Setup(
+            self.time_s[idx],
+            self.y[idx],
+            self.model,
+            None,
+            u,
+            self.order,
+            extra,
+            input_var_c2=self.input_var_c2 / step,
+        )
 
 
 def _chunks(n: int) -> list[tuple[int, int]]:
@@ -1978,11 +1994,18 @@ def estimate_gradient_model(
     if chamber == "tk_set_c":  # the programme: piecewise linear, corners between samples
         corners = setpoint_corners_between_samples(log.time_s, tk)
         corner_u = corner_inputs(log.time_s, tk, corners, model) if corners[0].size else None
-    setup = _Setup(log.time_s, np.asarray(log.t_int_c, dtype=float), model, tk, corner_u=corner_u)
     tau = params.tau_min
-    # a measured chamber (the air) carries its own noise into g = (Tk + ...)/tau directly;
-    # the programme's setpoint carries none
+    # a measured chamber (the air) carries its own noise into g = (Tk + ...)/tau directly,
+    # and into T through the model's input; the programme's setpoint carries none
     var_tk = chamber_reading_noise_c(log.time_s, tk) ** 2 if chamber == "tk_air_c" else 0.0
+    setup = _Setup(
+        log.time_s,
+        np.asarray(log.t_int_c, dtype=float),
+        model,
+        tk,
+        corner_u=corner_u,
+        input_var_c2=var_tk,
+    )
 
     def grad(rows, x1, x2, p11, p12, p22):
         # g = (Tk + dT0 - T)/tau + d ;  var g = P11/tau^2 - 2 P12/tau + P22 (+ var Tk/tau^2)
