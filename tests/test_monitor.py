@@ -396,3 +396,25 @@ def test_an_end_glitch_is_excluded_and_named_by_monitor(plan_dir, tmp_path, caps
     assert b["state_now"]["g_c_per_min"] == pytest.approx(a["state_now"]["g_c_per_min"], abs=0.002)
     assert b["predicted_if_unchanged"]["coverage"] == a["predicted_if_unchanged"]["coverage"]
     assert [g["row"] for g in b["log_readings"]["excluded_glitches"]] == [len(frame)]
+
+
+@pytest.mark.parametrize("setpoint", [True, False])
+def test_the_gradient_now_holds_a_rate_change_in_the_logs_last_minutes(plan_dir, setpoint):
+    """The log ends 1-2 min after the chamber's rate changes (at 85 min, 0 -> +1 °C/min;
+    at 225 min, 0 -> -0.75): the device's dg/dt jumps by dU/tau there and the smoother
+    extrapolated the old rate (red team: g_now -0.127 +- 0.007 °C/min against -0.165).
+    The plan's rate changes (or the logged setpoint's) let it jump: g_now within 2.5 of
+    its std of the device's gradient."""
+    plan = read_plan_dir(plan_dir)
+    z = []
+    for now_min in (86.0, 87.0, 226.0, 227.0):
+        frame = synth_log(plan_programme(), ThermalParams(2400.0, 3.0), sample_s=10.0,
+                          noise_c=0.005, seed=int(now_min))  # fmt: skip
+        frame = frame[frame["time_s"] <= now_min * 60.0]
+        g_true = float(frame["g_true_c_per_min"].iloc[-1])
+        frame = frame.drop(columns=["t_true_c", "g_true_c_per_min", "tk_air_c"])
+        if not setpoint:
+            frame = frame.drop(columns=["tk_set_c"])
+        rep = monitor_run(log_from_frame(frame, "cut"), plan, find_effect=False)
+        z.append((rep.g_now_c_per_min - g_true) / rep.g_now_std_c_per_min)
+    assert max(abs(v) for v in z) < 2.5, z
