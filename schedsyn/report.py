@@ -209,7 +209,8 @@ def run_report(
             f'<div class="warn">The run covered {r.coverage:.0%} of the working region '
             f"(as planned: {p.coverage:.0%}); it is not a complete calibration.</div>"
         )
-    body = [verdict, facts_html(facts), "<h2>Planned vs measured</h2>"]
+    body = [verdict, *(f'<div class="warn">{esc(n)}</div>' for n in c.notes)]
+    body += [facts_html(facts), "<h2>Planned vs measured</h2>"]
     body.append(
         figure_html(
             figure_uri(
