@@ -164,6 +164,9 @@ class OutputDir:
         self._name = self.target.resolve().name or "out"
         self.inputs = [Path(p) for p in inputs if p is not None and str(p)]
         self.command = command or " ".join(["schedsyn", *sys.argv[1:]])
+        #: Which command wrote the files (``plan``, ``compare``...): a run removes only the
+        #: stale files of an earlier run of the same command, never another command's
+        self.kind = _command_kind(self.command)
         self._staging: Path | None = None
         self._created_parents: list[Path] = []
         self._committed = False
@@ -324,11 +327,16 @@ class OutputDir:
         new = {str(rel) for rel in files}
         inputs = {p.resolve() for p in self.inputs}
         self.kept_stale = []
+        carried: dict[str, dict] = {}  # another command's files: kept, still listed
         for entry in old:
             name = entry.get("path")
             if not isinstance(name, str) or name in new or ".." in Path(name).parts:
                 continue
             p = target / name
+            if entry.get("by", "") != self.kind:
+                if p.is_file():
+                    carried[name] = entry
+                continue
             try:
                 st = p.stat()
             except OSError:  # gone (or never moved in by a killed run): its empty folders
@@ -340,18 +348,30 @@ class OutputDir:
                 continue
             p.unlink()
             _prune_empty(p.parent, target)
-        self._write_manifest(target / MANIFEST, files, target)
+        self._write_manifest(target / MANIFEST, files, target, list(carried.values()))
         (target / INCOMPLETE_MARKER).unlink(missing_ok=True)
         (target / PENDING).unlink(missing_ok=True)
         shutil.rmtree(staging, ignore_errors=True)
 
-    def _write_manifest(self, path: Path, files: Sequence[Path], root: Path) -> None:
+    def _write_manifest(
+        self, path: Path, files: Sequence[Path], root: Path, carried: Sequence[dict] = ()
+    ) -> None:
+        """The files this run wrote (``by`` its command), then ``carried``: an earlier
+        run's of another command, kept as they were."""
         from . import __version__
 
         rows = []
         for rel in files:
             st = (root / rel).stat()
-            rows.append({"path": str(rel), "size": st.st_size, "mtime_ns": st.st_mtime_ns})
+            rows.append(
+                {
+                    "path": str(rel),
+                    "size": st.st_size,
+                    "mtime_ns": st.st_mtime_ns,
+                    "by": self.kind,
+                }
+            )
+        rows += [dict(e) for e in carried]
         write_json_atomic(
             path,
             {
@@ -385,10 +405,22 @@ def _prune_empty(folder: Path, root: Path) -> None:
         folder = folder.parent
 
 
+def _command_kind(command: str) -> str:
+    """The command of a command line (``schedsyn plan --out x`` -> ``plan``): its first
+    word after the program that is not an option."""
+    words = command.split()
+    return next((w for w in words[1:] if not w.startswith("-")), "")
+
+
 def _read_manifest(path: Path) -> list[dict]:
+    """The files an earlier run listed, each with ``by``, the command that wrote it
+    (manifests before it was recorded per file: the manifest's own command)."""
     try:
         obj = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return []
     files = obj.get("files") if isinstance(obj, dict) else None
-    return [f for f in files if isinstance(f, dict)] if isinstance(files, list) else []
+    if not isinstance(files, list):
+        return []
+    kind = _command_kind(str(obj.get("command", "")))
+    return [{"by": kind, **f} for f in files if isinstance(f, dict)]

@@ -194,6 +194,32 @@ def test_stale_files_that_changed_or_are_inputs_are_kept(tmp_path):
     assert sorted(p.name for p in second.kept_stale) == ["edited.csv", "input.csv"]
 
 
+def test_another_commands_outputs_in_the_folder_are_never_removed(tmp_path):
+    """Red team: `schedsyn compare LOG runB/steps.csv --out runB` after `schedsyn plan
+    --out runB` removed plan.json and the plots as stale (`estimate --out` even steps.csv):
+    only an earlier run of the same command has stale files; another's are kept, and
+    still listed, so a rerun of that command replaces them as before."""
+    target = tmp_path / "runB"
+    plan = OutputDir(target, command=f"schedsyn plan --working -50 -30 --out {target}")
+    _write(plan, {"steps.csv": "s", "plan.json": "p", "phase.png": "1", "W/old.png": "1"})
+    plan.commit()
+    cmp = OutputDir(target, command=f"schedsyn compare log.csv {target}/steps.csv --out x")
+    _write(cmp, {"compare.csv": "c", "summary.json": "j"})
+    cmp.commit()
+    names = sorted(str(p.relative_to(target)) for p in target.rglob("*") if p.is_file())
+    kept = ["W/old.png", "compare.csv", "phase.png", "plan.json", "steps.csv", "summary.json"]
+    assert names == sorted([MANIFEST, *kept])
+    listed = {f["path"]: f["by"] for f in json.loads((target / MANIFEST).read_text())["files"]}
+    assert listed["plan.json"] == "plan" and listed["compare.csv"] == "compare"
+    # the plan again, without W/old.png: its own stale file goes, compare's stay
+    again = OutputDir(target, command=f"schedsyn --quiet plan --out {target}")
+    _write(again, {"steps.csv": "s2", "plan.json": "p2", "phase.png": "2"})
+    again.commit()
+    assert not (target / "W").exists()
+    assert (target / "compare.csv").read_text() == "c"
+    assert (target / "steps.csv").read_text() == "s2"
+
+
 def test_discard_leaves_the_target_as_it_was(tmp_path):
     target = tmp_path / "deep" / "out"
     out = OutputDir(target)
@@ -229,7 +255,7 @@ out.commit()
 
 def test_sigkill_while_moving_outputs_in_leaves_them_clearly_marked(tmp_path):
     target = tmp_path / "out"
-    old = OutputDir(target)
+    old = OutputDir(target, command=f"schedsyn campaign --out {target}")
     _write(old, {n: "old" for n in ("summary.csv", "W1/steps.csv", "W1/phase.png", "W3/a")})
     old.commit()
     script = tmp_path / "kill.py"
@@ -245,7 +271,7 @@ def test_sigkill_while_moving_outputs_in_leaves_them_clearly_marked(tmp_path):
     marker = texts[INCOMPLETE_MARKER]  # ... that says so
     assert "may mix" in marker and "schedsyn campaign --out" in marker
     # the next complete run clears the mark and the leftovers
-    again = OutputDir(target)
+    again = OutputDir(target, command=f"schedsyn campaign --out {target}")
     _write(again, {"summary.csv": "newer"})
     again.commit()
     assert not (target / INCOMPLETE_MARKER).exists()
