@@ -97,6 +97,12 @@ PAPER_BASELINE_EXP1 = package_data("baseline_exp1_steps.csv")
 #: The folder holding them.
 DATA_DIR = PAPER_CAMPAIGN_TOML.parent
 
+
+def _shipped(name: str) -> bool:
+    """Whether ``name`` is a step table shipped inside the package (``schedsyn/data``)."""
+    return name.endswith(".csv") and (DATA_DIR / name).is_file()
+
+
 #: The paper's regions: (name, working lo, working hi, approximation lo, approximation hi).
 PAPER_REGIONS_C = (
     ("W1", -50.0, -30.0, -52.0, -20.0),
@@ -333,8 +339,18 @@ def campaign_from_dict(doc: dict, path: Path | str = "<config>") -> CampaignConf
             base_path = Path(base)
             if not base_path.is_absolute():
                 base_path = path.resolve().parent / base_path
+            if not base_path.is_file() and base_path.name == base and _shipped(base):
+                # a copy of the shipped campaign file moved elsewhere names the shipped
+                # baseline beside it (red team: the README's "a copy of
+                # data/paper_campaign.toml" failed anywhere but in data/)
+                base_path = package_data(base)
             if not base_path.is_file():
-                raise ParameterError(f"{where} baseline_steps: {base_path} does not exist")
+                raise ParameterError(
+                    f"{where} baseline_steps: {base_path} does not exist (a relative path is "
+                    f"read from the campaign file's folder, {path.resolve().parent}); copy "
+                    "the table beside the campaign file, give its absolute path, or drop "
+                    "baseline_steps"
+                )
             baselines.append(base_path)
         else:
             baselines.append(None)

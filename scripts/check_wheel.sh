@@ -7,7 +7,8 @@
 #   4. from an unrelated temporary directory run `schedsyn campaign --out OUT` (the default
 #      campaign: the paper's four experiments), and
 #   5. check OUT: every experiment's step table, and a summary whose experiments are all
-#      complete (with the paper-like baseline read from the installed package).
+#      complete (with the paper-like baseline read from the installed package); and that
+#      `schedsyn examples` writes the shipped example files and `estimate` reads the log.
 # Exit code 0 when all holds. Takes about a minute plus the campaign (40-60 s on 2 cores).
 # Set KEEP=1 to keep the temporary directory; PYTHON to choose the interpreter.
 set -euo pipefail
@@ -49,7 +50,15 @@ say "built $(basename "$WHEEL")"
 "$PY" - "$WHEEL" <<'EOF'
 import sys, zipfile
 names = set(zipfile.ZipFile(sys.argv[1]).namelist())
-need = ["schedsyn/data/paper_campaign.toml", "schedsyn/data/baseline_exp1_steps.csv"]
+need = [
+    f"schedsyn/data/{n}"
+    for n in (
+        "paper_campaign.toml",
+        "baseline_exp1_steps.csv",
+        "example_gyro.toml",
+        "sample_run_exp1.csv",
+    )
+]
 missing = [n for n in need if n not in names]
 if missing:
     sys.exit(f"check_wheel: the wheel lacks {missing}; fix package-data in pyproject.toml")
@@ -74,6 +83,11 @@ if [ "$rc" -ne 0 ]; then
   say "FAILED: schedsyn campaign exited with $rc (0 = every experiment complete)"
   exit 1
 fi
+
+# 4b. the example files a wheel user follows the docs with, and a command that reads one
+"$WORK/venv/bin/schedsyn" examples --out EX > /dev/null
+"$WORK/venv/bin/schedsyn" estimate EX/sample_run_exp1.csv --out EST > /dev/null
+[ -s EST/gradient.csv ] || { say "FAILED: schedsyn examples / estimate wrote no gradient.csv"; exit 1; }
 
 # 5. the outputs, checked with the installed package
 "$WORK/venv/bin/python" - "$WORK" <<'EOF'

@@ -71,3 +71,35 @@ def test_real_logs_the_tests_use_are_in_the_repository_with_their_licence():
     ]
     for name in used:
         assert (tclab / name).stat().st_size > 10_000, name
+
+
+def test_examples_command_writes_the_shipped_example_files(tmp_path, capsys):
+    """A wheel user has no data/ folder: `schedsyn examples` writes the files the docs'
+    examples use (red team: example_gyro.toml and sample_run_exp1.csv were not in the
+    wheel), byte for byte the repository's copies."""
+    from schedsyn.cli import main
+    from schedsyn.cli.examples import EXAMPLE_FILES
+
+    assert main(["examples", "--out", str(tmp_path / "ex")]) == 0
+    for name in EXAMPLE_FILES:
+        assert (tmp_path / "ex" / name).read_bytes() == (ROOT / "data" / name).read_bytes()
+    assert "paper_campaign.toml" in capsys.readouterr().out
+    assert main(["--version"]) == 0
+    assert schedsyn.__version__ in capsys.readouterr().out
+
+
+def test_a_copy_of_the_paper_campaign_elsewhere_finds_its_baseline(tmp_path):
+    """The README's "a copy of data/paper_campaign.toml" failed anywhere but in data/
+    (baseline_steps is relative to the campaign file): a shipped table's name falls back
+    to the package's copy; any other missing table says where it was looked for and how
+    to fix it."""
+    from schedsyn.errors import ParameterError
+
+    copy = tmp_path / "copy.toml"
+    copy.write_text(PAPER_CAMPAIGN_TOML.read_text(encoding="utf-8"), encoding="utf-8")
+    assert load_campaign(copy).baseline_for(0) == PAPER_BASELINE_EXP1
+    text = PAPER_CAMPAIGN_TOML.read_text(encoding="utf-8")
+    other = tmp_path / "other.toml"
+    other.write_text(text.replace("baseline_exp1_steps.csv", "mine.csv"), encoding="utf-8")
+    with pytest.raises(ParameterError, match="copy the table beside the campaign file"):
+        load_campaign(other)

@@ -41,6 +41,7 @@ COMMANDS = (
     "export",
     "sheet",
     "report",
+    "examples",
 )
 
 EXIT_OK, EXIT_INCOMPLETE, EXIT_BAD_INPUT, EXIT_FAULT, EXIT_BUG = 0, 1, 2, 3, 4
@@ -54,6 +55,9 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Exit codes: 0 done, 1 plan incomplete, 2 bad input, 3 environment fault "
         "(cannot write, worker killed), 4 internal error.",
     )
+    from .. import __version__
+
+    parser.add_argument("--version", action="version", version=f"schedsyn {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMANDS:
