@@ -458,6 +458,16 @@ FAHRENHEIT_TAU2_S = (200.0, 500.0, 1200.0)
 FAHRENHEIT_GRID_POINTS = 20_000
 #: The slopes compared: degC / degC, degF / degC (t_int_c), degC / degF (the chamber).
 UNIT_SLOPES = {"celsius": 1.0, "t_int_c_fahrenheit": 1.8, "chamber_fahrenheit": 1.0 / 1.8}
+#: Every temperature column in Fahrenheit (the slopes all 1:1) is told by where a run
+#: starts and ends: at room temperature, 16-28 degC, which reads 61-82 in Fahrenheit. A
+#: log whose chamber starts and ends in this range (without one: whose device starts
+#: in it), degC, over at least
+#: ROOM_F_MIN_SPAN_S, gets a warning (red team: a W1 run converted whole to F was
+#: estimated, diagnosed -- dT0 5.4 "degC" -- and fitted without a word); a genuine run
+#: starting and ending at 61-82 degC would be a hot soak both ways.
+ROOM_TEMPERATURE_F = (61.0, 82.0)
+ROOM_F_MIN_SPAN_S = 3600.0
+ROOM_F_END_MIN = 5.0  # the minutes at either end whose median is taken
 
 
 def unit_fits(
@@ -551,6 +561,38 @@ def _check_fahrenheit(values: dict[str, np.ndarray], source: str) -> tuple[str, 
                     "(a device unlike a one- or two-pole lag can also fit so)"
                 )
     return tuple(warned)
+
+
+def _room_temperature_in_fahrenheit(values: dict[str, np.ndarray]) -> tuple[str, ...]:
+    """A warning when the log starts and ends at room temperature read in Fahrenheit
+    (:data:`ROOM_TEMPERATURE_F`): every temperature column in F, which the slope checks
+    cannot see (they compare the columns with each other)."""
+    t = values["time_s"]
+    col = next((c for c in ("tk_set_c", "tk_air_c") if c in values), "t_int_c")
+    v = values[col]
+    ok = np.isfinite(v)
+    if ok.sum() < 4 or float(t[ok][-1] - t[ok][0]) < ROOM_F_MIN_SPAN_S:
+        return ()
+    tt, vv = t[ok], v[ok]
+    end_s = 60.0 * ROOM_F_END_MIN
+    first = float(np.median(vv[tt <= tt[0] + end_s]))
+    last = float(np.median(vv[tt >= tt[-1] - end_s]))
+    lo, hi = ROOM_TEMPERATURE_F
+    # the chamber returns to room temperature at the end; the device may still lag it
+    ends = col == "t_int_c" or lo <= last <= hi
+    if not (lo <= first <= hi and ends):
+        return ()
+    where = (
+        f"starts at {first:.1f} °C, room temperature read in Fahrenheit "
+        f"({(first - 32.0) / 1.8:.1f} °C)"
+        if col == "t_int_c"
+        else f"starts at {first:.1f} and ends at {last:.1f} °C, room temperature read in "
+        f"Fahrenheit ({(first - 32.0) / 1.8:.1f} and {(last - 32.0) / 1.8:.1f} °C)"
+    )
+    return (
+        f"{col} {where}: if the temperature columns are in Fahrenheit, convert them with "
+        "(F - 32) * 5 / 9 (every figure from this log would be off by 1.8x, offsets by 32)",
+    )
 
 
 def glitch_rows(time_s: np.ndarray, values_c: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
@@ -903,7 +945,7 @@ class _Collector:
         report = dataclasses.replace(report, warnings=notes)
         values["t_int_c"], report = _exclude_glitches(values, report, self.source)
         # after the glitches are blanked: they hide the fit
-        units = _check_fahrenheit(values, self.source)
+        units = _check_fahrenheit(values, self.source) + _room_temperature_in_fahrenheit(values)
         if units:
             report = dataclasses.replace(report, warnings=(*report.warnings, *units))
         if len(self.extra_parts) > 1:

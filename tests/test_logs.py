@@ -134,6 +134,26 @@ def test_fahrenheit_inside_the_plausible_range_is_caught():
         log_from_frame(f.drop(columns="tk_set_c").assign(tk_air_c=_fahrenheit(f["tk_air_c"])))
 
 
+def test_a_log_wholly_in_fahrenheit_is_told_by_its_room_temperature_ends():
+    """Red team: every temperature column in F (the slopes all 1:1, so the slope checks
+    cannot see it) was estimated, diagnosed (dT0 5.4 "degC") and fitted without a word.
+    A run starts and ends at room temperature: 68 F reads as 68 degC. Warned, with the
+    chamber's start and end (its device lags it at the end) or, without a chamber column,
+    the device's start; the same log in degC and a device starting at 20 degC: no note."""
+    f = pd.read_csv(DATA / "sample_run_exp1.csv")
+    assert not any("room temperature" in w for w in log_from_frame(f).report.warnings)
+    cols = [c for c in ("t_int_c", "tk_set_c", "tk_air_c") if c in f]
+    all_f = f.assign(**{c: _fahrenheit(f[c]) for c in cols})
+    (w,) = [w for w in log_from_frame(all_f).report.warnings if "room temperature" in w]
+    assert w.startswith("tk_set_c starts at 63.") and "(F - 32) * 5 / 9" in w, w
+    device_only = all_f[["time_s", "t_int_c"]]
+    (w,) = [w for w in log_from_frame(device_only).report.warnings if "room temperature" in w]
+    assert w.startswith("t_int_c starts at 68.0 °C") and "(20.0 °C)" in w, w
+    assert not any(
+        "room temperature" in w for w in log_from_frame(f[["time_s", "t_int_c"]]).report.warnings
+    )
+
+
 @pytest.mark.parametrize(
     "tau_s, tau2_s, in_f",
     [
