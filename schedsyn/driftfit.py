@@ -1795,6 +1795,16 @@ def _samples_from_log(
     t_min, t_max = float(np.nanmin(t[ok])), float(np.nanmax(t[ok]))
     inside = ok & (t >= lo) & (t <= hi)
     if not inside.any():
+        everywhere = np.isfinite(t)
+        if (no_drift & everywhere & (t >= lo) & (t <= hi)).any():
+            # the run did enter the region; the drift readings there are missing
+            raise LogFormatError(
+                f"{log.source}: the run enters the region {lo:g} .. {hi:g} °C, but none of "
+                f"its drift_dph readings there is a number ({int(no_drift.sum())} of "
+                f"{no_drift.size} rows have none; the rows with one span {t_min:.1f} .. "
+                f"{t_max:.1f} °C): check the gyro's output column (empty cells, text, a "
+                "logger that stopped recording it)"
+            )
         raise ParameterError(
             f"{log.source}: the internal temperature spans {t_min:.1f} .. {t_max:.1f} °C and "
             f"never enters the region {lo:g} .. {hi:g} °C; choose --region inside what the "

@@ -442,3 +442,41 @@ def test_a_broken_pools_straggler_is_killed_not_waited_for(monkeypatch):
     sweep._stop_broken_pool(pool)
     assert not worker.is_alive() and not manager.is_alive()
     assert time.monotonic() - tic < 10.0
+
+
+def _sleep_or_sigint(seconds: float) -> bool:
+    """A pool task: whether Ctrl-C is ignored in the worker, after sleeping ``seconds``."""
+    time.sleep(seconds)
+    return signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+
+
+class _InterruptAfterFirst:
+    """A progress bar whose first update raises KeyboardInterrupt (Ctrl-C in the owner)."""
+
+    def __init__(self) -> None:
+        self.n = 0
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        return None
+
+    def update(self, k: int) -> None:
+        self.n += k
+        raise KeyboardInterrupt
+
+
+def test_ctrl_c_stops_the_local_pool_at_once_and_workers_leave_it_to_the_owner(monkeypatch):
+    """Red team: after Ctrl-C the campaign waited up to 17 s for the experiments under way,
+    once for ever (a worker that took the KeyboardInterrupt inside the call queue's lock),
+    and a worker printed a traceback. The workers ignore SIGINT (the owner handles it),
+    and an interrupted pool's workers are killed, not waited for."""
+    from schedsyn import sweep
+
+    assert sweep.run_map(_sleep_or_sigint, [0.0, 0.0], workers=2, progress=False) == [True] * 2
+    monkeypatch.setattr(sweep, "_progress_bar", lambda *a, **k: _InterruptAfterFirst())
+    tic = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        sweep.run_map(_sleep_or_sigint, [0.0, 60.0, 60.0], workers=2, progress=False)
+    assert time.monotonic() - tic < 30.0  # not the 60 s the others would have taken

@@ -644,6 +644,11 @@ def test_bad_logs_get_clear_errors(programme):
         fit_drift(log_from_frame(f.drop(columns=["drift_dph"])), REGION)
     with pytest.raises(ParameterError, match="never enters the region 30 .. 60"):
         fit_drift(log_from_frame(f), (30.0, 60.0))
+    # red team: drift_dph blank after row 5 was told the run never entered the region
+    blank = f.copy()
+    blank.loc[5:, "drift_dph"] = np.nan
+    with pytest.raises(LogFormatError, match=r"enters the region .* none of its drift_dph"):
+        fit_drift(log_from_frame(blank), REGION)
     with pytest.raises(ParameterError, match=r"bins -54 .. -52 °C have fewer than 5"):
         fit_drift(log_from_frame(f), (-54.0, -21.0))
     with pytest.raises(ParameterError, match="lo < hi"):
