@@ -42,8 +42,14 @@ def write_atomic(
     """Call ``writer(tmp_path)`` and move the result to ``path`` atomically."""
     path = Path(path)
     _check_not_input(path, inputs)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+    except OSError as exc:  # named by the output, not by a temporary file (red team)
+        raise EnvironmentFaultError(
+            f"cannot write {path} ({exc.strerror or type(exc).__name__}); choose another "
+            "output path or fix the folder's permissions/free space"
+        ) from None
     os.close(fd)
     tmp_path = Path(tmp)
     try:
@@ -53,6 +59,12 @@ def write_atomic(
         os.umask(umask)
         os.chmod(tmp_path, 0o666 & ~umask)
         os.replace(tmp_path, path)
+    except OSError as exc:
+        tmp_path.unlink(missing_ok=True)
+        raise EnvironmentFaultError(
+            f"cannot write {path} ({exc.strerror or type(exc).__name__}); choose another "
+            "output path or fix the folder's permissions/free space"
+        ) from None
     except BaseException:
         tmp_path.unlink(missing_ok=True)
         raise

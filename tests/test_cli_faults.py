@@ -480,3 +480,20 @@ def test_ctrl_c_stops_the_local_pool_at_once_and_workers_leave_it_to_the_owner(m
     with pytest.raises(KeyboardInterrupt):
         sweep.run_map(_sleep_or_sigint, [0.0, 60.0, 60.0], workers=2, progress=False)
     assert time.monotonic() - tic < 30.0  # not the 60 s the others would have taken
+
+
+def test_an_unwritable_output_is_named_by_its_own_path(tmp_path):
+    """Red team: `export --out /sys/x.csv` said "fault: Permission denied:
+    /sys/.x.csv.f68zin27.csv", a temporary name, with no hint. The output's own path and
+    what to do instead."""
+    from schedsyn.errors import EnvironmentFaultError
+    from schedsyn.io import write_text_atomic
+
+    blocker = tmp_path / "a-file"
+    blocker.write_text("x")
+    target = blocker / "out.csv"  # its folder is a file: no folder can be made there
+    with pytest.raises(EnvironmentFaultError) as err:
+        write_text_atomic(target, "t")
+    text = str(err.value)
+    assert f"cannot write {target} (" in text and "choose another output path" in text
+    assert ".out.csv." not in text  # no temporary name
