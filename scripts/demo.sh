@@ -10,7 +10,7 @@
 # died) are failures and stop the demo with that code; 4 if the independent re-check of
 # the exported step tables (scripts/check_tables.py) disagrees with the summary.
 set -euo pipefail
-source "$(dirname "${BASH_SOURCE[0]}")/_venv.sh" test
+source "$(dirname "${BASH_SOURCE[0]}")/_venv.sh" core
 rc=0
 .venv/bin/schedsyn campaign --out out "$@" || rc=$?
 case "$rc" in
