@@ -25,6 +25,7 @@ import argparse
 from pathlib import Path
 
 from ..export import CONTROLLER_KEYS
+from . import _common
 
 
 def register(sub) -> None:
@@ -69,6 +70,7 @@ def register(sub) -> None:
     p.add_argument(
         "--name", default=None, help="programme name on the controller (default: experiment)"
     )
+    _common.add_quiet_option(p)
     p.set_defaults(func=run)
 
 

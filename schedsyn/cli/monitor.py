@@ -28,15 +28,18 @@ def register(sub) -> None:
     p.add_argument("plan", metavar="PLAN_DIR", help="the plan's folder (steps.csv, plan.json)")
     p.add_argument("--out", default=None, help="output directory (default out/monitor)")
     p.add_argument("--no-plots", action="store_true", help="skip monitor.png")
+    _common.add_quiet_option(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     plan = read_plan_dir(args.plan)
+    progress = _common.progress_of(args)
     log = read_log(args.log, live=True)
     if not log.report.clean or log.report.warnings:
         # blank readings and gaps are not counted as passes: say where they are
         _common.stderr(f"log {log.source}: {log.report.summary()}")
+    progress("identifying the device and predicting the rest of the run")
     report = monitor_run(log, plan)
     out = _common.out_dir(args.out, "out/monitor")
     inputs = [args.log, plan.path / "steps.csv", plan.path / "plan.json"]

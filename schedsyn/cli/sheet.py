@@ -26,6 +26,7 @@ from typing import Any
 
 from ..errors import ParameterError, SchedsynError
 from ..export import CONTROLLER_KEYS
+from . import _common
 from .export import add_check_options, check_for, export_name
 
 
@@ -51,6 +52,7 @@ def register(sub) -> None:
     )
     p.add_argument("--first-programme", type=int, default=1, help="first programme number")
     p.add_argument("--max-steps", type=int, default=None, help="steps one programme holds")
+    _common.add_quiet_option(p)
     p.set_defaults(func=run)
 
 

@@ -46,6 +46,7 @@ def register(sub) -> None:
         "then override its base (default: the model the step table records)",
     )
     fit_cli.add_simulate_options(p)
+    _common.add_quiet_option(p)
     p.set_defaults(func=run)
 
 
