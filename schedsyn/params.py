@@ -148,3 +148,43 @@ class Limits:
 
     def to_dict(self) -> dict[str, float]:
         return asdict(self)
+
+
+#: Figures outside these ranges are legal but more likely a unit slip than a device or a
+#: chamber: a time constant under a minute (minutes given as seconds?) or over ten hours,
+#: a chamber rate beyond 30 degC/min (degC/h given as degC/min?), a self-heating offset
+#: beyond 20 degC.
+PLAUSIBLE_TAU_S = (60.0, 36000.0)
+PLAUSIBLE_RATE_C_PER_MIN = 30.0
+PLAUSIBLE_DT0_C = 20.0
+
+
+def unit_slip_notes(params: ThermalParams, limits: Limits) -> list[str]:
+    """Warnings for figures that are legal but look like a unit slip (red team: `plan
+    --tau-s 40` and `--rate-max-c-per-min 180` planned without a word)."""
+    notes = []
+    lo, hi = PLAUSIBLE_TAU_S
+    if params.tau_s < lo:
+        notes.append(
+            f"tau_s = {params.tau_s:g} s: the device settles in under a minute (a packaged "
+            "gyro takes tens of minutes; the paper's 2400 s); tau_s is in seconds: if you "
+            f"meant {params.tau_s:g} min, give {60.0 * params.tau_s:g}"
+        )
+    elif params.tau_s > hi:
+        notes.append(
+            f"tau_s = {params.tau_s:g} s is {params.tau_s / 3600.0:.1f} h: tau_s is in seconds "
+            "(not milliseconds)"
+        )
+    for name in ("rate_min_c_per_min", "rate_max_c_per_min"):
+        v = getattr(limits, name)
+        if abs(v) > PLAUSIBLE_RATE_C_PER_MIN:
+            notes.append(
+                f"{name} = {v:g} °C/min: faster than chambers ramp (at most ~20 °C/min); "
+                f"if you meant °C/h, give {v / 60.0:.3g}"
+            )
+    if abs(params.dt0_c) > PLAUSIBLE_DT0_C:
+        notes.append(
+            f"dt0_c = {params.dt0_c:g} °C: a device running {abs(params.dt0_c):g} °C "
+            f"{'above' if params.dt0_c > 0 else 'below'} its chamber; dt0_c is in °C"
+        )
+    return notes

@@ -435,6 +435,11 @@ def split_range(
     for name, v in (("lo_c", lo_c), ("hi_c", hi_c)):
         if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
             raise ParameterError(f"the range's {name} must be a finite number, got {v!r}")
+    if hi_c <= lo_c:
+        raise ParameterError(
+            f"the range [{lo_c:g}, {hi_c:g}] °C runs backwards: give the low end first "
+            f"(--range {hi_c:g} {lo_c:g})"
+        )
     if not hi_c - lo_c >= 1 or abs((hi_c - lo_c) - round(hi_c - lo_c)) > 1e-9:
         raise ParameterError(
             f"the range [{lo_c:g}, {hi_c:g}] °C must span a whole number (>= 1) of degrees"

@@ -304,3 +304,29 @@ def test_split_plan_says_where_it_is_while_it_runs(monkeypatch):
     assert "20 s, 40 s of the time budget left" in beats[0], beats[0]
     assert "past the time budget" in beats[-1] and "last: sweep" in beats[-1]
     assert said[-1] == "split: [-20, 35] °C not complete (100 s)"
+
+
+def test_figures_that_look_like_a_unit_slip_are_warned_of():
+    """Red team: `plan --tau-s 40` (minutes given as seconds) and `--rate-max-c-per-min 180`
+    (degC/h) planned without a word. Legal, so warned, with the figure that was likely
+    meant; the paper's figures and a fast MEMS board (tau 120 s) are not."""
+    from schedsyn.params import unit_slip_notes
+
+    (n,) = unit_slip_notes(ThermalParams(tau_s=40.0), Limits())
+    assert "tau_s = 40 s" in n and "give 2400" in n
+    (n,) = unit_slip_notes(ThermalParams(), Limits(rate_max_c_per_min=180.0))
+    assert "rate_max_c_per_min = 180" in n and "give 3" in n
+    # 24000 s = 6.7 h: plausible for a heavy fixture (no note)
+    assert unit_slip_notes(ThermalParams(tau_s=24000.0), Limits()) == []
+    assert len(unit_slip_notes(ThermalParams(tau_s=2.4e5, dt0_c=30.0), Limits())) == 2
+    assert unit_slip_notes(ThermalParams(), Limits()) == []
+    assert unit_slip_notes(ThermalParams(tau_s=120.0), Limits(rate_min_c_per_min=-15.0)) == []
+
+
+def test_cli_plan_prints_the_unit_slip_warning(tmp_path, capsys):
+    main(
+        ["plan", "--working", "-10", "0", "--tau-s", "40", "--levels", "2", "--quiet"]
+        + ["--out", str(tmp_path / "o")]
+    )
+    err = capsys.readouterr().err
+    assert "warning: tau_s = 40 s" in err

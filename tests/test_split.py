@@ -218,6 +218,7 @@ def test_an_uncoverable_bin_is_proven_and_nothing_is_planned():
     "kw, words",
     [
         ({"lo_c": 0.0, "hi_c": 0.5}, "whole number"),
+        ({"lo_c": 60.0, "hi_c": -50.0}, "runs backwards: give the low end first (--range -50 60)"),
         ({"lo_c": 0.0, "hi_c": 80.0}, "outside its limits"),
         ({"spec_settings": {"levels": 3}}, "unknown experiment setting"),
     ],

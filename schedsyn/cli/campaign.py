@@ -121,6 +121,7 @@ def run(args: argparse.Namespace) -> int:
     )
     from ..export import default_export_path
     from ..io import write_frame_atomic
+    from ..params import unit_slip_notes
     from ..planner import plan_experiment
     from .plan import (
         advice_progress,
@@ -134,6 +135,8 @@ def run(args: argparse.Namespace) -> int:
     from .sheet import write_campaign_index, write_plan_deliverables
 
     config = default_campaign() if args.config is None else load_campaign(args.config)
+    for note in unit_slip_notes(config.params, config.limits):
+        _common.stderr(f"warning: {note}")
     if args.advise and (config.robust_tau_s is not None or config.robust_dt0_c is not None):
         raise ParameterError(
             "--advise searches with the nominal model: remove the [robust] table or drop --advise"

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InfeasiblePlanError, ParameterError
-from ..params import Limits, ThermalParams
+from ..params import Limits, ThermalParams, unit_slip_notes
 from ..planner import OBJECTIVES, ExperimentSpec, Plan
 from . import _common
 
@@ -668,6 +668,8 @@ def run(args: argparse.Namespace) -> int:
         _common.device_limits(args, base), chamber_min_c=floors[0], chamber_max_c=ceilings[0]
     )
     params, limits, model, model_json = _model(args, _common.thermal_params(args), limits)
+    for note in unit_slip_notes(params, limits):
+        _common.stderr(f"warning: {note}")
     spec = build_spec(args, limits)
     robust_tau = _robust(args.robust_tau_s, "--robust-tau-s")
     robust_dt0 = _robust(args.robust_dt0_c, "--robust-dt0-c")
