@@ -112,7 +112,6 @@ def run(args: argparse.Namespace) -> int:
     # every output is checked against the inputs before any work and written into a
     # staging folder that moves into place as a whole (a refusal leaves nothing written)
     out = _common.output_dir(args.out, "out/fit", inputs, FIT_OUTPUTS)
-    progress = _common.progress_of(args)
     log = read_log(args.log)
     holdout = read_log(args.holdout) if args.holdout else None
     for one in (log, holdout):
@@ -129,9 +128,7 @@ def run(args: argparse.Namespace) -> int:
     # identified from each log
     given = args.tau_s is not None or args.dt0_c is not None
     params = _common.thermal_params(args) if given else None
-    progress("estimating T and g and fitting the drift polynomial")
     fit = fit_drift(log, tuple(args.region), settings, params, holdout=holdout)
-    progress("writing the coefficients, tables and plots")
     doc = fit.to_json_dict()
     doc["log_readings"] = _common.log_record(log)
     write_json_atomic(out.path("coefficients.json"), doc)

@@ -34,12 +34,10 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     plan = read_plan_dir(args.plan)
-    progress = _common.progress_of(args)
     log = read_log(args.log, live=True)
     if not log.report.clean or log.report.warnings:
         # blank readings and gaps are not counted as passes: say where they are
         _common.stderr(f"log {log.source}: {log.report.summary()}")
-    progress("identifying the device and predicting the rest of the run")
     report = monitor_run(log, plan)
     out = _common.out_dir(args.out, "out/monitor")
     inputs = [args.log, plan.path / "steps.csv", plan.path / "plan.json"]

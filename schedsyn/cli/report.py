@@ -55,12 +55,10 @@ def run(args: argparse.Namespace) -> int:
         d = getattr(args, opt)
         if d is not None and not Path(d).is_dir():
             raise ParameterError(f"--{opt} {d} is not a folder; give the --out folder of that step")
-    progress = _common.progress_of(args)
     log = read_log(args.log)
     print_log_report(log)
     table = read_step_table(args.steps)
     check = check_for(args, table)
-    progress("estimating the run's gradient and simulating the plan")
     cmp = compare_run(
         log,
         table.programme,
