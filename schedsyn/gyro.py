@@ -39,6 +39,7 @@ benchmarks (a real log has none; the reader keeps them as extra columns):
 
 from __future__ import annotations
 
+import difflib
 import json
 import math
 import tomllib
@@ -173,9 +174,14 @@ def gyro_from_dict(doc: Mapping, source: str = "<gyro>") -> Gyro:
     """A :class:`Gyro` from a parsed TOML document with a ``[gyro]`` table."""
     table = doc.get("gyro")
     if not isinstance(table, Mapping):
+        found = sorted(k for k, v in doc.items() if isinstance(v, Mapping))
+        close = difflib.get_close_matches("gyro", found, n=1, cutoff=0.6)
         raise ParameterError(
-            f"{source}: no [gyro] table; a gyro file needs [gyro] (keys "
-            f"{', '.join(GYRO_KEYS)}) and [gyro.drift_dph] (terms {', '.join(TERMS)})"
+            f"{source}: no [gyro] table"
+            + (f" ([{close[0]}]: did you mean [gyro]?)" if close else "")
+            + (f"; its tables: {', '.join(f'[{k}]' for k in found)}" if found and not close else "")
+            + f"; a gyro file needs [gyro] (keys {', '.join(GYRO_KEYS)}) and [gyro.drift_dph] "
+            f"(terms {', '.join(TERMS)})"
         )
     unknown = sorted(set(table) - set(GYRO_KEYS) - {"drift_dph"})
     if unknown:

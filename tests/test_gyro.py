@@ -82,6 +82,14 @@ def test_bad_gyro_files_name_the_problem(doc, words):
     assert words in str(exc.value) and "\n" not in str(exc.value)
 
 
+def test_a_misspelt_gyro_table_is_named():
+    """Red team: [gyros] for [gyro] was told "no [gyro] table" without the table it saw."""
+    with pytest.raises(ParameterError, match=r"\[gyros\]: did you mean \[gyro\]"):
+        gyro_from_dict({"gyros": {"t_ref_c": 20.0}}, "g.toml")
+    with pytest.raises(ParameterError, match=r"its tables: \[limits\]"):
+        gyro_from_dict({"limits": {"a": 1}}, "g.toml")
+
+
 def test_random_gyros(rng):
     with_g = random_gyro(np.random.default_rng(1), (30.0, 60.0))
     without = random_gyro(np.random.default_rng(1), (30.0, 60.0), gradient_terms=False)
