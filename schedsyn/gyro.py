@@ -191,9 +191,16 @@ def gyro_from_dict(doc: Mapping, source: str = "<gyro>") -> Gyro:
         )
     missing = [k for k in REQUIRED_GYRO_KEYS if k not in table]
     if missing:
+        near = [
+            k
+            for k in difflib.get_close_matches("gyro", [str(k) for k in doc], n=3, cutoff=0.6)
+            if k != "gyro" and isinstance(doc.get(k), Mapping)
+        ]
         raise ParameterError(
-            f"{source}: [gyro] lacks {', '.join(missing)}; give each (0 for no noise of that "
-            "kind): t_ref_c is the temperature the coefficients are about, degC"
+            f"{source}: [gyro] lacks {', '.join(missing)}"
+            + (f" (they are under [{near[0]}]: did you mean [gyro]?)" if near else "")
+            + "; give each (0 for no noise of that kind): t_ref_c is the temperature the "
+            "coefficients are about, degC"
         )
     if "drift_dph" not in table:
         raise ParameterError(

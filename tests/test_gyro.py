@@ -88,6 +88,10 @@ def test_a_misspelt_gyro_table_is_named():
         gyro_from_dict({"gyros": {"t_ref_c": 20.0}}, "g.toml")
     with pytest.raises(ParameterError, match=r"its tables: \[limits\]"):
         gyro_from_dict({"limits": {"a": 1}}, "g.toml")
+    # [gyros] beside [gyro.drift_dph]: the keys are under the misspelt table
+    doc = {"gyros": {"t_ref_c": 20.0}, "gyro": {"drift_dph": {"1": 0.1}}}
+    with pytest.raises(ParameterError, match=r"under \[gyros\]: did you mean \[gyro\]"):
+        gyro_from_dict(doc, "g.toml")
 
 
 def test_random_gyros(rng):
