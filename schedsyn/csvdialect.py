@@ -91,6 +91,12 @@ def detect_csv_dialect(head: str) -> CsvDialect:
     if hint:  # a spreadsheet's "sep=;" line names the separator: no guessing
         lines = lines[1:] or [""]
     header, data = lines[0], lines[1 : 1 + MAX_DATA_LINES]
+    for i, ln in enumerate([header, *data]):
+        if ln.count('"') % 2:  # it swallows the lines after it into one field
+            raise ValueError(
+                f"{'the header' if i == 0 else f'data line {i}'} ({ln.strip()!r}) has an "
+                'unterminated quote ("): close it or remove it'
+            )
     sep = hint.group(1) if hint else ","
     found = bool(hint)
     for cand in () if hint else SEPARATORS:

@@ -37,6 +37,14 @@ def test_decimal_commas_in_a_comma_file_are_named():
         detect_csv_dialect("time_s,t_int_c\n0,20,5\n10,20,75\n")
 
 
+def test_an_unterminated_quote_is_named():
+    """Red team: `10,"20.1` swallowed the lines after it and was told "decimal commas in
+    a comma-separated file"."""
+    with pytest.raises(ValueError, match=r"data line 2 \('10,\"20\.1'\) has an unterminated"):
+        detect_csv_dialect('time_s,t_int_c\n0,20\n10,"20.1\n20,20,5,6\n30\n')
+    assert detect_csv_dialect('time_s,note\n0,"say ""hi"""\n').separator == ","
+
+
 def test_mixed_decimal_marks_are_named():
     with pytest.raises(ValueError, match=r"mixes decimal commas \('20,5'\) and decimal points"):
         detect_csv_dialect("time_s;t_int_c;tk_set_c\n0;20,5;19.5\n")
