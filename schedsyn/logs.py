@@ -466,6 +466,12 @@ UNIT_SLOPES = {"celsius": 1.0, "t_int_c_fahrenheit": 1.8, "chamber_fahrenheit": 
 #: estimated, diagnosed -- dT0 5.4 "degC" -- and fitted without a word); a genuine run
 #: starting and ending at 61-82 degC would be a hot soak both ways.
 ROOM_TEMPERATURE_F = (61.0, 82.0)
+#: Swapped columns (:func:`_check_swapped`): checked where the 1:1 lag leaves more than
+#: this share of t_int_c's variance (the sample run: 0.004; swapped: 0.75), and refused
+#: where the reverse lag leaves this many times less (genuine logs: the reverse 16x to
+#: 10^4x *more*; a log with its time in ms, refused anyway: 0.23x).
+SWAP_MIN_RESIDUAL_SHARE = 0.05
+SWAP_RATIO = 10.0
 ROOM_F_MIN_SPAN_S = 3600.0
 ROOM_F_END_MIN = 5.0  # the minutes at either end whose median is taken
 
@@ -539,6 +545,7 @@ def _check_fahrenheit(values: dict[str, np.ndarray], source: str) -> tuple[str, 
         if fits is None:
             continue
         r2_c = fits["celsius"][0]
+        _check_swapped(values, col, 1.0 - r2_c, source)
         for name, what in (
             ("t_int_c_fahrenheit", "t_int_c"),
             ("chamber_fahrenheit", col),
@@ -561,6 +568,30 @@ def _check_fahrenheit(values: dict[str, np.ndarray], source: str) -> tuple[str, 
                     "(a device unlike a one- or two-pole lag can also fit so)"
                 )
     return tuple(warned)
+
+
+def _check_swapped(
+    values: dict[str, np.ndarray], col: str, residual_share: float, source: str
+) -> None:
+    """Refuse a log whose ``t_int_c`` and chamber column ``col`` are swapped: the device
+    lags its chamber, so the chamber as a lag of the device fits far worse than the
+    device as a lag of the chamber (residual shares 16 to 10^4 times larger on 377
+    genuine and red-team logs); swapped, the other way round (red team: the estimate was
+    of the setpoint, silently). Only where the device fits poorly as a lag of the chamber
+    (``residual_share`` above :data:`SWAP_MIN_RESIDUAL_SHARE`, e.g. 0.75 swapped)."""
+    if residual_share <= SWAP_MIN_RESIDUAL_SHARE:
+        return
+    rev = unit_fits(values["time_s"], values[col], values["t_int_c"])
+    if rev is None:
+        return
+    rev_share = 1.0 - rev["celsius"][0]
+    if residual_share > SWAP_RATIO * max(rev_share, 1e-300):
+        raise LogFormatError(
+            f"{source}: t_int_c and {col} look swapped: {col} follows t_int_c as a lag "
+            f"({100 * (1 - rev_share):.1f} % of its variance) where a device follows its "
+            f"chamber; t_int_c as a lag of {col} explains {100 * (1 - residual_share):.1f} % "
+            "of it; check the column names (t_int_c is the device's internal temperature)"
+        )
 
 
 def _room_temperature_in_fahrenheit(values: dict[str, np.ndarray]) -> tuple[str, ...]:

@@ -134,6 +134,20 @@ def test_fahrenheit_inside_the_plausible_range_is_caught():
         log_from_frame(f.drop(columns="tk_set_c").assign(tk_air_c=_fahrenheit(f["tk_air_c"])))
 
 
+def test_a_device_column_swapped_with_its_chamber_is_refused():
+    """Red team: with t_int_c and tk_set_c swapped the gradient of the setpoint was
+    estimated, silently. A device lags its chamber; swapped, the 'chamber' lags the
+    'device' (the sample run: 99.6 % against 25 %). The log as it is: read."""
+    f = pd.read_csv(DATA / "sample_run_exp1.csv")
+    log_from_frame(f)
+    swapped = f.rename(columns={"t_int_c": "tk_set_c", "tk_set_c": "t_int_c"})
+    with pytest.raises(LogFormatError, match="t_int_c and tk_set_c look swapped"):
+        log_from_frame(swapped)
+    air = f.drop(columns="tk_set_c").rename(columns={"t_int_c": "tk_air_c", "tk_air_c": "t_int_c"})
+    with pytest.raises(LogFormatError, match="t_int_c and tk_air_c look swapped"):
+        log_from_frame(air)
+
+
 def test_a_log_wholly_in_fahrenheit_is_told_by_its_room_temperature_ends():
     """Red team: every temperature column in F (the slopes all 1:1, so the slope checks
     cannot see it) was estimated, diagnosed (dT0 5.4 "degC") and fitted without a word.
