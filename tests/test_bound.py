@@ -365,20 +365,32 @@ def test_a_request_asked_twice_is_bounded_once_and_its_profiles_cannot_be_change
 
 def test_the_chamber_limit_said_to_be_needed_is_one_the_bound_allows():
     """Red team: "a floor of at most -54.25 °C is needed" read as a fix, but the bound
-    there was 624 min against the 540-min budget. The floor said is now one where the
-    proven bound fits the budget, and 1.25 °C less far it does not."""
+    there was 624 min against the 540-min budget. The floor said is now the last one the
+    proven bound rules out (to 0.25 °C), with the first that fits beside it. A second red
+    team: "-44.25 needed" where -43.3 fits the bound and -44 plans: the reach had one
+    degree too many (floor + dT0 must pass the edge and its margin, no more)."""
     import re
 
     from schedsyn.planner.explain import explain_shortfall
 
     spec = ExperimentSpec("r09", -50.0, -40.0, -52.0, -30.0)
     params, limits = ThermalParams(2400.0, 3.0), Limits(chamber_min_c=-45.0)
-    (note,) = [n for n in explain_shortfall(spec, params, limits) if "floor of at most" in n]
-    floor = float(re.search(r"a floor of at most (-?[\d.]+) °C is needed", note).group(1))
+    (note,) = [n for n in explain_shortfall(spec, params, limits) if "floor below" in n]
+    m = re.search(r"a floor below (-?[\d.]+) °C is needed .*; (-?[\d.]+) °C fits the bound", note)
+    ruled_out, fits = float(m.group(1)), float(m.group(2))
     assert "necessary, not sufficient" in note
 
     def bound(f):
         return duration_lower_bound(spec, params, Limits(chamber_min_c=f)).lower_bound_min
 
-    assert bound(floor) <= limits.duration_max_min < bound(floor + 1.25)
-    assert floor < -54.25  # below the bare reach, where the bound was 624 min
+    assert bound(fits) <= limits.duration_max_min < bound(ruled_out)
+    assert 0 < ruled_out - fits <= 0.5  # the bisection's resolution, rounded outward
+    assert ruled_out < -53.25  # past the bare reach (-50 - 0.25 - 3), where it was 624 min
+    # the red team's request: reach -43.25, not -44.25; the bound fits at -43.3
+    spec2 = ExperimentSpec("p02", -40.0, -36.0, -45.0, -30.0)
+    (note,) = [
+        n
+        for n in explain_shortfall(spec2, params, Limits(chamber_min_c=-43.0))
+        if "floor below" in n
+    ]
+    assert "a floor below -43.25 °C is needed" in note, note

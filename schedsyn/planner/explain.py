@@ -26,7 +26,7 @@ def explain_shortfall(spec: ExperimentSpec, params: ThermalParams, limits: Limit
     g_cool = (spec.working_lo_c - (limits.chamber_min_c + params.dt0_c)) / tau
     if g_cool <= 0:
         floor_t = limits.chamber_min_c + params.dt0_c
-        reach = spec.working_lo_c - spec.edge_margin_c - params.dt0_c - 1
+        reach = spec.working_lo_c - spec.edge_margin_c - params.dt0_c
         notes.append(
             f"the chamber floor {limits.chamber_min_c:g} °C cannot bring the device below "
             f"{floor_t:g} °C (floor + dT0), so the bins below it are unreachable; "
@@ -49,7 +49,7 @@ def explain_shortfall(spec: ExperimentSpec, params: ThermalParams, limits: Limit
         )
     g_heat = (limits.chamber_max_c + params.dt0_c - spec.working_hi_c) / tau
     if g_heat <= 0:
-        reach = spec.working_hi_c + spec.edge_margin_c - params.dt0_c + 1
+        reach = spec.working_hi_c + spec.edge_margin_c - params.dt0_c
         notes.append(
             f"the chamber ceiling {limits.chamber_max_c:g} °C cannot bring the device above "
             f"{limits.chamber_max_c + params.dt0_c:g} °C (ceiling + dT0), so the bins above "
@@ -118,14 +118,17 @@ def _limit_needed(
     sign: float,
 ) -> str:
     """What a chamber limit (``name``, moved in the direction ``sign``) must at least be:
-    past ``reach_c`` (the device must reach the region's edge) and far enough that the
-    proven duration bound fits the budget. Said as necessary, not sufficient (red team:
-    "a floor of at most -54.25 °C is needed" read as a fix, but the bound there was 624
-    min against a 540-min budget; planning found -57 °C)."""
+    past ``reach_c`` (limit + dT0 past the region's edge and its margin: the device only
+    approaches limit + dT0) and far enough that the proven duration bound fits the
+    budget, found by bisection to :data:`LIMIT_RESOLUTION_C`. Said as necessary, not
+    sufficient (red team: "a floor of at most -54.25 °C is needed" read as a fix, but the
+    bound there was 624 min against a 540-min budget; planning found -57 °C). The
+    figure is the last one the bound rules out (a red team found "-44.25 needed" where
+    -43.3 fits the bound and -44 plans: one degree too many, then rounded outward)."""
     from .bound import duration_lower_bound
 
     word = "floor" if sign < 0 else "ceiling"
-    than = "at most" if sign < 0 else "at least"
+    past = "below" if sign < 0 else "above"
 
     def fits(value: float) -> bool:
         try:
@@ -135,22 +138,25 @@ def _limit_needed(
         bound = duration_lower_bound(spec, params, moved).lower_bound_min
         return math.isfinite(bound) and bound <= limits.duration_max_min
 
-    value = reach_c
-    if not fits(value):
-        far = reach_c + sign * LIMIT_SEARCH_C
-        if not fits(far):
-            return (
-                f"a {word} of {than} {reach_c:g} °C is needed to reach the region, and even "
-                f"{far:g} °C leaves the proven duration bound above the "
-                f"{limits.duration_max_min:g}-min budget (see --advise)"
-            )
-        near = value  # bisect: near does not fit, far does
+    near, far = reach_c, reach_c + sign * LIMIT_SEARCH_C
+    if not fits(far):
+        return (
+            f"a {word} {past} {reach_c:g} °C is needed to reach the region ({word} + dT0 "
+            f"past the edge and its {spec.edge_margin_c:g} °C margin), and even {far:g} °C "
+            f"leaves the proven duration bound above the {limits.duration_max_min:g}-min "
+            "budget (see --advise)"
+        )
+    if not fits(near):  # bisect: near does not fit, far does
         while abs(far - near) > LIMIT_RESOLUTION_C:
             mid = 0.5 * (near + far)
             near, far = (near, mid) if fits(mid) else (mid, far)
-        value = math.floor(far) if sign < 0 else math.ceil(far)
+    # the last value ruled out, to the resolution, rounded towards the region (still ruled
+    # out); the device never quite reaches limit + dT0, so reach_c itself is ruled out
+    step = LIMIT_RESOLUTION_C
+    shown = math.ceil(near / step) * step if sign < 0 else math.floor(near / step) * step
+    shown = max(shown, near) if sign < 0 else min(shown, near)
     return (
-        f"a {word} of {than} {value:g} °C is needed (to reach the region and for the proven "
-        f"duration bound to fit {limits.duration_max_min:g} min; necessary, not sufficient: "
-        "--advise plans with it to check)"
+        f"a {word} {past} {shown:g} °C is needed (to reach the region and for the proven "
+        f"duration bound to fit {limits.duration_max_min:g} min; {far:.2f} °C fits the "
+        "bound; necessary, not sufficient: --advise plans with it to check)"
     )
