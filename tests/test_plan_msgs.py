@@ -193,11 +193,19 @@ def test_a_partial_plan_that_breaks_a_limit_has_status_limits_violated():
     best = _best_partial([plan], spec, params, limits, ())
     assert best is not None and best.status == "limits violated"
     (note,) = [n for n in best.notes if n.startswith("PARTIAL")]
-    assert "no plan within the limits" in note and "BREAKS A LIMIT" in note, note
+    assert "found no plan within the limits" in note and "BREAKS A LIMIT" in note, note
+    assert "(not a proof)" in note
     # and one within its limits stays "incomplete"
     within = dataclasses.replace(plan, limits=Limits(), violations=())
     ok = _reported_for(within, spec, params, Limits(), (), "PARTIAL: test (x")
     assert ok.status == "incomplete" and ok.violations == ()
+    # a search result, not a proof (red team: "no plan gives every bin even 2 levels"
+    # where a hand-made 3-step, 239-min table gives them)
+    best = _best_partial([within], spec, params, Limits(), ())
+    assert best is not None
+    (note,) = [n for n in best.notes if n.startswith("PARTIAL")]
+    assert "the search found no plan that gives every bin even 2 levels" in note, note
+    assert "not a proof" in note
 
 
 # -- 5. the effort note says what stopped the search, in the limit's own unit ---------------

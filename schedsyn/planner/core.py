@@ -1343,15 +1343,17 @@ def _best_partial(
         # it may give every bin k levels, but not within the limits (red team: "no plan
         # gives every bin even 2 levels ...; this one gives 2 levels to 100% of the bins")
         head = (
-            f"PARTIAL: no plan within the limits gives every bin even {k} levels within "
-            f"{limits.duration_max_min:g} min; the best found gives {k} levels to "
+            f"PARTIAL: the search found no plan within the limits that gives every bin even "
+            f"{k} levels within {limits.duration_max_min:g} min (not a proof); the best found "
+            f"gives {k} levels to "
             f"{best.coverage.coverage:.0%} of the bins{part} but BREAKS A LIMIT (see the "
             "violations; the part of the region that fits"
         )
     else:
         head = (
-            f"PARTIAL: no plan gives every bin even {k} levels within "
-            f"{limits.duration_max_min:g} min; this one gives {k} levels to "
+            f"PARTIAL: the search found no plan that gives every bin even {k} levels "
+            f"within {limits.duration_max_min:g} min (not a proof: a programme of another "
+            f"shape may); this one gives {k} levels to "
             f"{best.coverage.coverage:.0%} of the bins{part} (the part of the region that fits"
         )
     return _reported_for(best, spec, params, limits, notes, head)
