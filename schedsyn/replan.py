@@ -1121,6 +1121,7 @@ class ReplanResult:
                     for lo, n, u in self.fewer_levels_bins()
                 ],
                 "new_steps_from_min": self.new_steps_from_min,
+                "end": self.end_state(),
                 "lead_min": self.lead_min,
                 "replan_s": self.replan_s,
                 "planner_s": self.planner_s,
@@ -1173,6 +1174,9 @@ class ReplanResult:
                 + (f" and {len(short) - 10} more" if len(short) > 10 else "")
             )
         lines.extend(f"problem: {x}" for x in self.prediction.problems)
+        end = self.end_line()
+        if end is not None:
+            lines.append(end)
         fewer = self.fewer_levels_bins()
         if fewer:
             lines.append(
@@ -1198,6 +1202,35 @@ class ReplanResult:
             lines.append(late)
         lines.extend(f"note: {n}" for n in r.notes)
         return "\n".join(lines)
+
+    def end_state(self) -> dict[str, float]:
+        """Where the chosen run leaves the device: its predicted temperature when the
+        programme ends, where it settles with the chamber held at the end temperature
+        (``end + dT0`` of the model for the rest) and the minutes that takes to come within
+        the plan's end tolerance, ``tau ln(|T_end - settle| / tol)`` (first order, the
+        model's tau; 0 when already within). Red team: a rest that ended with the device
+        at 41 degC against 20 + dT0 said nothing of the 2-3 h it still needed."""
+        limits = self.request.plan.limits
+        _, temp, _ = run_series(self.request, self.programme)
+        t_end = float(temp[-1])
+        settle = float(self.programme.end_c) + self.request.model.dt0_c
+        gap = abs(t_end - settle)
+        tol = limits.end_tol_c
+        soak = 0.0 if gap <= tol else self.request.model.tau_s / 60.0 * math.log(gap / tol)
+        return {"device_end_c": t_end, "settles_at_c": settle, "end_soak_min": math.ceil(soak)}
+
+    def end_line(self) -> str | None:
+        """The end-soak line of :meth:`summary` (None when the device ends settled)."""
+        e = self.end_state()
+        if e["end_soak_min"] <= 0:
+            return None
+        return (
+            f"end: the device is predicted at {e['device_end_c']:.1f} °C when the programme "
+            f"ends; with the chamber held at {self.programme.end_c:g} °C it needs about "
+            f"{e['end_soak_min']:g} min more to come within ±"
+            f"{self.request.plan.limits.end_tol_c:g} °C of where it settles "
+            f"({e['settles_at_c']:.1f} °C, the model for the rest)"
+        )
 
     def fewer_levels_bins(self) -> list[tuple[float, int, int]]:
         """Bins the chosen new steps leave short with fewer levels than the plan unchanged

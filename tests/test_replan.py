@@ -476,6 +476,20 @@ def test_replan_cli_keeps_the_executed_steps_and_the_true_run_reaches_its_claim(
     assert np.all(np.abs(levels - claimed) <= 1)
     assert np.all(levels >= LEVELS)  # replan.json says complete
     assert total == pytest.approx(meta["predicted"]["duration_min"]) and total <= 540.0
+    # where the run leaves the device: its end temperature and the soak it still needs,
+    # against scipy's integration on the true device (red team: a rest ending with the
+    # device at 41 degC said nothing of the hours it still needed)
+    steps = pd.read_csv(out / "steps.csv", comment="#")
+    edges = np.concatenate(([0.0], np.cumsum(steps["duration_min"].to_numpy())))
+    temps = np.concatenate((steps["tk_start_c"].to_numpy()[:1], steps["tk_end_c"].to_numpy()))
+    end_t, _ = _ode(edges, temps, truth.tau_s, truth.dt0_c, 20.0, (0.0, edges[-1]), edges[-1:])
+    end = meta["end"]
+    assert end["device_end_c"] == pytest.approx(float(end_t[0]), abs=0.3)
+    assert end["settles_at_c"] == pytest.approx(temps[-1] + truth.dt0_c, abs=0.5)
+    gap = abs(float(end_t[0]) - (temps[-1] + truth.dt0_c))
+    soak = truth.tau_s / 60.0 * np.log(gap / 0.5) if gap > 0.5 else 0.0
+    assert end["end_soak_min"] == pytest.approx(soak, rel=0.1, abs=3.0)
+    assert ("end: the device is predicted at" in printed.out) == (end["end_soak_min"] > 0)
     # the plan unchanged would not have been complete on this device
     old_grads, _ = _true_levels(plan_dir / "steps.csv", truth)
     assert min(distinct_levels(g, DELTA) for g in old_grads) < LEVELS

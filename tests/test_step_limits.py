@@ -51,6 +51,19 @@ def test_min_step_min_is_met_and_the_plan_stays_complete(free_plan, tmp_path):
     assert check["coverage"] == 1.0
 
 
+def test_a_small_controller_gets_a_complete_table_on_long_segments(tmp_path):
+    """Red team p17: [0, 5] degC, 6 levels, max_steps 15 (a small controller). 2x and 3x
+    segments were not enough and it came back "limits violated" with 38 steps after
+    187 s (a hand-made 7-ramp table does it in 324 min); with 5x and 10x tried too:
+    complete within 15 steps, re-checked by scipy and separate counting."""
+    spec = ExperimentSpec("p17", 0.0, 5.0, -10.0, 15.0, max_steps=15)
+    plan = plan_experiment(spec)
+    assert plan.complete and plan.steps <= 15, (plan.status, plan.violations, plan.notes)
+    check = table_check(plan.programme.to_csv(tmp_path / "s.csv"), (0.0, 5.0), 6)
+    assert check["coverage"] == 1.0 and check["duration_min"] <= 540.0
+    assert any("-min segments" in n for n in plan.notes)
+
+
 def test_an_impossible_step_limit_is_reported_not_hidden():
     plan = plan_experiment(dataclasses.replace(SPEC, max_steps=3), limits=LIMITS)
     assert not plan.complete and plan.status == "limits violated"

@@ -43,7 +43,7 @@ REPOLISH_PAD_C = 0.05
 MAX_SEGMENT_MIN = 30
 #: Segment lengths (multiples of the requested one) tried when merging steps cannot meet
 #: max_steps.
-COARSER_FACTORS = (2, 3)
+COARSER_FACTORS = (2, 3, 5, 10)
 #: Effort after which a plan's optional searches stop (the partial-coverage fallbacks,
 #: the graded search for fewer levels; see :func:`plan_experiment`), in reference seconds
 #: (:data:`LP_NONZEROS_PER_EFFORT_S`).
