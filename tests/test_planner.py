@@ -430,8 +430,9 @@ def test_a_bin_the_chamber_cannot_reach_is_named_in_the_error_with_the_floor_it_
     msg = str(info.value)
     assert "some bin cannot be crossed at all" in msg and "inf min" not in msg
     assert "not searched" not in msg  # the levels were searched (for a partial plan)
-    # the binding limit and the floor that would do: lo - edge margin - dT0 - 1 degC
-    assert "cannot bring the device below 1.5 °C" in msg and "at most -4.25 °C" in msg
+    # the binding limit and the floor it needs: past lo - edge margin - dT0 = -3.25 degC
+    assert "cannot bring the device below 1.5 °C" in msg
+    assert "a floor below -3.25 °C is needed" in msg
     assert "\n" not in msg  # one line for the CLI
     # the cause leads (it came after what the search saw), and no advice that cannot help
     assert msg.startswith("unreachable: no complete plan exists") and "The search:" in msg
@@ -474,12 +475,15 @@ def test_shortfall_names_the_binding_chamber_limit():
     w1 = ExperimentSpec("W1", -50, -30, -52, -20)
     notes = explain_shortfall(w1, ThermalParams(), Limits(chamber_min_c=-52.0))
     assert any("cannot bring the device below -49" in n for n in notes)
-    # the ceiling's side: reaching the region needs hi + edge margin - dT0 + 1 = 58.25 degC,
-    # and the proven duration bound fits 540 min only from 62 degC (the first whole degree
-    # past the bisection's 0.25 degC)
+    # the ceiling's side: reaching the region needs a ceiling past hi + edge margin - dT0
+    # = 57.25 degC, and the proven duration bound fits 540 min only past 61.25 degC (the
+    # last value it rules out, to the bisection's 0.25 degC; 61.47 fits)
     w4 = ExperimentSpec("W4", 30, 60, 20, 62)
     notes = explain_shortfall(w4, ThermalParams(), Limits(chamber_max_c=55.0))
-    assert any("cannot bring the device above 58" in n and "at least 62 °C" in n for n in notes)
+    assert any(
+        "cannot bring the device above 58" in n and "a ceiling above 61.25 °C is needed" in n
+        for n in notes
+    ), notes
     notes = explain_shortfall(w1, ThermalParams(), Limits(chamber_min_c=-60.0))
     assert any("0.175" in n for n in notes)  # (Tk_min + dT0 - T)/tau at -50 degC
     assert explain_shortfall(w1, ThermalParams(), Limits()) == []
