@@ -96,6 +96,7 @@ def test_an_end_soak_that_does_not_fit_is_a_clear_error(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--end-soak" in err and "does not fit" in err
     assert "140 min" in err
+    assert "--objective informative with --end-soak" in err  # what may fit instead
     assert not out.exists()
 
 

@@ -458,7 +458,15 @@ def with_end_soak(plan: Plan, model=None) -> Plan:
     try:  # the metadata records the soak the table includes (end_soak_included_min)
         prog = base.with_meta(base.meta or StepTableMeta()).with_end_soak(soak, plan.limits)
     except ParameterError as exc:
-        raise ParameterError(f"{plan.spec.name}: --end-soak: {exc}") from None
+        hint = (
+            "; or try --objective informative with --end-soak (objective = "
+            '"informative" in a campaign\'s [settings]): it plans the run to end settled '
+            "within the limit where it can (red team: 399 of 400 min where this plan's "
+            "soak did not fit)"
+            if plan.spec.objective != "informative"
+            else ""
+        )
+        raise ParameterError(f"{plan.spec.name}: --end-soak: {exc}{hint}") from None
     # the soak runs after the planned sweeps, so the device passes bins again: check anew
     scenarios = tuple(plan.scenarios) or (plan.params,)
     cov, cov01, problems, t_lo, t_hi = check_programme(
