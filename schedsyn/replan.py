@@ -460,6 +460,8 @@ class RunPrediction:
     #: chosen: the controller cannot be loaded with it (red team: W4 at minute 30, a
     #: 117-step rest against ``max_steps`` 80 was taken with ``problems`` empty).
     table_problems: tuple[str, ...] = ()
+    #: the device's predicted temperature when the programme ends, degC
+    device_end_c: float = math.nan
 
     @property
     def complete(self) -> bool:
@@ -597,7 +599,7 @@ def predict_run(request: ReplanRequest, programme: Programme) -> RunPrediction:
             f"{request.at_min:g}, outside its limits {lim.device_min_c:g} .. "
             f"{lim.device_max_c:g} °C"
         )
-    return RunPrediction(programme, cov, lo, hi, tuple(problems))
+    return RunPrediction(programme, cov, lo, hi, tuple(problems), device_end_c=float(temp[-1]))
 
 
 def with_table_problems(run: RunPrediction, table: Sequence[str]) -> RunPrediction:
@@ -1211,8 +1213,7 @@ class ReplanResult:
         model's tau; 0 when already within). Red team: a rest that ended with the device
         at 41 degC against 20 + dT0 said nothing of the 2-3 h it still needed."""
         limits = self.request.plan.limits
-        _, temp, _ = run_series(self.request, self.programme)
-        t_end = float(temp[-1])
+        t_end = self.prediction.device_end_c  # (predict_run's series, not run again)
         settle = float(self.programme.end_c) + self.request.model.dt0_c
         gap = abs(t_end - settle)
         tol = limits.end_tol_c

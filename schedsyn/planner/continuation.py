@@ -329,9 +329,8 @@ def plan_continuation(
             best_coverage=0.0,
         )
     _, programme, mg, mt, search, check = best
-    spoilt = max(step_limited, default=-1.0) > check[0].coverage or (
-        bool(step_limited) and not check[0].complete
-    )
+    # (a complete rest covers every bin: none the step limits spoilt can cover more)
+    spoilt = bool(step_limited) and not check[0].complete
     return programme, mg, mt, search, notes, check, spoilt
 
 
