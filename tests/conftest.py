@@ -25,12 +25,18 @@ WHOLE_MODULES = frozenset(
     for name in ("advise", "graded_effort", "informative", "reach", "replan", "split")
 )
 
+#: Modules that read another whole module's memo run in that module's unit, after it:
+#: test_replan_choice asks test_replan's ``PLANNED`` the requests test_replan asked (its
+#: step-limit test took 0.8 s after test_replan on the same worker, 25 s on the other).
+SAME_UNIT_AS = {"tests/test_replan_choice.py": "tests/test_replan.py"}
+
 
 @pytest.hookimpl(optionalhook=True)  # a plain pytest (no xdist) does not know the hook
 def pytest_xdist_make_scheduler(config, log):
     """``--dist loadgroup`` (scripts/test.sh): the modules of :data:`WHOLE_MODULES` as one
-    unit each, every other test alone; the units in order of size (the whole modules
-    first), pytest-xdist's load-scope scheduling. Other ``--dist`` modes: xdist's own."""
+    unit each (with those of :data:`SAME_UNIT_AS` in theirs), every other test alone; the
+    units in order of size (the whole modules first), pytest-xdist's load-scope
+    scheduling. Other ``--dist`` modes: xdist's own."""
     if config.getvalue("dist") != "loadgroup":
         return None
     from xdist.scheduler import LoadScopeScheduling
@@ -38,6 +44,7 @@ def pytest_xdist_make_scheduler(config, log):
     class WholeModules(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
             module = nodeid.split("::", 1)[0]
+            module = SAME_UNIT_AS.get(module, module)
             return module if module in WHOLE_MODULES else nodeid
 
     return WholeModules(config, log)

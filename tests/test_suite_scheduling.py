@@ -14,7 +14,10 @@ pytest.importorskip("xdist")
 HERE = Path(__file__).resolve().parent
 
 
-def test_a_whole_module_runs_on_one_worker_and_the_rest_spread(tmp_path):
+def _run_two_workers(tmp_path, modules: tuple[str, ...]) -> list[tuple[str, str, str]]:
+    """Six 0.2-s tests in each of ``modules`` (copies of the suite's conftest.py beside
+    them), run on two workers under ``--dist loadgroup``: (worker, module, test) in the
+    order they passed."""
     tests = tmp_path / "tests"
     tests.mkdir()
     shutil.copy(HERE / "conftest.py", tests / "conftest.py")
@@ -23,8 +26,8 @@ def test_a_whole_module_runs_on_one_worker_and_the_rest_spread(tmp_path):
     body = "import time\n\n\n" + "".join(
         f"def test_{i}():\n    time.sleep(0.2)\n\n\n" for i in range(6)
     )
-    (tests / "test_split.py").write_text(body)  # one of WHOLE_MODULES
-    (tests / "test_other.py").write_text(body)
+    for module in modules:
+        (tests / f"{module}.py").write_text(body)
     run = subprocess.run(
         [
             sys.executable,
@@ -44,6 +47,18 @@ def test_a_whole_module_runs_on_one_worker_and_the_rest_spread(tmp_path):
         timeout=300,
     )
     assert run.returncode == 0, run.stdout + run.stderr
-    where = re.findall(r"\[(gw\d)\].*PASSED tests/(test_\w+)\.py::", run.stdout)
-    assert len(where) == 12, run.stdout
-    assert len({w for w, m in where if m == "test_split"}) == 1, run.stdout
+    where = re.findall(r"\[(gw\d)\].*PASSED tests/(test_\w+)\.py::(test_\d)", run.stdout)
+    assert len(where) == 6 * len(modules), run.stdout
+    return where
+
+
+def test_a_whole_module_runs_on_one_worker_and_the_rest_spread(tmp_path):
+    where = _run_two_workers(tmp_path, ("test_split", "test_other"))  # split: a whole module
+    assert len({w for w, m, _ in where if m == "test_split"}) == 1, where
+
+
+def test_a_module_reading_a_whole_modules_memo_runs_after_it_on_its_worker(tmp_path):
+    where = _run_two_workers(tmp_path, ("test_replan", "test_replan_choice", "test_other"))
+    unit = [(w, m) for w, m, _ in where if m != "test_other"]
+    assert len({w for w, _ in unit}) == 1, where  # one worker
+    assert [m for _, m in unit] == ["test_replan"] * 6 + ["test_replan_choice"] * 6, where
