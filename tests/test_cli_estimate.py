@@ -255,9 +255,16 @@ def test_compare_refuses_a_log_that_is_not_a_run_of_the_step_table(
     err = capsys.readouterr().err.strip().splitlines()[-1]  # after the progress lines
     assert rc == 2 and err.startswith("schedsyn compare: error:") and re.search(message, err), err
     assert not out.exists()
-    # the run itself is its step table's: its setpoint logged to 1 °C and 20 s late, or
-    # 60 s late, and a log that begins 12 min into the programme (verification: refused,
-    # with the advice to shift its times, which would have misaligned it)
+
+
+def test_compare_takes_a_run_of_the_step_table_logged_late_rounded_or_begun_late(
+    clean_log_path, tmp_path, capsys
+):
+    """The refusals above spare the table's own run: its setpoint logged to 1 °C and 20 s
+    late, or 60 s late, and a log that begins 12 min into the programme (verification:
+    refused, with the advice to shift its times, which would have misaligned it)."""
+    path = tmp_path / "log.csv"
+    out = tmp_path / "out"
     clean = pd.read_csv(clean_log_path)
     for late_s, rounded, start_min in ((20.0, True, 0.0), (60.0, False, 0.0), (0.0, False, 12)):
         ok = clean.copy()
