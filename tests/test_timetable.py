@@ -96,53 +96,10 @@ def test_region_holding_the_start_with_odd_levels(tmp_path):
     assert_complete_independently(res, spec, PARAMS, limits, tmp_path)
 
 
-@pytest.mark.slow
-def test_hot_edge_just_below_the_device_limit(tmp_path):
-    """Red team r05: the hot edge 0.3 degC below the device limit (``[40, 44]`` degC,
-    device 44.3), 6 levels in 540 min. The tracked starts overshoot the limit (45.0 degC:
-    the fast ranks reach the hot edge sep apart); the LPs kept the limit hard only where
-    the iterate was already inside, and the merit did not count it, so every SLP
-    converged at 44.8-45.0 degC and no rounded table passed (the campaign printed 2
-    levels). With the excess in the merit and soft rows in the LP: complete (223 min)."""
-    spec = ExperimentSpec(
-        name="tt-hot-edge",
-        working_lo_c=40.0,
-        working_hi_c=44.0,
-        approx_lo_c=30.0,
-        approx_hi_c=44.3,
-        levels_required=6,
-        delta_c_per_min=0.05,
-        segment_min=3,
-    )
-    limits = Limits(device_max_c=44.3, duration_max_min=540.0)
-    res = timetable_search(spec, PARAMS, limits, max_lps=200, first_found=True)
-    assert res is not None
-    assert_complete_independently(res, spec, PARAMS, limits, tmp_path)
-
-
-@pytest.mark.slow
-def test_a_ceiling_just_past_the_region_with_no_self_heating(tmp_path):
-    """Red team q13: [30, 33] degC, tau 600 s, dT0 0, chamber ceiling 34 degC, 8 levels in
-    360 min. The tracked start kept the chamber 1 degC inside its ceiling, so the device
-    (dT0 0) never turned past 33 + depth and no start finished; and the 3/5 split found
-    nothing in its share of the LPs. With the margin half the room: complete; with a 2/6
-    split tried as well, sooner (14 s against 40 s; 314 min, their own generator 342)."""
-    spec = ExperimentSpec(
-        name="tt-ceiling",
-        working_lo_c=30.0,
-        working_hi_c=33.0,
-        approx_lo_c=20.0,
-        approx_hi_c=34.0,
-        levels_required=8,
-    )
-    params = ThermalParams(600.0, 0.0)
-    limits = Limits(chamber_max_c=34.0, duration_max_min=360.0)
-    said: list[str] = []
-    res = timetable_search(spec, params, limits, first_found=True, progress=said.append)
-    assert any("split 3/5 or 2/6" in m for m in said), said[:3]
-    assert res is not None
-    lev = assert_complete_independently(res, spec, params, limits, tmp_path)
-    assert lev.min() >= 8
+# Two red-team requests the stage once failed end to end -- the hot edge 0.3 degC below
+# the device limit (r05) and a chamber ceiling 1 degC past a tau-600 s region (q13), 20-30 s
+# of search each -- are REGRESSIONS rows of scripts/bench_timetable.py, each table re-checked
+# by scripts/check_tables.py; the unit tests of what fixed them are the two below.
 
 
 def test_the_tracked_start_keeps_room_to_turn_under_a_near_ceiling():
