@@ -65,9 +65,12 @@ def test_a_small_controller_gets_a_complete_table_on_long_segments(tmp_path):
 
 
 def test_an_impossible_step_limit_is_reported_not_hidden():
-    plan = plan_experiment(dataclasses.replace(SPEC, max_steps=3), limits=LIMITS)
+    # SPEC's 2 degC-wide corner: the same answer as SPEC (27 steps) in 3 s instead of 17
+    spec = dataclasses.replace(SPEC, working_lo_c=-6.0, approx_lo_c=-14.0, max_steps=3)
+    plan = plan_experiment(spec, limits=LIMITS)
     assert not plan.complete and plan.status == "limits violated"
     assert any("max_steps = 3" in v for v in plan.violations)
+    assert plan.steps > 3 and plan.programme.n_segments == plan.steps
 
 
 def test_a_request_too_short_for_its_levels_gets_the_most_levels_every_bin_can_have(tmp_path):
