@@ -75,6 +75,7 @@ class RunComparison:
     run_coverage_low: CoverageReport | None = None
     run_coverage_high: CoverageReport | None = None
     notes: tuple[str, ...] = ()
+    t0_c: float = 20.0
 
     @property
     def borderline_bins(self) -> int:
@@ -137,6 +138,7 @@ class RunComparison:
             "rows": self.log.n_rows,
             "tau_s": self.params.tau_s,
             "dt0_c": self.params.dt0_c,
+            "t0_c": self.t0_c,
             "rms_residual_c": self.rms_residual_c,
             "max_abs_residual_c": self.max_abs_residual_c,
             "estimator": est.method,
@@ -285,6 +287,57 @@ def check_run_of(log: MeasuredLog, programme: Programme) -> None:
     )
 
 
+#: A log whose first reading is this close to the programme's start (min) holds the
+#: device's start temperature (:func:`log_start_c`, read from a line through the readings
+#: of its first LOG_START_FIT_MIN minutes).
+LOG_START_WITHIN_MIN = 1.0
+LOG_START_FIT_MIN = 2.0
+#: A start this far from the simulation's start temperature (degC) gets :func:`start_note`.
+START_NOTE_C = 1.0
+
+
+def log_start_c(log: MeasuredLog) -> float:
+    """The device's temperature at the programme's start, degC: a straight line through
+    the log's readings of its first :data:`LOG_START_FIT_MIN` minutes, at the programme's
+    start (neither one reading's noise nor the first minutes' drift is taken for the
+    start; fewer than three readings: their median). Raises
+    :class:`ParameterError` when the log begins later than :data:`LOG_START_WITHIN_MIN`
+    after the programme's start (the start is then not in the log: give it as a number)."""
+    ok = np.isfinite(log.t_int_c)
+    t, y = log.time_min[ok], log.t_int_c[ok]
+    if t.size == 0 or float(t[0]) > LOG_START_WITHIN_MIN:
+        first = float(t[0]) if t.size else float("nan")
+        raise ParameterError(
+            f"{log.source}: the first reading of t_int_c is at {first:g} min, not within "
+            f"{LOG_START_WITHIN_MIN:g} min of the programme's start, so the log does not "
+            "hold the device's start temperature: give it as a number (--t0-c T)"
+        )
+    first = t <= t[0] + LOG_START_FIT_MIN
+    if first.sum() < 3:
+        return float(np.median(y[first]))
+    _, intercept = np.polyfit(t[first], y[first], 1)
+    return float(intercept)
+
+
+def start_note(log: MeasuredLog, t0_c: float, params: ThermalParams) -> str | None:
+    """A note when the log's first reading (:func:`log_start_c`) lies more than
+    :data:`START_NOTE_C` from ``t0_c``, the temperature the simulation starts from (the
+    plan's ``t_init_c``): the residual of the first hours is then partly that start,
+    decaying with tau. None otherwise, or when the log begins later."""
+    try:
+        first = log_start_c(log)
+    except ParameterError:
+        return None
+    if abs(first - t0_c) <= START_NOTE_C:
+        return None
+    return (
+        f"the log starts at {first:.2f} °C, the simulation at {t0_c:g} °C (the plan's start "
+        f"temperature): the residual of the first hours is partly that start (it decays "
+        f"with tau {params.tau_s:g} s); --t0-c log starts the simulation at the log's first "
+        "readings"
+    )
+
+
 def device_follows_note(log: MeasuredLog, programme: Programme) -> str | None:
     """Without a setpoint column, a warning when the device cannot be a first-order lag of
     the programme (:func:`device_fit_rms_c` above :data:`RUN_DEVICE_FIT_RMS_MAX_C`), else
@@ -385,7 +438,9 @@ def compare_run(
     q, r : float, optional
         Fixed noise levels (see :func:`schedsyn.estimate.estimate_gradient`).
     t0_c : float
-        Internal temperature at t = 0 assumed by the plan, degC.
+        Internal temperature at the programme's start that the simulation begins from,
+        degC: the plan's (its ``t_init_c``), or the log's own (:func:`log_start_c`). A
+        first reading more than :data:`START_NOTE_C` from it is noted (:func:`start_note`).
     dt_min : float
         Step of the dense plan simulation, min.
     """
@@ -423,7 +478,8 @@ def compare_run(
             levels_required,
             max(delta_c_per_min - margin, 0.05 * delta_c_per_min),
         )
-    note = device_follows_note(log, programme) if log.tk_set_c is None else None
+    notes = [device_follows_note(log, programme) if log.tk_set_c is None else None]
+    notes.append(start_note(log, t0_c, params))
     return RunComparison(
         log,
         est,
@@ -436,5 +492,6 @@ def compare_run(
         margin,
         low,
         high,
-        notes=() if note is None else (note,),
+        notes=tuple(n for n in notes if n is not None),
+        t0_c=float(t0_c),
     )

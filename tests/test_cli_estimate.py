@@ -339,3 +339,45 @@ def test_compare_without_a_chamber_column_warns_of_a_device_that_is_no_run_of_th
     assert main(args) in (0, 1), capsys.readouterr().err
     assert "does not follow" not in capsys.readouterr().out
     assert json.loads((out2 / "summary.json").read_text())["notes"] == []
+
+
+def test_a_run_that_starts_away_from_the_plans_start_is_noted_and_can_be_simulated_from_it(
+    tmp_path, capsys
+):
+    """A device 6 °C warmer than the plan assumed at the start (20 °C): compare says so
+    and, with --t0-c log, simulates from the log's first readings; that simulation matches
+    scipy's ODE solution from the same start (tests/independent.py), and the residual
+    shrinks. A log that begins later, or a --t0-c that is no temperature, is refused."""
+    from independent import chamber_knots, ode_trajectories
+
+    frame = synth_log(read_steps(STEPS), seed=2, t0_c=26.0)
+    path = tmp_path / "warm.csv"
+    frame.drop(columns=["t_true_c", "g_true_c_per_min"]).to_csv(path, index=False)
+    base = ["compare", str(path), STEPS, "--region", "-50", "-30"]
+    assert main([*base, "--out", str(tmp_path / "plan")]) in (0, 1)
+    said = capsys.readouterr().out
+    (note,) = [ln for ln in said.splitlines() if ln.startswith("*** the log starts at")]
+    assert "the log starts at 26.0" in note and "--t0-c log" in note
+    at_plan = json.loads((tmp_path / "plan" / "summary.json").read_text())
+    assert at_plan["t0_c"] == 20.0 and len(at_plan["notes"]) == 1
+    assert main([*base, "--t0-c", "log", "--out", str(tmp_path / "log")]) in (0, 1)
+    said = capsys.readouterr().out
+    assert "*** the log starts" not in said and "(the log's first readings)" in said
+    at_log = json.loads((tmp_path / "log" / "summary.json").read_text())
+    assert at_log["t0_c"] == pytest.approx(26.0, abs=0.05) and at_log["notes"] == []
+    assert at_log["rms_residual_c"] < 0.5 * at_plan["rms_residual_c"]
+    rows = pd.read_csv(tmp_path / "log" / "compare.csv")
+    knots_t, knots_tk = chamber_knots(STEPS)
+    _, temp, _ = ode_trajectories(knots_t, knots_tk, 2400.0, 3.0, t0_c=at_log["t0_c"], dt_min=1 / 6)
+    n = min(len(rows), temp.shape[1])
+    np.testing.assert_allclose(rows["t_sim_c"].to_numpy()[:n], temp[0, :n], atol=2e-3)
+    # refused: a start the log does not hold, and a word for a temperature
+    late = frame[frame["time_s"] >= 720.0].drop(columns=["t_true_c", "g_true_c_per_min"])
+    late.to_csv(path, index=False)
+    assert main([*base, "--t0-c", "log", "--out", str(tmp_path / "late")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "give it as a number (--t0-c T)" in err[0], err
+    assert main([*base, "--t0-c", "warm", "--out", str(tmp_path / "bad")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--t0-c must be a temperature in °C or 'log'" in err[0], err
+    assert not (tmp_path / "late").exists() and not (tmp_path / "bad").exists()

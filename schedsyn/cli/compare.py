@@ -35,8 +35,37 @@ def register(sub) -> None:
     _common.add_region_option(p)
     _common.add_limit_options(p)
     _common.add_coverage_options(p)
+    p.add_argument(
+        "--t0-c",
+        default=None,
+        metavar="T0_C|log",
+        help="the device's temperature at the programme's start, °C, that the simulation "
+        "begins from, or 'log' for the log's first readings (default: the step table's "
+        "t_init_c, the start the plan assumed)",
+    )
     _common.add_quiet_option(p)
     p.set_defaults(func=run)
+
+
+def start_temperature(value: str | None, log, default_c: float) -> tuple[float, str]:
+    """``--t0-c``: a number, 'log' (:func:`schedsyn.compare.log_start_c`), or the plan's
+    start temperature; and where it came from."""
+    from ..compare import log_start_c
+    from ..errors import ParameterError
+
+    if value is None:
+        return default_c, "the plan's start"
+    if value.strip().lower() == "log":
+        return log_start_c(log), "the log's first readings"
+    try:
+        t0 = float(value)
+    except ValueError:
+        raise ParameterError(
+            f"--t0-c must be a temperature in °C or 'log', got {value!r}"
+        ) from None
+    if not -100.0 <= t0 <= 200.0:
+        raise ParameterError(f"--t0-c must be a temperature in -100 .. 200 °C, got {value!r}")
+    return t0, "--t0-c"
 
 
 NAMES = (
@@ -70,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
         )
     out = _common.output_dir(args.out, "out/compare", [args.log, args.steps], NAMES)
     log = read_log(args.log)
+    t0_c, t0_source = start_temperature(args.t0_c, log, limits.t_init_c)
     print_log_report(log)
     progress("estimating the run's gradient and simulating the plan")
     cmp = compare_run(
@@ -83,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
         chamber=args.chamber,
         q=args.q,
         r=args.r,
-        t0_c=limits.t_init_c,
+        t0_c=t0_c,
     )
     progress("writing tables and plots")
     write_frame_atomic(out.path("gradient.csv"), cmp.estimate.to_frame())
@@ -126,7 +156,8 @@ def run(args: argparse.Namespace) -> int:
     region_src = "given" if args.region is not None else "from the step table"
     _common.say(
         f"plan model: tau {params.tau_s:g} s, dT0 {params.dt0_c:g} °C ({source}); working "
-        f"region [{lo:g}, {hi:g}] °C ({region_src})",
+        f"region [{lo:g}, {hi:g}] °C ({region_src}); simulated from {t0_c:.2f} °C "
+        f"({t0_source})",
         cmp.estimate.summary(),
         cmp.summary(),
         f"wrote {out.target}/" + ", ".join(NAMES),
