@@ -366,6 +366,12 @@ def test_a_run_that_starts_away_from_the_plans_start_is_noted_and_can_be_simulat
     at_log = json.loads((tmp_path / "log" / "summary.json").read_text())
     assert at_log["t0_c"] == pytest.approx(26.0, abs=0.05) and at_log["notes"] == []
     assert at_log["rms_residual_c"] < 0.5 * at_plan["rms_residual_c"]
+    # report takes the same option: its summary as compare's
+    rep = ["report", str(path), STEPS, "--region", "-50", "-30", "--quiet"]
+    assert main([*rep, "--t0-c", "log", "--out", str(tmp_path / "rep")]) == 0
+    capsys.readouterr()
+    filed = json.loads((tmp_path / "rep" / "report.json").read_text())
+    assert filed["t0_c"] == at_log["t0_c"] and filed["notes"] == []
     rows = pd.read_csv(tmp_path / "log" / "compare.csv")
     knots_t, knots_tk = chamber_knots(STEPS)
     _, temp, _ = ode_trajectories(knots_t, knots_tk, 2400.0, 3.0, t0_c=at_log["t0_c"], dt_min=1 / 6)

@@ -35,6 +35,13 @@ def register(sub) -> None:
     _common.add_region_option(p)
     _common.add_limit_options(p)
     _common.add_coverage_options(p)
+    add_start_option(p)
+    _common.add_quiet_option(p)
+    p.set_defaults(func=run)
+
+
+def add_start_option(p: argparse.ArgumentParser) -> None:
+    """``--t0-c`` (compare, report): where the plan's simulation starts."""
     p.add_argument(
         "--t0-c",
         default=None,
@@ -43,8 +50,6 @@ def register(sub) -> None:
         "begins from, or 'log' for the log's first readings (default: the step table's "
         "t_init_c, the start the plan assumed)",
     )
-    _common.add_quiet_option(p)
-    p.set_defaults(func=run)
 
 
 def start_temperature(value: str | None, log, default_c: float) -> tuple[float, str]:

@@ -20,6 +20,7 @@ from pathlib import Path
 
 from ..errors import ParameterError
 from . import _common
+from .compare import add_start_option, start_temperature
 from .estimate import add_estimator_options, print_log_report
 from .export import add_check_options, check_for
 
@@ -38,6 +39,7 @@ def register(sub) -> None:
     p.add_argument("--out", default=None, help="output directory (default out/report)")
     add_check_options(p)
     add_estimator_options(p)
+    add_start_option(p)
     _common.add_quiet_option(p)
     p.set_defaults(func=run)
 
@@ -59,6 +61,7 @@ def run(args: argparse.Namespace) -> int:
     print_log_report(log)
     table = read_step_table(args.steps)
     check = check_for(args, table)
+    t0_c, _ = start_temperature(args.t0_c, log, table.limits.t_init_c)
     cmp = compare_run(
         log,
         table.programme,
@@ -70,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
         chamber=args.chamber,
         q=args.q,
         r=args.r,
-        t0_c=table.limits.t_init_c,
+        t0_c=t0_c,
     )
     prov = provenance(
         {"log": args.log, "step table": args.steps, "diagnosis": args.diagnosis, "fit": args.fit}
