@@ -60,7 +60,11 @@ class RunComparison:
         two bins flipped by gradient errors of 1-2 sigma).
     notes : tuple of str
         Warnings about the comparison itself (a log without a setpoint whose device does
-        not follow the table: :func:`device_follows_note`).
+        not follow the table: :func:`device_follows_note`; a log starting away from the
+        simulation's start: :func:`start_note`).
+    t0_c, t0_source
+        The device's temperature at the programme's start that the simulation begins
+        from, degC, and where it came from (the plan's start, the log's own start, given).
     """
 
     log: MeasuredLog
@@ -76,6 +80,7 @@ class RunComparison:
     run_coverage_high: CoverageReport | None = None
     notes: tuple[str, ...] = ()
     t0_c: float = 20.0
+    t0_source: str = "the plan's start"
 
     @property
     def borderline_bins(self) -> int:
@@ -139,6 +144,7 @@ class RunComparison:
             "tau_s": self.params.tau_s,
             "dt0_c": self.params.dt0_c,
             "t0_c": self.t0_c,
+            "t0_source": self.t0_source,
             "rms_residual_c": self.rms_residual_c,
             "max_abs_residual_c": self.max_abs_residual_c,
             "estimator": est.method,
@@ -297,12 +303,13 @@ START_NOTE_C = 1.0
 
 
 def log_start_c(log: MeasuredLog) -> float:
-    """The device's temperature at the programme's start, degC: a straight line through
-    the log's readings of its first :data:`LOG_START_FIT_MIN` minutes, at the programme's
-    start (neither one reading's noise nor the first minutes' drift is taken for the
-    start; fewer than three readings: their median). Raises
-    :class:`ParameterError` when the log begins later than :data:`LOG_START_WITHIN_MIN`
-    after the programme's start (the start is then not in the log: give it as a number)."""
+    """The device's temperature at the programme's start (time 0), degC: a straight line
+    through the log's readings within :data:`LOG_START_FIT_MIN` minutes of the start (from
+    its first reading on, when that comes after the start), taken at the start: neither
+    one reading's noise nor the first minutes' drift is taken for the start (two readings:
+    the line through them; one: that reading). Raises :class:`ParameterError` when the
+    log's first reading comes later than :data:`LOG_START_WITHIN_MIN` after the start (the
+    start is then not in the log: give it as a number)."""
     ok = np.isfinite(log.t_int_c)
     t, y = log.time_min[ok], log.t_int_c[ok]
     if t.size == 0 or float(t[0]) > LOG_START_WITHIN_MIN:
@@ -312,18 +319,21 @@ def log_start_c(log: MeasuredLog) -> float:
             f"{LOG_START_WITHIN_MIN:g} min of the programme's start, so the log does not "
             "hold the device's start temperature: give it as a number (--t0-c T)"
         )
-    first = t <= t[0] + LOG_START_FIT_MIN
-    if first.sum() < 3:
-        return float(np.median(y[first]))
-    _, intercept = np.polyfit(t[first], y[first], 1)
+    lo = max(float(t[0]), -LOG_START_FIT_MIN)
+    near = (t >= lo) & (t <= max(float(t[0]), 0.0) + LOG_START_FIT_MIN)
+    if near.sum() < 2:
+        return float(y[near][0]) if near.any() else float(np.interp(0.0, t, y))
+    _, intercept = np.polyfit(t[near], y[near], 1)
     return float(intercept)
 
 
-def start_note(log: MeasuredLog, t0_c: float, params: ThermalParams) -> str | None:
-    """A note when the log's first reading (:func:`log_start_c`) lies more than
-    :data:`START_NOTE_C` from ``t0_c``, the temperature the simulation starts from (the
-    plan's ``t_init_c``): the residual of the first hours is then partly that start,
-    decaying with tau. None otherwise, or when the log begins later."""
+def start_note(
+    log: MeasuredLog, t0_c: float, params: ThermalParams, t0_source: str = "the plan's start"
+) -> str | None:
+    """A note when the log's start (:func:`log_start_c`) lies more than
+    :data:`START_NOTE_C` from ``t0_c``, the temperature the simulation starts from (from
+    ``t0_source``): the residual of the first hours is then partly that start, decaying
+    with tau. None otherwise, or when the log begins later."""
     try:
         first = log_start_c(log)
     except ParameterError:
@@ -331,10 +341,10 @@ def start_note(log: MeasuredLog, t0_c: float, params: ThermalParams) -> str | No
     if abs(first - t0_c) <= START_NOTE_C:
         return None
     return (
-        f"the log starts at {first:.2f} °C, the simulation at {t0_c:g} °C (the plan's start "
-        f"temperature): the residual of the first hours is partly that start (it decays "
-        f"with tau {params.tau_s:g} s); --t0-c log starts the simulation at the log's first "
-        "readings"
+        f"the log starts at {first:.2f} °C, the simulation at {t0_c:g} °C ({t0_source}): "
+        f"the residual of the first hours is partly that start (it decays with tau "
+        f"{params.tau_s:g} s); the simulation can start at the log's own start (compare or "
+        "report --t0-c log; API: t0_c=log_start_c(log))"
     )
 
 
@@ -415,6 +425,7 @@ def compare_run(
     r: float | None = None,
     t0_c: float = 20.0,
     dt_min: float = 0.1,
+    t0_source: str = "the plan's start",
 ) -> RunComparison:
     """Estimate the run's gradient and compare it with the simulated plan.
 
@@ -440,9 +451,11 @@ def compare_run(
     t0_c : float
         Internal temperature at the programme's start that the simulation begins from,
         degC: the plan's (its ``t_init_c``), or the log's own (:func:`log_start_c`). A
-        first reading more than :data:`START_NOTE_C` from it is noted (:func:`start_note`).
+        start more than :data:`START_NOTE_C` from it is noted (:func:`start_note`).
     dt_min : float
         Step of the dense plan simulation, min.
+    t0_source : str
+        Where ``t0_c`` comes from, for the note.
     """
     params = ThermalParams() if params is None else params
     check_run_of(log, programme)
@@ -479,7 +492,7 @@ def compare_run(
             max(delta_c_per_min - margin, 0.05 * delta_c_per_min),
         )
     notes = [device_follows_note(log, programme) if log.tk_set_c is None else None]
-    notes.append(start_note(log, t0_c, params))
+    notes.append(start_note(log, t0_c, params, t0_source))
     return RunComparison(
         log,
         est,
@@ -494,4 +507,5 @@ def compare_run(
         high,
         notes=tuple(n for n in notes if n is not None),
         t0_c=float(t0_c),
+        t0_source=t0_source,
     )

@@ -182,7 +182,11 @@ def run_report(
         ("log", f"{log_path} ({c.log.n_rows} rows, {c.log.time_min[-1]:.1f} min)"),
         ("step table", f"{steps_path} ({c.planned.duration_min:g} min)"),
         ("working region", f"{region[0]:g} .. {region[1]:g} °C"),
-        ("model", f"tau {c.params.tau_s:g} s, dT0 {c.params.dt0_c:g} °C"),
+        (
+            "model",
+            f"tau {c.params.tau_s:g} s, dT0 {c.params.dt0_c:g} °C; simulated from "
+            f"{c.t0_c:.2f} °C ({c.t0_source})",
+        ),
         (
             "coverage planned",
             f"{p.coverage:.0%} (min {p.min_levels} levels; ≥ {p.levels_required} levels "

@@ -33,7 +33,8 @@ Usage::
 
 Exit codes: 0 the benchmark ran and found nothing invalid (missed targets are results,
 not failures); 1 a validity problem (a complete plan below its bound, the re-check
-disagreeing with the planner, a planner crash); 2 bad input (unknown request, a
+disagreeing with the planner, a planner crash) or a request of :data:`REGRESSIONS` not
+complete; 2 bad input (unknown request, a
 campaign file that does not load).
 """
 
@@ -85,6 +86,11 @@ CHAMBER_TOL_C = 0.05 + 1e-9
 RATE_TOL_C_PER_MIN = 1e-3
 DEVICE_TOL_C = 5e-3
 TIME_TOL_MIN = 1e-6
+#: Requests whose completeness a removed suite test asserted (the suite is kept well
+#: under 10 min; the unit tests of what made them plan stay there): not complete here is
+#: a failure (exit 1), not a result. w1-seg10: W1 on 10-min segments (was
+#: tests/test_search_slow_timing.py, its cold 15 degC).
+REGRESSIONS = ("w1-seg10",)
 COVERAGE_TOL = 1e-9
 
 #: Columns of the results table, in order.
@@ -378,6 +384,9 @@ def headline(frame: pd.DataFrame) -> dict[str, Any]:
         "below_bound": sorted(below["request"]),
         "recheck_disagrees": sorted(frame.loc[~frame["recheck_agrees"].astype(bool), "request"]),
         "crashed": sorted(frame.loc[frame["status"] == "crashed", "request"]),
+        "regressions_not_complete": sorted(
+            frame.loc[frame["request"].isin(REGRESSIONS) & ~complete, "request"]
+        ),
         "median_gap_complete_min": (
             float(frame.loc[complete, "gap_to_bound_min"].median()) if complete.any() else None
         ),
@@ -531,6 +540,12 @@ def headline_lines(head: dict[str, Any]) -> list[str]:
             + ", ".join(head["crashed"])
             + " (tracebacks in requests/<request>/traceback.txt) ***"
         )
+    if head.get("regressions_not_complete"):
+        lines.append(
+            "- *** NOT COMPLETE, though a former suite test asserted it (REGRESSIONS): "
+            + ", ".join(head["regressions_not_complete"])
+            + " ***"
+        )
     return lines
 
 
@@ -655,6 +670,7 @@ def main(argv: list[str] | None = None) -> int:
         or head["complete_where_bound_exceeds_budget"]
         or head["recheck_disagrees"]
         or head["crashed"]
+        or head["regressions_not_complete"]
     )
     if invalid:
         print(

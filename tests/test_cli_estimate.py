@@ -350,6 +350,8 @@ def test_a_run_that_starts_away_from_the_plans_start_is_noted_and_can_be_simulat
     shrinks. A log that begins later, or a --t0-c that is no temperature, is refused."""
     from independent import chamber_knots, ode_trajectories
 
+    from schedsyn.compare import log_start_c
+
     frame = synth_log(read_steps(STEPS), seed=2, t0_c=26.0)
     path = tmp_path / "warm.csv"
     frame.drop(columns=["t_true_c", "g_true_c_per_min"]).to_csv(path, index=False)
@@ -362,7 +364,7 @@ def test_a_run_that_starts_away_from_the_plans_start_is_noted_and_can_be_simulat
     assert at_plan["t0_c"] == 20.0 and len(at_plan["notes"]) == 1
     assert main([*base, "--t0-c", "log", "--out", str(tmp_path / "log")]) in (0, 1)
     said = capsys.readouterr().out
-    assert "*** the log starts" not in said and "(the log's first readings)" in said
+    assert "*** the log starts" not in said and "(the log's own start)" in said
     at_log = json.loads((tmp_path / "log" / "summary.json").read_text())
     assert at_log["t0_c"] == pytest.approx(26.0, abs=0.05) and at_log["notes"] == []
     assert at_log["rms_residual_c"] < 0.5 * at_plan["rms_residual_c"]
@@ -377,6 +379,17 @@ def test_a_run_that_starts_away_from_the_plans_start_is_noted_and_can_be_simulat
     _, temp, _ = ode_trajectories(knots_t, knots_tk, 2400.0, 3.0, t0_c=at_log["t0_c"], dt_min=1 / 6)
     n = min(len(rows), temp.shape[1])
     np.testing.assert_allclose(rows["t_sim_c"].to_numpy()[:n], temp[0, :n], atol=2e-3)
+    # a given start is named as given; a log that begins 30 min before the programme (the
+    # device held at 26 degC) has its start at time 0, not 30 min of drift before it
+    assert main([*base, "--t0-c", "22", "--out", str(tmp_path / "given")]) in (0, 1)
+    said = capsys.readouterr().out
+    assert "the simulation at 22 °C (given by --t0-c)" in said
+    logged = frame.drop(columns=["t_true_c", "g_true_c_per_min"])
+    before = logged.iloc[:180].copy()
+    before["time_s"] = np.arange(-1800.0, 0.0, 10.0)
+    before["t_int_c"] = 26.0 + 0.02 * np.random.default_rng(4).standard_normal(180)
+    pd.concat([before, logged]).to_csv(path, index=False)
+    assert log_start_c(read_log(path)) == pytest.approx(26.0, abs=0.05)
     # refused: a start the log does not hold, and a word for a temperature
     late = frame[frame["time_s"] >= 720.0].drop(columns=["t_true_c", "g_true_c_per_min"])
     late.to_csv(path, index=False)

@@ -365,9 +365,11 @@ def test_a_plan_far_above_its_bound_hints_at_shorten(tmp_path, capsys):
 
 
 def test_the_shorten_hint_only_for_a_complete_shortest_band_plan_far_above_its_bound(
-    small_plan_for_hint,
+    small_plan_for_hint, monkeypatch
 ):
-    from schedsyn.cli.plan import SHORTEN_HINT_MIN, SHORTEN_HINT_SHARE, shorten_hint
+    import schedsyn.cli.plan as cli_plan
+    from schedsyn.cli.plan import SHORTEN_HINT_MIN, SHORTEN_HINT_SHARE, report_plan, shorten_hint
+    from schedsyn.programme import StepTableMeta
 
     plan = small_plan_for_hint
     d = plan.duration_min
@@ -376,9 +378,12 @@ def test_the_shorten_hint_only_for_a_complete_shortest_band_plan_far_above_its_b
         return shorten_hint(dataclasses.replace(plan, duration_lower_bound_min=bound, **kw))
 
     share_bound = d / (1.0 + SHORTEN_HINT_SHARE)  # the gap is SHORTEN_HINT_SHARE of it
-    assert d - share_bound >= SHORTEN_HINT_MIN  # so the share decides below
+    assert d - share_bound >= SHORTEN_HINT_MIN  # so the share decides here
     assert at(share_bound - 0.5) is not None and at(share_bound + 0.5) is None
-    assert at(d - SHORTEN_HINT_MIN + 0.5) is None  # at most 30 min above: never
+    with monkeypatch.context() as mp:  # a small share: the 30-min floor decides
+        mp.setattr(cli_plan, "SHORTEN_HINT_SHARE", 0.01)
+        assert at(d - SHORTEN_HINT_MIN - 0.5) is not None
+        assert at(d - SHORTEN_HINT_MIN + 0.5) is None
     far = 0.3 * d
     assert at(far) is not None
     assert at(far, complete=False) is None
@@ -387,6 +392,15 @@ def test_the_shorten_hint_only_for_a_complete_shortest_band_plan_far_above_its_b
     assert at(float("inf")) is None and at(None) is None
     informative = dataclasses.replace(plan.spec, objective="informative")
     assert at(far, spec=informative) is None
+    # an end soak appended to the table is no gap: the bound does not count it
+    meta = dataclasses.replace(
+        plan.programme.meta or StepTableMeta(), end_soak_included_min=d - far - 1.0
+    )
+    assert at(far, programme=plan.programme.with_meta(meta)) is None
+    # and where --shorten ran or cannot apply (several chambers), the report has none
+    wide = dataclasses.replace(plan, duration_lower_bound_min=far)
+    assert any("hint:" in ln for ln in report_plan(wide))
+    assert not any("hint:" in ln for ln in report_plan(wide, shorten_hint_ok=False))
 
 
 @pytest.fixture(scope="module")

@@ -65,7 +65,8 @@ def test_a_small_controller_gets_a_complete_table_on_long_segments(tmp_path):
 
 
 def test_an_impossible_step_limit_is_reported_not_hidden():
-    # SPEC's 2 degC-wide corner: the same answer as SPEC (27 steps) in 3 s instead of 17
+    # SPEC's 2 degC-wide corner: reported as SPEC is (there with 27 steps, here 15) in 3 s
+    # instead of 17
     spec = dataclasses.replace(SPEC, working_lo_c=-6.0, approx_lo_c=-14.0, max_steps=3)
     plan = plan_experiment(spec, limits=LIMITS)
     assert not plan.complete and plan.status == "limits violated"

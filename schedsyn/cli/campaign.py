@@ -143,6 +143,11 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.shorten:
         check_shorten(config)
+    try:  # a --shorten hint only where --shorten would be accepted and did not run
+        check_shorten(config)
+        hint_ok = not (args.shorten or config.shorten)
+    except ParameterError:
+        hint_ok = False
     inputs = [args.config] if args.config else []
     inputs += [b for b in config.baseline_steps if b is not None]
     # checked before any planning: no output overwrites an input, the folder is writable
@@ -203,7 +208,7 @@ def run(args: argparse.Namespace) -> int:
                 lines.append(f"*** {exc}; its table is written WITHOUT an end soak")
         folder = out.folder(spec.name)
         write_plan_outputs(plan, folder, extra_json=advice_json)
-        lines += report_plan(plan)
+        lines += report_plan(plan, shorten_hint_ok=hint_ok)
         lines += end_soak_lines(plan)
         lines += more
         extra, links[spec.name], lost_one = write_plan_deliverables(

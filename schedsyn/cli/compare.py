@@ -47,7 +47,7 @@ def add_start_option(p: argparse.ArgumentParser) -> None:
         default=None,
         metavar="T0_C|log",
         help="the device's temperature at the programme's start, °C, that the simulation "
-        "begins from, or 'log' for the log's first readings (default: the step table's "
+        "begins from, or 'log' for the log's own start (default: the step table's "
         "t_init_c, the start the plan assumed)",
     )
 
@@ -61,7 +61,7 @@ def start_temperature(value: str | None, log, default_c: float) -> tuple[float, 
     if value is None:
         return default_c, "the plan's start"
     if value.strip().lower() == "log":
-        return log_start_c(log), "the log's first readings"
+        return log_start_c(log), "the log's own start"
     try:
         t0 = float(value)
     except ValueError:
@@ -70,7 +70,7 @@ def start_temperature(value: str | None, log, default_c: float) -> tuple[float, 
         ) from None
     if not -100.0 <= t0 <= 200.0:
         raise ParameterError(f"--t0-c must be a temperature in -100 .. 200 °C, got {value!r}")
-    return t0, "--t0-c"
+    return t0, "given by --t0-c"
 
 
 NAMES = (
@@ -119,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
         q=args.q,
         r=args.r,
         t0_c=t0_c,
+        t0_source=t0_source,
     )
     progress("writing tables and plots")
     write_frame_atomic(out.path("gradient.csv"), cmp.estimate.to_frame())

@@ -535,8 +535,9 @@ SHORTEN_HINT_MIN = 30.0
 
 def shorten_hint(plan: Plan) -> str | None:
     """The hint to plan again with ``--shorten``, for a complete plan of the shortest
-    objective, one model and no continuation, far above its proven bound and planned by the
-    band search alone; else None."""
+    objective, one model and no continuation, far above its proven bound (not counting an
+    end soak appended to it) and planned by the band search alone; else None. (The caller
+    leaves it out where ``--shorten`` ran or cannot apply, :func:`report_plan`.)"""
     bound = plan.duration_lower_bound_min
     if (
         not plan.complete
@@ -548,7 +549,9 @@ def shorten_hint(plan: Plan) -> str | None:
         or any(n.startswith("planned by the timetable stage") for n in plan.notes)
     ):
         return None
-    gap = plan.duration_min - bound
+    meta = plan.programme.meta
+    soak = (meta.end_soak_included_min if meta is not None else None) or 0.0
+    gap = plan.duration_min - soak - bound
     if gap < max(SHORTEN_HINT_SHARE * bound, SHORTEN_HINT_MIN):
         return None
     return (
@@ -558,8 +561,10 @@ def shorten_hint(plan: Plan) -> str | None:
     )
 
 
-def report_plan(plan: Plan) -> list[str]:
-    """Lines describing a plan; an incomplete plan says so loudly, with its short bins."""
+def report_plan(plan: Plan, shorten_hint_ok: bool = True) -> list[str]:
+    """Lines describing a plan; an incomplete plan says so loudly, with its short bins.
+    ``shorten_hint_ok``: the request could be planned again with ``--shorten`` and was not
+    (else no :func:`shorten_hint`)."""
     s = plan.spec
     lines = [
         f"{s.name}: [{s.working_lo_c:g}, {s.working_hi_c:g}] °C, "
@@ -576,7 +581,7 @@ def report_plan(plan: Plan) -> list[str]:
             if math.isfinite(bound)
             else "  proven: no complete plan exists (some bin cannot be crossed at all)"
         )
-        hint = shorten_hint(plan)
+        hint = shorten_hint(plan) if shorten_hint_ok else None
         if hint:
             lines.append(f"  hint: {hint}")
     if plan.coverage_nominal is not None:
@@ -845,7 +850,7 @@ def run(args: argparse.Namespace) -> int:
     write_plan_outputs(
         plan, out.folder("."), model=model, model_json=model_json, extra_json=advice_json
     )
-    lines += report_plan(plan)
+    lines += report_plan(plan, shorten_hint_ok=not (args.shorten or several))
     lines += design_lines(plan)
     lines += end_soak_lines(plan, model)
     lines += advice_lines

@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     print_log_report(log)
     table = read_step_table(args.steps)
     check = check_for(args, table)
-    t0_c, _ = start_temperature(args.t0_c, log, table.limits.t_init_c)
+    t0_c, t0_source = start_temperature(args.t0_c, log, table.limits.t_init_c)
     cmp = compare_run(
         log,
         table.programme,
@@ -74,6 +74,7 @@ def run(args: argparse.Namespace) -> int:
         q=args.q,
         r=args.r,
         t0_c=t0_c,
+        t0_source=t0_source,
     )
     prov = provenance(
         {"log": args.log, "step table": args.steps, "diagnosis": args.diagnosis, "fit": args.fit}
