@@ -311,6 +311,37 @@ def read_step_table(path: Path | str, limits: Limits | None = None) -> StepTable
     return StepTable(path, prog, meta, hashlib.sha256(raw).hexdigest(), lim)
 
 
+def planned_for_notes(
+    meta: Mapping[str, str], programme: Programme, source: str = "step table"
+) -> list[str]:
+    """What the table's metadata says it was planned for and it is not: a planner status
+    other than ``complete`` (``schedsyn plan`` writes an incomplete or limit-breaking
+    table too, marked NOT COMPLETE), more steps than its ``max_steps``, a step shorter
+    than its ``min_step_min``. Empty for a table without those lines (older or hand-made
+    tables). Red team: a table over its step limit exported without a word."""
+    out = []
+    status = meta.get("status")
+    if status is not None and status != "complete":
+        out.append(
+            f"{source} was planned NOT COMPLETE (status {status}): it does not give every "
+            "bin its levels, or breaks a limit; its plan's report says which"
+        )
+    max_steps = _meta_float(meta, "max_steps", source)
+    if max_steps is not None and programme.n_segments > max_steps:
+        out.append(
+            f"{source} has {programme.n_segments} steps, more than the max_steps = "
+            f"{max_steps:g} it was planned for"
+        )
+    min_step = _meta_float(meta, "min_step_min", source)
+    shortest = float(np.min(programme.durations_min))
+    if min_step is not None and shortest < min_step - 1e-9:
+        out.append(
+            f"{source}'s shortest step lasts {shortest:g} min, shorter than the min_step_min "
+            f"= {min_step:g} min it was planned for"
+        )
+    return out
+
+
 # ---------------------------------------------------------------------------------------
 # the coverage check
 # ---------------------------------------------------------------------------------------

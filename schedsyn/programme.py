@@ -60,8 +60,8 @@ RATE_TOL_C_PER_MIN = 1e-6
 # metadata of a step table
 # ---------------------------------------------------------------------------------------
 _LIMIT_KEYS = tuple(f.name for f in fields(Limits))
-_TEXT_KEYS = ("schedsyn_version", "experiment", "model")
-_INT_KEYS = ("levels_required",)
+_TEXT_KEYS = ("schedsyn_version", "experiment", "model", "status")
+_INT_KEYS = ("levels_required", "max_steps")
 _KEY = re.compile(r"^#\s*([A-Za-z_][A-Za-z0-9_]*)\s*:\s?(.*)$")
 
 
@@ -104,6 +104,13 @@ class StepTableMeta:
     model : str
         An augmented model the plan was made with, as the JSON of a model file
         (``schedsyn diagnose``), or None for the first-order lag of ``tau_s``, ``dt0_c``.
+    max_steps : int
+        The most steps the table was planned to have (the controller's).
+    min_step_min : float
+        The shortest step the table was planned to have, min.
+    status : str
+        The planner's verdict on the table: ``complete``, ``incomplete`` or ``limits
+        violated`` (:attr:`schedsyn.planner.Plan.status`).
     extra : tuple of (key, value)
         Keys this version does not know, kept verbatim (written back unchanged).
     """
@@ -136,6 +143,9 @@ class StepTableMeta:
     end_soak_min: float | None = None
     end_soak_included_min: float | None = None
     model: str | None = None
+    max_steps: int | None = None
+    min_step_min: float | None = None
+    status: str | None = None
     extra: tuple[tuple[str, str], ...] = field(default=())
 
     def __post_init__(self) -> None:
@@ -272,9 +282,10 @@ class StepTableMeta:
     ) -> StepTableMeta:
         """The metadata of a planned experiment (a :class:`schedsyn.planner.Plan`).
 
-        Takes the experiment's name, regions, levels and delta from ``plan.spec``, the
-        model from ``plan.params``, the limits from ``plan.limits`` and, for a robust
-        plan (several ``plan.scenarios``), the box they span.
+        Takes the experiment's name, regions, levels, delta and step limits from
+        ``plan.spec``, the model from ``plan.params``, the limits from ``plan.limits``, the
+        status from ``plan.status`` and, for a robust plan (several ``plan.scenarios``),
+        the box they span.
         """
         spec, params, limits = plan.spec, plan.params, plan.limits
         scen = tuple(getattr(plan, "scenarios", ()) or ())
@@ -304,6 +315,9 @@ class StepTableMeta:
             end_soak_min=end_soak_min,
             end_soak_included_min=end_soak_included_min,
             model=None if model_json is None else json.dumps(model_json, sort_keys=True),
+            max_steps=getattr(spec, "max_steps", None),
+            min_step_min=getattr(spec, "min_step_min", None),
+            status=getattr(plan, "status", None),
         )
 
 

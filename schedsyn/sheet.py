@@ -263,6 +263,7 @@ def operator_sheet(
     export: Any = None,
     source: str = "",
     provenance: Mapping[str, Any] | None = None,
+    warnings: Sequence[str] = (),
 ) -> str:
     """The operator sheet of one experiment (an HTML document).
 
@@ -285,6 +286,9 @@ def operator_sheet(
         The step table's file name.
     provenance : mapping, optional
         :func:`schedsyn.provenance.provenance` of the inputs.
+    warnings : sequence of str
+        Shown in a box under the facts (what the table was planned for and is not:
+        :func:`schedsyn.export.planned_for_notes`).
     """
     prog = cp.programme
     total = prog.total_min
@@ -329,6 +333,7 @@ def operator_sheet(
         facts.append(("step table", source))
 
     body = [facts_html(facts)]
+    body += [f'<div class="warn">{esc(w)}</div>' for w in warnings]
     if coverage is not None and not coverage.complete:
         body.append(
             f'<div class="warn">This programme covers only {coverage.coverage:.0%} of the '
@@ -451,6 +456,7 @@ def build_sheet(
     limits: Limits | None = None,
     source: str = "",
     provenance: Mapping[str, Any] | None = None,
+    warnings: Sequence[str] = (),
 ) -> tuple[str, Checkpoints]:
     """Checkpoints and the operator sheet of a programme.
 
@@ -470,6 +476,8 @@ def build_sheet(
         When given, the sheet shows the exported programme (what the controller runs).
     limits : Limits, optional
         ``t_init_c`` gives the device's start temperature.
+    warnings : sequence of str
+        Boxes on the sheet (:func:`operator_sheet`).
     """
     settings = SheetSettings() if settings is None else settings
     limits = Limits() if limits is None else limits
@@ -495,6 +503,7 @@ def build_sheet(
         export=export,
         source=source,
         provenance=provenance,
+        warnings=warnings,
     )
     return text, cp
 

@@ -963,3 +963,41 @@ def test_binders_end_segment_fits_a_plan_of_exactly_its_budget():
         ramps, ExportSettings("binder-mb"), limits=Limits(duration_max_min=40.0)
     )
     assert any("longer than the limit" in b for b in over.limit_breaks)
+
+
+def test_a_table_that_breaks_what_it_was_planned_for_is_said_at_export_and_on_the_sheet(
+    tmp_path, capsys
+):
+    """Red team: a table over its step limit (planned 'limits violated') exported, and its
+    operator sheet written, without a word: the table now records its status, max_steps
+    and min_step_min, and export and sheet say what it breaks."""
+    from schedsyn.cli import main
+    from schedsyn.export import planned_for_notes
+    from schedsyn.programme import StepTableMeta, read_steps
+
+    plan_dir = tmp_path / "p"
+    argv = ["plan", "--working", "-6", "-4", "--approx", "-14", "4", "--levels", "4"]
+    argv += ["--max-steps", "3", "--duration-max-min", "360", "--quiet", "--out", str(plan_dir)]
+    assert main(argv) == 1  # not complete: a limit broken
+    capsys.readouterr()
+    steps = plan_dir / "steps.csv"
+    meta = read_steps(steps).meta
+    n = read_steps(steps).n_segments
+    assert meta.status == "limits violated" and meta.max_steps == 3 and n > 3
+    assert StepTableMeta.from_lines(meta.to_lines()) == meta  # round trip
+    assert main(
+        ["export", str(steps), "--controller", "csv", "--out", str(tmp_path / "e.csv")]
+    ) in (0, 1)
+    said = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("***")]
+    assert any("planned NOT COMPLETE (status limits violated)" in ln for ln in said), said
+    assert any(f"has {n} steps, more than the max_steps = 3" in ln for ln in said), said
+    assert main(["sheet", str(plan_dir), "--out", str(tmp_path / "s.html")]) == 0
+    page = (tmp_path / "s.html").read_text()
+    assert "planned NOT COMPLETE" in page and f"has {n} steps, more than the max_steps" in page
+    # a table that meets them (or carries no such lines) gets nothing; a short step is said
+    prog = read_steps(steps)
+    ok = {"status": "complete", "max_steps": str(n), "min_step_min": "0"}
+    assert planned_for_notes(ok, prog) == [] and planned_for_notes({}, prog) == []
+    shortest = float(prog.durations_min.min())
+    (note,) = planned_for_notes({"min_step_min": str(shortest + 1.0)}, prog)
+    assert f"shortest step lasts {shortest:g} min" in note

@@ -134,6 +134,7 @@ def run(args: argparse.Namespace) -> int:
         ExportSettings,
         default_export_path,
         export_programme,
+        planned_for_notes,
         read_step_table,
         write_export,
     )
@@ -163,6 +164,8 @@ def run(args: argparse.Namespace) -> int:
         table.programme, settings, limits=table.limits, check=check, header=header
     )
     write_export(out, result, [args.steps])
+    for note in planned_for_notes(table.meta, table.programme, str(args.steps)):
+        print(f"*** {note} ***")
     print("\n".join(result.summary()))
     print(f"wrote {out}")
     return 0 if result.faithful else 1

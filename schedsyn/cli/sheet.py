@@ -139,7 +139,12 @@ def load_source(source: str):
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..export import ExportSettings, export_programme, robust_box_from_meta
+    from ..export import (
+        ExportSettings,
+        export_programme,
+        planned_for_notes,
+        robust_box_from_meta,
+    )
     from ..provenance import provenance
     from ..sheet import build_sheet, write_page
 
@@ -163,6 +168,7 @@ def run(args: argparse.Namespace) -> int:
     robust = robust_box_from_meta(table.meta, str(steps_path))
     if robust is not None and any(math.isnan(v) for pair in robust for v in pair):
         robust = None
+    warnings = planned_for_notes(table.meta, table.programme, str(steps_path))
     text, cp = build_sheet(
         table.programme,
         experiment=table.meta.get("experiment", name),
@@ -173,6 +179,7 @@ def run(args: argparse.Namespace) -> int:
         limits=table.limits,
         source=str(steps_path),
         provenance=provenance({"step table": steps_path, "plan": plan_path}),
+        warnings=warnings,
     )
     if args.out is not None:
         out = Path(args.out)
@@ -187,6 +194,8 @@ def run(args: argparse.Namespace) -> int:
         f"{name}: {cp.check_min.size} checkpoints every {settings.interval_min:g} min, "
         f"band {cp.box.describe()}"
     )
+    for w in warnings:
+        print(f"*** {w} ***")
     print(f"wrote {out}")
     return 0
 
