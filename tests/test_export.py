@@ -970,7 +970,7 @@ def test_a_table_that_breaks_what_it_was_planned_for_is_said_at_export_and_on_th
 ):
     """Red team: a table over its step limit (planned 'limits violated') exported, and its
     operator sheet written, without a word: the table now records its status, max_steps
-    and min_step_min, and export and sheet say what it breaks."""
+    and min_step_min, and export, simulate and sheet say what it breaks."""
     from schedsyn.cli import main
     from schedsyn.export import planned_for_notes
     from schedsyn.programme import StepTableMeta, read_steps
@@ -991,6 +991,10 @@ def test_a_table_that_breaks_what_it_was_planned_for_is_said_at_export_and_on_th
     said = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("***")]
     assert any("planned NOT COMPLETE (status limits violated)" in ln for ln in said), said
     assert any(f"has {n} steps, more than the max_steps = 3" in ln for ln in said), said
+    sim = ["simulate", str(steps), "--quiet", "--out", str(tmp_path / "sim")]
+    assert main(sim) in (0, 1)
+    said = capsys.readouterr().out
+    assert f"*** {steps} has {n} steps, more than the max_steps = 3" in said, said
     assert main(["sheet", str(plan_dir), "--out", str(tmp_path / "s.html")]) == 0
     page = (tmp_path / "s.html").read_text()
     assert "planned NOT COMPLETE" in page and f"has {n} steps, more than the max_steps" in page

@@ -87,6 +87,15 @@ def run(args: argparse.Namespace) -> int:
         f"chamber {programme.boundary_temps_c.min():.1f} .. "
         f"{programme.boundary_temps_c.max():.1f} °C"
     ]
+    if programme.meta is not None:  # what the table was planned for and is not
+        from ..export import planned_for_notes
+
+        recorded = {
+            k: str(v)
+            for k in ("status", "max_steps", "min_step_min")
+            if (v := getattr(programme.meta, k)) is not None
+        }
+        lines += [f"*** {n} ***" for n in planned_for_notes(recorded, programme, str(args.steps))]
     model = None
     if spec is not None:  # an augmented model: exact if linear, else on a grid
         base = ThermalParams(spec.tau_s, spec.dt0_c)
