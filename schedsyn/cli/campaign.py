@@ -141,13 +141,15 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(
             "--advise searches with the nominal model: remove the [robust] table or drop --advise"
         )
-    if args.shorten:
+    try:
         check_shorten(config)
-    try:  # a --shorten hint only where --shorten would be accepted and did not run
-        check_shorten(config)
-        hint_ok = not (args.shorten or config.shorten)
+        shorten_applies = True
     except ParameterError:
-        hint_ok = False
+        if args.shorten:
+            raise
+        shorten_applies = False
+    # a --shorten hint only where --shorten would be accepted and did not run
+    hint_ok = shorten_applies and not (args.shorten or config.shorten)
     inputs = [args.config] if args.config else []
     inputs += [b for b in config.baseline_steps if b is not None]
     # checked before any planning: no output overwrites an input, the folder is writable
