@@ -426,6 +426,7 @@ def compare_run(
     t0_c: float = 20.0,
     dt_min: float = 0.1,
     t0_source: str = "the plan's start",
+    plan_t0_c: float | None = None,
 ) -> RunComparison:
     """Estimate the run's gradient and compare it with the simulated plan.
 
@@ -456,6 +457,9 @@ def compare_run(
         Step of the dense plan simulation, min.
     t0_source : str
         Where ``t0_c`` comes from, for the note.
+    plan_t0_c : float, optional
+        The plan's own start temperature, degC, for the planned coverage (what the plan
+        promised; default ``t0_c``): the run is simulated from ``t0_c``, the plan from this.
     """
     params = ThermalParams() if params is None else params
     check_run_of(log, programme)
@@ -467,8 +471,12 @@ def compare_run(
         raise ParameterError(f"method must be 'kinematic' or 'model', got {method!r}")
     if not math.isfinite(t0_c):
         raise ParameterError(f"t0_c must be finite, got {t0_c!r}")
+    if plan_t0_c is None:
+        plan_t0_c = t0_c
+    if not math.isfinite(plan_t0_c):
+        raise ParameterError(f"plan_t0_c must be finite, got {plan_t0_c!r}")
     simulated = simulate(programme, params, times_min=log.time_min, t0_c=t0_c)
-    planned = simulate(programme, params, dt_min=dt_min, t0_c=t0_c)
+    planned = simulate(programme, params, dt_min=dt_min, t0_c=plan_t0_c)
     planned_cov = coverage_report(
         planned.t_c, planned.g_c_per_min, grid, levels_required, delta_c_per_min
     )

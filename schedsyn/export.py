@@ -849,8 +849,13 @@ class ControllerExport:
             f"{self.spec.title}: {len(parts)} programme(s) "
             f"{', '.join(str(n) for n in self.decoded.numbers)} with "
             f"{', '.join(str(p.n_segments) for p in parts)} step(s) "
-            f"(at most {'any' if self.spec.max_steps is None else self.spec.max_steps} per "
-            f"programme, {self.spec.time_step_s} s and {self.spec.temp_step_c:g} °C resolution)",
+            "("
+            + (
+                "no step limit per programme"
+                if self.spec.max_steps is None
+                else f"at most {self.spec.max_steps} per programme"
+            )
+            + f", {self.spec.time_step_s} s and {self.spec.temp_step_c:g} °C resolution)",
             f"  rounding: boundaries moved by at most {self.max_boundary_shift_s:.0f} s, chamber "
             f"path by at most {self.max_chamber_deviation_c:.3f} °C; "
             f"{self.exported.total_min:g} min{self._end_segments_text()} (source "

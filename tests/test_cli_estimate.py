@@ -368,6 +368,8 @@ def test_a_run_that_starts_away_from_the_plans_start_is_noted_and_can_be_simulat
     at_log = json.loads((tmp_path / "log" / "summary.json").read_text())
     assert at_log["t0_c"] == pytest.approx(26.0, abs=0.05) and at_log["notes"] == []
     assert at_log["rms_residual_c"] < 0.5 * at_plan["rms_residual_c"]
+    # the plan's promise is the plan's, from its own start, whichever start the run has
+    assert at_log["planned_coverage"] == at_plan["planned_coverage"]
     # report takes the same option: its summary as compare's
     rep = ["report", str(path), STEPS, "--region", "-50", "-30", "--quiet"]
     assert main([*rep, "--t0-c", "log", "--out", str(tmp_path / "rep")]) == 0

@@ -991,6 +991,8 @@ def test_a_table_that_breaks_what_it_was_planned_for_is_said_at_export_and_on_th
     said = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("***")]
     assert any("planned NOT COMPLETE (status limits violated)" in ln for ln in said), said
     assert any(f"has {n} steps, more than the max_steps = 3" in ln for ln in said), said
+    # the export file says so too: it may be passed on without the summary
+    assert "planned NOT COMPLETE (status limits violated)" in (tmp_path / "e.csv").read_text()
     sim = ["simulate", str(steps), "--quiet", "--out", str(tmp_path / "sim")]
     assert main(sim) in (0, 1)
     said = capsys.readouterr().out

@@ -120,6 +120,7 @@ def run(args: argparse.Namespace) -> int:
         r=args.r,
         t0_c=t0_c,
         t0_source=t0_source,
+        plan_t0_c=limits.t_init_c,
     )
     progress("writing tables and plots")
     write_frame_atomic(out.path("gradient.csv"), cmp.estimate.to_frame())

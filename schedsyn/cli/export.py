@@ -154,17 +154,20 @@ def run(args: argparse.Namespace) -> int:
         from ..errors import ParameterError
 
         raise ParameterError(f"--out {out} is a directory; give a file name")
+    planned_for = planned_for_notes(table.meta, table.programme, str(args.steps))
     header = {
         "schedsyn_version": __version__,
         "source": str(args.steps),
         "source_sha256": table.sha256,
         "experiment": table.meta.get("experiment", ""),
+        # the file carries it too: it may be passed on without this summary
+        **({"planned_for": planned_for} if planned_for else {}),
     }
     result = export_programme(
         table.programme, settings, limits=table.limits, check=check, header=header
     )
     write_export(out, result, [args.steps])
-    for note in planned_for_notes(table.meta, table.programme, str(args.steps)):
+    for note in planned_for:
         print(f"*** {note} ***")
     print("\n".join(result.summary()))
     print(f"wrote {out}")

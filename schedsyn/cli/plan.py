@@ -577,7 +577,11 @@ def report_plan(plan: Plan, shorten_hint_ok: bool = True) -> list[str]:
         bound = plan.duration_lower_bound_min
         lines.append(
             f"  proven lower bound on any complete plan: {bound:.0f} min "
-            f"(this plan {plan.gap_to_bound_min:+.0f} min)"
+            + (
+                f"(this plan {plan.gap_to_bound_min:+.0f} min)"
+                if plan.complete
+                else f"(this plan, not complete, {plan.duration_min:g} min)"
+            )
             if math.isfinite(bound)
             else "  proven: no complete plan exists (some bin cannot be crossed at all)"
         )

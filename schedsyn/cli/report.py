@@ -75,6 +75,7 @@ def run(args: argparse.Namespace) -> int:
         r=args.r,
         t0_c=t0_c,
         t0_source=t0_source,
+        plan_t0_c=table.limits.t_init_c,
     )
     prov = provenance(
         {"log": args.log, "step table": args.steps, "diagnosis": args.diagnosis, "fit": args.fit}
