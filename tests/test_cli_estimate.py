@@ -345,9 +345,11 @@ def test_a_run_that_starts_away_from_the_plans_start_is_noted_and_can_be_simulat
     tmp_path, capsys
 ):
     """A device 6 °C warmer than the plan assumed at the start (20 °C): compare says so
-    and, with --t0-c log, simulates from the log's first readings; that simulation matches
-    scipy's ODE solution from the same start (tests/independent.py), and the residual
-    shrinks. A log that begins later, or a --t0-c that is no temperature, is refused."""
+    and, with --t0-c log, simulates the run from the log's own start (report too); that
+    simulation matches scipy's ODE solution from the same start (tests/independent.py),
+    the residual shrinks, the planned coverage stays the plan's. A given start is named as
+    given, a log that begins before the programme is read at time 0, and a log that begins
+    later, or a --t0-c that is no temperature, is refused."""
     from independent import chamber_knots, ode_trajectories
 
     from schedsyn.compare import log_start_c
