@@ -108,6 +108,10 @@ class StepTableMeta:
         The most steps the table was planned to have (the controller's).
     min_step_min : float
         The shortest step the table was planned to have, min.
+    segment_min : float
+        The control segment the planner chose the rates on, min: a step lasts a whole
+        number of them. Longer than requested when the planner went to coarser segments
+        to meet ``max_steps`` or ``min_step_min`` (the plan's notes say so).
     status : str
         The planner's verdict on the table: ``complete``, ``incomplete`` or ``limits
         violated`` (:attr:`schedsyn.planner.Plan.status`).
@@ -145,6 +149,7 @@ class StepTableMeta:
     model: str | None = None
     max_steps: int | None = None
     min_step_min: float | None = None
+    segment_min: float | None = None
     status: str | None = None
     extra: tuple[tuple[str, str], ...] = field(default=())
 
@@ -279,13 +284,15 @@ class StepTableMeta:
         end_soak_min: float | None = None,
         end_soak_included_min: float | None = None,
         model_json: dict | None = None,
+        segment_min: float | None = None,
     ) -> StepTableMeta:
         """The metadata of a planned experiment (a :class:`schedsyn.planner.Plan`).
 
         Takes the experiment's name, regions, levels, delta and step limits from
         ``plan.spec``, the model from ``plan.params``, the limits from ``plan.limits``, the
         status from ``plan.status`` and, for a robust plan (several ``plan.scenarios``),
-        the box they span.
+        the box they span. ``segment_min`` (default ``plan.spec.segment_min``): the
+        segments the rates were chosen on, when the planner went coarser than the spec.
         """
         spec, params, limits = plan.spec, plan.params, plan.limits
         scen = tuple(getattr(plan, "scenarios", ()) or ())
@@ -317,6 +324,7 @@ class StepTableMeta:
             model=None if model_json is None else json.dumps(model_json, sort_keys=True),
             max_steps=getattr(spec, "max_steps", None),
             min_step_min=getattr(spec, "min_step_min", None),
+            segment_min=getattr(spec, "segment_min", None) if segment_min is None else segment_min,
             status=getattr(plan, "status", None),
         )
 

@@ -325,6 +325,7 @@ def write_plan_outputs(
         end_soak_min=soak,
         end_soak_included_min=recorded.end_soak_included_min if recorded else None,
         model_json=model_json,
+        segment_min=recorded.segment_min if recorded else None,
     )
     written = [
         plan.programme.with_meta(meta).to_csv(out / "steps.csv", inputs),

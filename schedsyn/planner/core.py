@@ -899,6 +899,7 @@ def _plan_continued(
     programme, mg, mt, search, notes, check, spoilt = plan_continuation(
         spec, params, limits, model, continuation, progress, stats
     )
+    segment_used = spec.segment_min
     if spoilt:  # merging steps was not enough: coarser control has fewer steps
         for factor in COARSER_FACTORS:
             seg = spec.segment_min * factor
@@ -929,6 +930,7 @@ def _plan_continued(
             ):
                 continue  # a rest that can be run, covering more (or the first that can)
             programme, mg, mt, search, notes, check = alt[:6]
+            segment_used = seg
             notes = [
                 *notes,
                 f"planned with {seg:g}-min segments: with {spec.segment_min:g}-min ones the "
@@ -967,7 +969,8 @@ def _plan_continued(
             t_min_c=t_lo,
             t_max_c=t_hi,
             continued_from_min=continuation.at_min,
-        )
+        ),
+        segment_min=segment_used,
     )
 
 
@@ -1067,13 +1070,17 @@ def _make_informative(
     )
 
 
-def with_table_meta(plan: Plan) -> Plan:
+def with_table_meta(plan: Plan, segment_min: float | None = None) -> Plan:
     """The plan with its step table carrying what it was planned for (region, model,
     limits, box): ``schedsyn.simulate(plan.programme)`` and readers of the written table
-    then use the plan's own parameters."""
+    then use the plan's own parameters. ``segment_min``: the segments the rates were
+    chosen on, when not ``plan.spec``'s (coarser, to meet the step limits); by default
+    what the table already records, else ``plan.spec``'s."""
     from ..programme import StepTableMeta
 
-    meta = StepTableMeta.from_plan(plan)
+    if segment_min is None and plan.programme.meta is not None:
+        segment_min = plan.programme.meta.segment_min
+    meta = StepTableMeta.from_plan(plan, segment_min=segment_min)
     return dataclasses.replace(plan, programme=plan.programme.with_meta(meta))
 
 
@@ -1467,7 +1474,9 @@ def _respec(plan: Plan, spec: ExperimentSpec, note: str, require_complete: bool)
             best_coverage=out.coverage.coverage,
             best_plan=out,
         )
-    return with_table_meta(out)
+    meta = plan.programme.meta
+    inner = meta.segment_min if meta is not None else None  # went coarser again inside
+    return with_table_meta(out, segment_min=inner or plan.spec.segment_min)
 
 
 def _coarser(
