@@ -147,6 +147,9 @@ class LogReport:
     stuck_s : tuple of (start_s, end_s, value_c, jump_c)
         Runs of one ``t_int_c`` value repeated that end in a jump (:func:`stuck_runs`): a
         held reading, not the device. The repeats after the first are excluded (NaN).
+    excursions_s : tuple of (start_s, end_s, n_rows, off_c)
+        Runs of ``t_int_c`` readings that jump off the device's curve and back
+        (:func:`excursion_runs`): a sensor dropout or a logger fault. Excluded (NaN).
     """
 
     n_rows: int
@@ -157,6 +160,7 @@ class LogReport:
     warnings: tuple[str, ...] = ()
     glitches: tuple[tuple[int, float, float, float], ...] = ()
     stuck_s: tuple[tuple[float, float, float, float], ...] = ()
+    excursions_s: tuple[tuple[float, float, int, float], ...] = ()
 
     @property
     def clean(self) -> bool:
@@ -797,13 +801,143 @@ def stuck_runs(values_c: np.ndarray, limit_c: float) -> list[tuple[int, int, flo
     ]
 
 
+#: A run of at most this many consecutive t_int_c readings can be an excursion ...
+EXCURSION_MAX_ROWS = 20
+#: ... judged against the quadratic in time through this many readings on each side.
+EXCURSION_SIDE_ROWS = 4
+#: The run's readings must lie off that quadratic by more than the glitch limit plus this
+#: many times the quadratic's own largest miss on the readings it goes through.
+EXCURSION_SCATTER = 3.0
+#: More of the readings than this share in excursions is a broken column: refused.
+EXCURSION_MAX_SHARE = 0.05
+
+
+def excursion_runs(
+    time_s: np.ndarray, values_c: np.ndarray, limit_c: float
+) -> list[tuple[int, int, float]]:
+    """Runs of readings that leave the device's curve and come back: ``(first_row,
+    last_row, off_c)`` each (rows of ``values_c``, ``off_c`` their median distance from
+    the curve).
+
+    A run of 1 to :data:`EXCURSION_MAX_ROWS` consecutive finite readings is one when it
+    starts with a jump and ends with a jump back, each larger than ``limit_c`` (the glitch
+    limit of :func:`glitch_rows`) plus twice the largest step of the two readings outside
+    it (a device's steps change smoothly; a coarsely sampled ramp's large steps are
+    alike), and every reading of the run lies on the jump's side of the quadratic in time
+    through the :data:`EXCURSION_SIDE_ROWS` readings on each side, by more than
+    ``limit_c`` plus :data:`EXCURSION_SCATTER` times that quadratic's largest miss on
+    them (a turnaround the quadratic follows badly does not count). A device lagging its
+    chamber cannot jump out and back; a sensor that drops out (reads 0, a wired default,
+    an offset) for a few readings does. Runs at the log's ends (no readings on one side)
+    are not judged. Judge, session 52: five readings of 0.0 °C at -40.7 °C passed
+    silently, made the gradient swing by +-100 °C/min and its sigma 8x too large over the
+    whole log; neither :func:`glitch_rows` (one or two readings) nor :func:`stuck_runs`
+    (six or more repeats of one value) took them.
+    """
+    v = np.asarray(values_c, dtype=float)
+    finite = np.flatnonzero(np.isfinite(v))
+    n, side = finite.size, EXCURSION_SIDE_ROWS
+    if n < 2 * side + 1 or not math.isfinite(limit_c):
+        return []
+    t = np.asarray(time_s, dtype=float)[finite]
+    y = v[finite]
+    d = np.diff(y)  # d[k]: from finite reading k to k + 1
+    ad = np.abs(d)
+    prev2 = np.maximum(np.concatenate(([0.0], ad[:-1])), np.concatenate(([0.0, 0.0], ad[:-2])))
+    next2 = np.maximum(np.concatenate((ad[1:], [0.0])), np.concatenate((ad[2:], [0.0, 0.0])))
+    out_ok = ad > limit_c + 2.0 * prev2  # a jump out of the curve (its steps before)
+    back_ok = ad > limit_c + 2.0 * next2  # a jump back onto it (its steps after)
+    outs = np.flatnonzero(out_ok)
+    backs = np.flatnonzero(back_ok)
+    found: list[tuple[int, int, float]] = []
+    done = -1
+    for k in outs:
+        if k < side - 1 or k <= done:
+            continue  # not enough readings before it, or inside a run found
+        later = backs[(backs > k) & (backs <= k + EXCURSION_MAX_ROWS) & (backs < n - side)]
+        for m in later:
+            if np.sign(d[m]) != -np.sign(d[k]):
+                continue
+            around = np.r_[k - side + 1 : k + 1, m + 1 : m + 1 + side]
+            run = np.arange(k + 1, m + 1)
+            x0 = t[around[side - 1]]
+            scale = float(t[around[-1]] - t[around[0]]) or 1.0
+            x = (t[around] - x0) / scale
+            design = np.column_stack([np.ones_like(x), x, x * x])
+            coef = np.linalg.lstsq(design, y[around], rcond=None)[0]
+            miss = float(np.max(np.abs(design @ coef - y[around])))
+            xr = (t[run] - x0) / scale
+            off = y[run] - (coef[0] + coef[1] * xr + coef[2] * xr * xr)
+            if np.all(np.sign(off) == np.sign(d[k])) and np.all(
+                np.abs(off) > limit_c + EXCURSION_SCATTER * miss
+            ):
+                found.append((int(finite[k + 1]), int(finite[m]), float(np.median(off))))
+                done = m
+                break
+    return found
+
+
 def _exclude_glitches(
     values: dict[str, np.ndarray], report: LogReport, source: str
 ) -> tuple[np.ndarray, LogReport]:
-    """``t_int_c`` with its glitch readings and held readings (:func:`stuck_runs`) set to
-    NaN, and the report that lists them."""
+    """``t_int_c`` with its glitch readings, held readings (:func:`stuck_runs`) and
+    excursions (:func:`excursion_runs`) set to NaN, and the report that lists them."""
+    rows, off, limit_c = glitch_rows(values["time_s"], values["t_int_c"])
+    temp, report = _exclude_spikes(values, report, source, rows, off, limit_c)
+    return _exclude_excursions(values["time_s"], temp, report, source, limit_c)
+
+
+def _exclude_excursions(
+    time_s: np.ndarray, temp: np.ndarray, report: LogReport, source: str, limit_c: float
+) -> tuple[np.ndarray, LogReport]:
+    """``temp`` with its excursions (:func:`excursion_runs`) set to NaN, and the report
+    that lists them; a column with more than :data:`EXCURSION_MAX_SHARE` of its readings
+    in them is refused."""
+    runs = excursion_runs(time_s, temp, limit_c)
+    if not runs:
+        return temp, report
+    n_rows = sum(b - a + 1 for a, b, _ in runs)
+    n_finite = int(np.isfinite(temp).sum())
+    a0 = runs[0][0]
+    if n_rows > EXCURSION_MAX_SHARE * n_finite:
+        raise LogFormatError(
+            f"{source}: column t_int_c: {n_rows} of {n_finite} readings lie in {len(runs)} "
+            f"run(s) that jump off the curve through their neighbours and back (first: row "
+            f"{a0 + 1}, line {a0 + 2}, {temp[a0]:g} °C): the column looks corrupted, not a "
+            "few dropouts; check the sensor's wiring or the export"
+        )
+    t = np.asarray(time_s, dtype=float)
+    found = tuple((float(t[a]), float(t[b]), b - a + 1, off) for a, b, off in runs)
+    listed = ", ".join(
+        f"rows {a + 1}-{b + 1} ({t0:g} .. {t1:g} s, {k} reading(s), {off:+.3g} °C)"
+        for (a, b, _), (t0, t1, k, off) in zip(runs[:5], found[:5], strict=True)
+    )
+    more = f" and {len(runs) - 5} more" if len(runs) > 5 else ""
+    note = (
+        f"t_int_c: {len(runs)} run(s) of readings that jump more than {limit_c:.3g} °C off "
+        f"the curve through their neighbours and back (a sensor dropout or a logger fault, "
+        f"not the device) were excluded (treated as missing): {listed}{more}; check the "
+        "sensor, and fix or blank them in the log to silence this"
+    )
+    clean = np.array(temp, dtype=float)
+    for a, b, _ in runs:
+        clean[a : b + 1] = np.nan
+    clean.setflags(write=False)
+    report = dataclasses.replace(report, warnings=(note, *report.warnings), excursions_s=found)
+    return clean, report
+
+
+def _exclude_spikes(
+    values: dict[str, np.ndarray],
+    report: LogReport,
+    source: str,
+    rows: np.ndarray,
+    off: np.ndarray,
+    limit_c: float,
+) -> tuple[np.ndarray, LogReport]:
+    """``t_int_c`` with the glitch readings ``rows`` (:func:`glitch_rows`) and held
+    readings (:func:`stuck_runs`) set to NaN, and the report that lists them."""
     temp = values["t_int_c"]
-    rows, off, limit_c = glitch_rows(values["time_s"], temp)
     held = stuck_runs(temp, limit_c)
     if held:
         t = values["time_s"]
@@ -1211,6 +1345,7 @@ def thin_log(log: MeasuredLog, max_rows: int) -> tuple[MeasuredLog, int]:
         warnings=log.report.warnings,
         glitches=log.report.glitches,
         stuck_s=log.report.stuck_s,
+        excursions_s=log.report.excursions_s,
     )
     thin = MeasuredLog(
         time_s=cols["time_s"],

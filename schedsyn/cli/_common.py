@@ -206,8 +206,9 @@ def stderr(message: str) -> None:
 
 def log_record(log) -> dict:
     """What the output JSON says about the log's readings: warnings, the glitch readings
-    excluded (``LogReport.glitches``; rows 1-based like the messages) and the runs of a
-    held reading whose repeats were excluded (``LogReport.stuck_s``)."""
+    excluded (``LogReport.glitches``; rows 1-based like the messages), the runs of a
+    held reading whose repeats were excluded (``LogReport.stuck_s``) and the runs that
+    jumped off the curve and back (``LogReport.excursions_s``)."""
     return {
         "source": log.source,
         "warnings": list(log.report.warnings),
@@ -218,6 +219,10 @@ def log_record(log) -> dict:
         "excluded_held_readings": [
             {"start_s": a, "end_s": b, "t_int_c": value_c, "jump_c": jump_c}
             for a, b, value_c, jump_c in log.report.stuck_s
+        ],
+        "excluded_excursions": [
+            {"start_s": a, "end_s": b, "n_rows": k, "off_c": off_c}
+            for a, b, k, off_c in log.report.excursions_s
         ],
     }
 
