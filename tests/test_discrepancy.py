@@ -288,6 +288,37 @@ def test_a_chamber_limited_both_ways_is_found_with_both_limits(air):
     assert d.rms_after_c < 0.03
 
 
+def test_a_rate_limited_chamber_under_setpoint_steps_is_one_air_finding_in_plain_numbers():
+    """Judge, session 52: setpoint steps (-40 and +50 degC jumps) on a chamber held to 1.5
+    / 3 degC/min. The air was also said to lag by 1098 s (its air gap 4 degC against the
+    rate limit's 0.02: a shadow), and a lag's sentence took a step for the fastest ramp
+    ("a 3e+02 degC/min ramp runs 3e+03 degC behind")."""
+    frame = _rate_limited_log(
+        1.5, 3.0, True, knots_min=(0, 60, 60, 240, 240, 420, 420, 540),
+        knots_c=(20, 20, -40, -40, 50, 50, 20, 20),
+    )  # fmt: skip
+    d = diagnose_frame(frame, SETTINGS)
+    assert d.effect == "chamber_rate_limit"
+    assert [f.effect for f in d.air_findings] == ["chamber_rate_limit"], [
+        f.text for f in d.air_findings
+    ]
+    assert discrepancy._fastest_ramp_c_per_min(frame["time_s"].to_numpy(), frame["tk_set_c"]) == 0.0
+    ramp = frame["time_s"].to_numpy() / 60.0  # 1 degC/min, with one step
+    ramp[100:] += 20.0
+    assert discrepancy._fastest_ramp_c_per_min(frame["time_s"].to_numpy(), ramp) == pytest.approx(
+        1.0
+    )
+
+
+def test_air_logged_as_the_setpoint_is_no_air_finding_not_a_crash():
+    """Judge, session 52: a chamber that logs its setpoint as the air (tk_air_c equal to
+    tk_set_c) crashed diagnose with a math domain error (log of a zero variance)."""
+    frame = _effect_frame("cold", "none", {}, air=True)
+    frame["tk_air_c"] = frame["tk_set_c"]
+    d = diagnose_frame(frame, SETTINGS)
+    assert d.effect == "none" and d.air_findings == ()
+
+
 def test_a_heating_limit_under_a_programme_that_ramps_both_ways_is_found():
     """The red team's log (a random programme: ramps of -1..+2.1 degC/min and holds, 540
     min; cooling limited to 0.5 and heating to 1.5; tau 2820 s, dT0 3.11 degC; no air
