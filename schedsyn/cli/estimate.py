@@ -161,6 +161,8 @@ def run(args: argparse.Namespace) -> int:
     write_gradient_csv(out.path("gradient.csv"), est, [args.log], progress)
     if progress is not None:
         progress.close()
+    for w in est.warnings():
+        _common.stderr(f"warning: {log.source}: {w}")
     region = tuple(args.region) if args.region else None
     # plots of at most ~PLOT_ROWS rows (the smoothed estimate changes slowly)
     view = est.take(slice(None, None, max(1, math.ceil(est.n_rows / PLOT_ROWS))))
