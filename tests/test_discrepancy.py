@@ -319,6 +319,18 @@ def test_air_logged_as_the_setpoint_is_no_air_finding_not_a_crash():
     assert d.effect == "none" and d.air_findings == ()
 
 
+def test_a_huge_fitted_offset_is_called_doubtful():
+    """Judge, session 52: t_int_c in Fahrenheit on a log too short for the unit check was
+    diagnosed with dT0 -50 degC and no word. A device 30 degC off its chamber (a wrong
+    unit or column) gets a warning; the same log as it was, none."""
+    frame = _effect_frame("cold", "none", {}, air=False)
+    assert not any("far beyond" in w for w in diagnose_frame(frame, SETTINGS).warnings)
+    frame["t_int_c"] = frame["t_int_c"] + 30.0
+    d = diagnose_frame(frame, SETTINGS)
+    assert d.model.dt0_c == pytest.approx(33.0, abs=0.5)
+    assert any("fitted dT0 of +33 °C is far beyond" in w for w in d.warnings), d.warnings
+
+
 def test_a_heating_limit_under_a_programme_that_ramps_both_ways_is_found():
     """The red team's log (a random programme: ramps of -1..+2.1 degC/min and holds, 540
     min; cooling limited to 0.5 and heating to 1.5; tau 2820 s, dT0 3.11 degC; no air

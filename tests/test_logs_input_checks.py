@@ -239,6 +239,15 @@ def test_one_glitch_in_a_short_log_is_excluded_not_refused():
     assert [g[0] for g in log_from_frame(f).report.glitches] == [20]
 
 
+def test_a_short_fast_log_in_milliseconds_gets_a_warning():
+    """Judge, session 52: 40 min at 0.2 s with time_s in ms reads as 28 days at 200 s,
+    within the limits; every gradient was 1000x too small without a word."""
+    f = _sample_run()
+    fast = f.iloc[:1500].assign(time_s=np.arange(1500) * 0.2 * 1000.0)  # 5 min, in ms
+    assert any("if time_s holds milliseconds" in w for w in log_from_frame(fast).report.warnings)
+    assert not any("milliseconds" in w for w in log_from_frame(f).report.warnings)
+
+
 # -- excursions: a few readings off the curve and back -------------------------------------
 @pytest.mark.parametrize(("rows", "value"), [(3, 0.0), (5, 0.0), (10, None), (4, "+3")])
 def test_a_dropout_of_several_readings_is_excluded_named_and_harmless(rows, value, capsys):
