@@ -183,9 +183,21 @@ def test_doubts_are_judged_on_the_fit_the_rest_is_planned_with(plan):
     assert fit.dt0_std_c == pytest.approx(req.effect.stderr["dt0_c"] * vague.inflation)
     unchanged = predict_run(req, plan.programme)
     result = ReplanResult(req, "keep", "test", unchanged, unchanged)
-    assert "does not pin the device down" not in result.summary()
+    assert "*** the log does not pin the device down" not in result.summary()
     assert result.to_json_dict()["identification_doubts"] == []
     assert result.trusted_complete == unchanged.complete
+    # ... but the base fit's doubt is said, as monitor says it (judge, session 52: a
+    # two-mass device fitted tightly and wrongly on 60 min, replan silent, monitor not)
+    assert result.to_json_dict()["base_fit_doubts"] == list(vague.doubts())
+    (note,) = [x for x in result.summary().splitlines() if "first-order fit alone" in x]
+    assert note.startswith("note: ") and "dT0 -0.27 ± 6.44 °C" in note
+    short = replace(req, identified=replace(vague, span_min=20.0))  # a log shorter than tau
+    (loud,) = [
+        x
+        for x in ReplanResult(short, "keep", "test", unchanged, unchanged).summary().splitlines()
+        if "first-order fit alone" in x
+    ]
+    assert loud.startswith("*** ") and "the prediction is a guess" in loud
     # with the base model in use, the base fit's doubts stand
     base = replace(req, effect=replace(req.effect, material=False), model=vague.model)
     assert base.doubts() == vague.doubts() and base.planning_fit() is vague
