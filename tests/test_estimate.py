@@ -777,6 +777,23 @@ def test_a_quantised_creep_at_the_end_of_a_hold_is_not_followed_step_by_step():
     assert np.max(np.abs(z)) < 5.0
 
 
+def _end_cut_frame(durations, rates, tau_min, dt0_c, rng):
+    """A 10-s log (readings to 0.01 degC, 0.02 degC of noise, the setpoint) of the
+    closed-form lag under ``rates`` for ``durations``, and its true gradient."""
+    time_min = np.arange(0.0, durations.sum() + 1e-9, 10.0 / 60.0)
+    temp_c, g_true, tk_c = _lag_closed_form(
+        durations, np.array(rates), 20.0, tau_min, dt0_c, time_min
+    )
+    frame = pd.DataFrame(
+        {
+            "time_s": time_min * 60.0,
+            "t_int_c": np.round(temp_c + 0.02 * rng.standard_normal(time_min.size), 2),
+            "tk_set_c": tk_c,
+        }
+    )
+    return frame, g_true
+
+
 def test_the_gradient_sigma_at_the_logs_end_holds_a_rate_change_just_before_it():
     """A log ending 0.5-3 min after the chamber's rate changes by +4 or -3 degC/min: the
     device's dg/dt = (U - g)/tau jumps there and the kinematic smoother, with no reading
@@ -792,17 +809,7 @@ def test_the_gradient_sigma_at_the_logs_end_holds_a_rate_change_just_before_it()
         ((0.0, 2.0, -1.0), 2.0),
     ]:
         durations = np.array([20.0, 40.0, after_min])
-        time_min = np.arange(0.0, durations.sum() + 1e-9, 10.0 / 60.0)
-        temp_c, g_true, tk_c = _lag_closed_form(
-            durations, np.array(rates), 20.0, tau_min, dt0_c, time_min
-        )
-        frame = pd.DataFrame(
-            {
-                "time_s": time_min * 60.0,
-                "t_int_c": np.round(temp_c + 0.02 * rng.standard_normal(time_min.size), 2),
-                "tk_set_c": tk_c,
-            }
-        )
+        frame, g_true = _end_cut_frame(durations, rates, tau_min, dt0_c, rng)
         est = estimate_gradient(log_from_frame(frame))
         worst.append(abs(est.g_est_c_per_min[-1] - g_true[-1]) / est.g_std_c_per_min[-1])
         # no setpoint column: the plan's changes given
@@ -827,17 +834,8 @@ def test_without_a_setpoint_the_logs_end_may_hide_a_change_of_the_largest_size_s
     worst = []
     for rates, after_min in [((0.0, 2.0, -1.0), 0.5), ((1.0, -1.0, 2.0), 1.0)]:
         durations = np.array([20.0, 40.0, after_min])
-        time_min = np.arange(0.0, durations.sum() + 1e-9, 10.0 / 60.0)
-        temp_c, g_true, _ = _lag_closed_form(
-            durations, np.array(rates), 20.0, tau_min, dt0_c, time_min
-        )
-        frame = pd.DataFrame(
-            {
-                "time_s": time_min * 60.0,
-                "t_int_c": np.round(temp_c + 0.02 * rng.standard_normal(time_min.size), 2),
-            }
-        )
-        est = estimate_gradient(log_from_frame(frame))
+        frame, g_true = _end_cut_frame(durations, rates, tau_min, dt0_c, rng)
+        est = estimate_gradient(log_from_frame(frame.drop(columns="tk_set_c")))
         z = (est.g_est_c_per_min - g_true) / est.g_std_c_per_min
         worst.append(abs(z[-1]))
         assert np.mean(np.abs(z) <= 2.0) > 0.95  # the rest is not made loose
