@@ -158,6 +158,23 @@ def test_a_rest_with_too_many_steps_is_merged_or_coarsened_to_fit_max_steps(
     assert knots_t[-1] <= LIMITS.duration_max_min and abs(knots_tk[-1] - 20.0) <= 0.5
 
 
+def test_a_complete_rest_over_the_step_limit_asks_for_coarser_segments(nominal):
+    """A rest that completes every bin but has more new steps than max_steps (13 against
+    2) is not loadable: the continuation says coarser segments may help. It said so only
+    for a rest short of bins (judge, session 52: a rest of 81 steps against 80 was
+    refused and coarser segments never tried)."""
+    import dataclasses
+
+    from schedsyn.planner.continuation import plan_continuation
+    from schedsyn.planner.core import LpStats
+
+    cont = Continuation(cut(nominal.programme, 100.0), measured(nominal.programme, PARAMS, 100.0))
+    spec = dataclasses.replace(SPEC, max_steps=2)
+    *_, check, spoilt = plan_continuation(spec, PARAMS, LIMITS, _lag(PARAMS), cont, None, LpStats())
+    assert check[0].complete and any("more than max_steps = 2" in p for p in check[2])
+    assert spoilt
+
+
 def _lag(params):
     from schedsyn.model import FirstOrderLag
 

@@ -330,7 +330,12 @@ def plan_continuation(
         )
     _, programme, mg, mt, search, check = best
     # (a complete rest covers every bin: none the step limits spoilt can cover more)
-    spoilt = bool(step_limited) and not check[0].complete
+    # or the rest taken itself breaks them (an over-long structure cut to end in time is
+    # not merged; judge, session 52: a rest of 81 steps against max_steps 80 was refused
+    # and the plan went on unchanged, coarser segments never tried)
+    spoilt = (bool(step_limited) and not check[0].complete) or _breaks_step_limits(
+        programme, spec, continuation
+    )
     return programme, mg, mt, search, notes, check, spoilt
 
 
