@@ -1916,8 +1916,10 @@ def estimate_gradient(
     tau_min = float(sensor_tau_s) / 60.0
     changes: list[tuple[float, float]] | None
     if rate_change_times_s is None:
-        # None: unknown (no setpoint logged), and the log's ends may hide a change
-        changes = None if log.tk_set_c is None else setpoint_rate_changes(log.time_s, log.tk_set_c)
+        # None: unknown (no setpoint logged, or one with blanks, which
+        # setpoint_rate_changes does not read), and the log's ends may hide a change
+        known = log.tk_set_c is not None and bool(np.all(np.isfinite(log.tk_set_c)))
+        changes = setpoint_rate_changes(log.time_s, log.tk_set_c) if known else None
     else:
         times = np.asarray(rate_change_times_s, dtype=float)
         jumps = np.asarray(rate_change_jumps_c_per_min, dtype=float)

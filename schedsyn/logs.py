@@ -819,16 +819,31 @@ EXCURSION_SIDE_ROWS = 4
 #: The run's readings must lie off that quadratic by more than the glitch limit plus this
 #: many times the quadratic's own largest miss on the readings it goes through.
 EXCURSION_SCATTER = 3.0
-#: More of the readings than this share in excursions is a broken column: refused.
+#: More of the readings than this share in more than EXCURSION_MAX_FEW runs is a broken
+#: column: refused (one or a few dropouts are excluded however long).
 EXCURSION_MAX_SHARE = 0.05
+EXCURSION_MAX_FEW = 3
+#: A jump spans at most this many median sampling steps (a reviewer: a turnaround read
+#: through two sampling gaps, and bursts of readings every 40 min, were taken as runs).
+EXCURSION_MAX_STEPS = 3.0
+#: Without a chamber column a jump must be faster than this, degC/min: faster than any
+#: device follows a chamber (the rate this reader refuses when sustained). A reviewer's
+#: device of tau 60 s under a 20 degC/min chamber read every 60 s (38 degC in one step,
+#: then a hold) is taken for a dropout without the chamber column; with it, its step
+#: tells. A dropout to 0 degC from 20-40 degC at 30-s rows is 40-80 degC/min.
+EXCURSION_MIN_RATE_C_PER_MIN = MAX_DEVICE_RATE_C_PER_MIN
 
 
 def excursion_runs(
-    time_s: np.ndarray, values_c: np.ndarray, limit_c: float
-) -> list[tuple[int, int, float]]:
+    time_s: np.ndarray,
+    values_c: np.ndarray,
+    limit_c: float,
+    chamber_c: np.ndarray | None = None,
+    excluded: np.ndarray | None = None,
+) -> list[tuple[int, int, int, float]]:
     """Runs of readings that leave the device's curve and come back: ``(first_row,
-    last_row, off_c)`` each (rows of ``values_c``, ``off_c`` their median distance from
-    the curve).
+    last_row, n_readings, off_c)`` each (rows of ``values_c``, the finite readings in
+    between, ``off_c`` their median distance from the curve).
 
     A run of 1 to :data:`EXCURSION_MAX_ROWS` consecutive finite readings is one when it
     starts with a jump and ends with a jump back, each larger than ``limit_c`` (the glitch
@@ -839,8 +854,15 @@ def excursion_runs(
     ``limit_c`` plus :data:`EXCURSION_SCATTER` times that quadratic's largest miss on
     them (a turnaround the quadratic follows badly does not count). A device lagging its
     chamber cannot jump out and back; a sensor that drops out (reads 0, a wired default,
-    an offset) for a few readings does. Runs at the log's ends (no readings on one side)
-    are not judged. Judge, session 52: five readings of 0.0 °C at -40.7 °C passed
+    an offset) for a few readings does. Each jump must also be between readings at most
+    :data:`EXCURSION_MAX_STEPS` median sampling steps apart (across a gap a device moves),
+    and not the chamber's: with ``chamber_c`` (the chamber column, on the rows of
+    ``values_c``), the chamber moved by less than half the jump over that step and the one
+    before (a fast device follows a setpoint step in one reading); without it, faster
+    than :data:`EXCURSION_MIN_RATE_C_PER_MIN` (no device; a 3 degC offset at 10-s rows is
+    then not found). ``excluded``: rows the reader blanked (glitches, held repeats),
+    not sampling gaps. Runs at the log's ends (no readings on one side) are not judged.
+    Judge, session 52: five readings of 0.0 °C at -40.7 °C passed
     silently, made the gradient swing by +-100 °C/min and its sigma 8x too large over the
     whole log; neither :func:`glitch_rows` (one or two readings) nor :func:`stuck_runs`
     (six or more repeats of one value) took them.
@@ -850,17 +872,43 @@ def excursion_runs(
     n, side = finite.size, EXCURSION_SIDE_ROWS
     if n < 2 * side + 1 or not math.isfinite(limit_c):
         return []
-    t = np.asarray(time_s, dtype=float)[finite]
+    t_all = np.asarray(time_s, dtype=float)
+    t = t_all[finite]
     y = v[finite]
     d = np.diff(y)  # d[k]: from finite reading k to k + 1
     ad = np.abs(d)
+    dt_s = np.diff(t)
     prev2 = np.maximum(np.concatenate(([0.0], ad[:-1])), np.concatenate(([0.0, 0.0], ad[:-2])))
     next2 = np.maximum(np.concatenate((ad[1:], [0.0])), np.concatenate((ad[2:], [0.0, 0.0])))
-    out_ok = ad > limit_c + 2.0 * prev2  # a jump out of the curve (its steps before)
-    back_ok = ad > limit_c + 2.0 * next2  # a jump back onto it (its steps after)
+    # a jump between two readings one sampling step apart (across a gap a device moves);
+    # rows this reader excluded between them (glitches, held repeats) are no gap: the
+    # span is then their largest step
+    row_dt = np.diff(t_all)
+    span_s = dt_s.copy()
+    if excluded is not None:
+        blank = ~np.isfinite(v) & ~np.asarray(excluded, dtype=bool)
+        cum_blank = np.concatenate(([0], np.cumsum(blank)))
+        for k in np.flatnonzero(np.diff(finite) > 1):
+            r0, r1 = finite[k], finite[k + 1]
+            if cum_blank[r1] == cum_blank[r0 + 1]:  # only excluded rows between
+                span_s[k] = float(np.max(row_dt[r0:r1]))
+    plain = span_s <= EXCURSION_MAX_STEPS * float(np.median(row_dt))
+    if chamber_c is None:  # only a jump no device makes
+        plain &= ad > EXCURSION_MIN_RATE_C_PER_MIN * span_s / 60.0
+    else:  # not a jump of the chamber's, which the device follows
+        ch = np.asarray(chamber_c, dtype=float)
+        ok = np.isfinite(ch)
+        if ok.sum() < 2:
+            return []
+        ch_at = np.interp(t, t_all[ok], ch[ok])
+        before = np.concatenate(([ch_at[0]], ch_at[:-2]))  # the chamber a step earlier
+        moved = np.maximum(np.abs(ch_at[1:] - ch_at[:-1]), np.abs(ch_at[1:] - before))
+        plain &= moved < 0.5 * ad
+    out_ok = plain & (ad > limit_c + 2.0 * prev2)  # a jump out of the curve (steps before)
+    back_ok = plain & (ad > limit_c + 2.0 * next2)  # a jump back onto it (steps after)
     outs = np.flatnonzero(out_ok)
     backs = np.flatnonzero(back_ok)
-    found: list[tuple[int, int, float]] = []
+    found: list[tuple[int, int, int, float]] = []
     done = -1
     for k in outs:
         if k < side - 1 or k <= done:
@@ -882,7 +930,9 @@ def excursion_runs(
             if np.all(np.sign(off) == np.sign(d[k])) and np.all(
                 np.abs(off) > limit_c + EXCURSION_SCATTER * miss
             ):
-                found.append((int(finite[k + 1]), int(finite[m]), float(np.median(off))))
+                found.append(
+                    (int(finite[k + 1]), int(finite[m]), int(m - k), float(np.median(off)))
+                )
                 done = m
                 break
     return found
@@ -895,22 +945,30 @@ def _exclude_glitches(
     excursions (:func:`excursion_runs`) set to NaN, and the report that lists them."""
     rows, off, limit_c = glitch_rows(values["time_s"], values["t_int_c"])
     temp, report = _exclude_spikes(values, report, source, rows, off, limit_c)
-    return _exclude_excursions(values["time_s"], temp, report, source, limit_c)
+    chamber = values.get("tk_set_c", values.get("tk_air_c"))
+    blanked = np.isfinite(values["t_int_c"]) & ~np.isfinite(temp)
+    return _exclude_excursions(values["time_s"], temp, report, source, limit_c, chamber, blanked)
 
 
 def _exclude_excursions(
-    time_s: np.ndarray, temp: np.ndarray, report: LogReport, source: str, limit_c: float
+    time_s: np.ndarray,
+    temp: np.ndarray,
+    report: LogReport,
+    source: str,
+    limit_c: float,
+    chamber_c: np.ndarray | None = None,
+    excluded: np.ndarray | None = None,
 ) -> tuple[np.ndarray, LogReport]:
     """``temp`` with its excursions (:func:`excursion_runs`) set to NaN, and the report
     that lists them; a column with more than :data:`EXCURSION_MAX_SHARE` of its readings
     in them is refused."""
-    runs = excursion_runs(time_s, temp, limit_c)
+    runs = excursion_runs(time_s, temp, limit_c, chamber_c, excluded)
     if not runs:
         return temp, report
-    n_rows = sum(b - a + 1 for a, b, _ in runs)
+    n_rows = sum(k for _, _, k, _ in runs)
     n_finite = int(np.isfinite(temp).sum())
     a0 = runs[0][0]
-    if n_rows > EXCURSION_MAX_SHARE * n_finite:
+    if n_rows > EXCURSION_MAX_SHARE * n_finite and len(runs) > EXCURSION_MAX_FEW:
         raise LogFormatError(
             f"{source}: column t_int_c: {n_rows} of {n_finite} readings lie in {len(runs)} "
             f"run(s) that jump off the curve through their neighbours and back (first: row "
@@ -918,10 +976,10 @@ def _exclude_excursions(
             "few dropouts; check the sensor's wiring or the export"
         )
     t = np.asarray(time_s, dtype=float)
-    found = tuple((float(t[a]), float(t[b]), b - a + 1, off) for a, b, off in runs)
+    found = tuple((float(t[a]), float(t[b]), k, off) for a, b, k, off in runs)
     listed = ", ".join(
         f"rows {a + 1}-{b + 1} ({t0:g} .. {t1:g} s, {k} reading(s), {off:+.3g} °C)"
-        for (a, b, _), (t0, t1, k, off) in zip(runs[:5], found[:5], strict=True)
+        for (a, b, _, _), (t0, t1, k, off) in zip(runs[:5], found[:5], strict=True)
     )
     more = f" and {len(runs) - 5} more" if len(runs) > 5 else ""
     note = (
@@ -931,7 +989,7 @@ def _exclude_excursions(
         "sensor, and fix or blank them in the log to silence this"
     )
     clean = np.array(temp, dtype=float)
-    for a, b, _ in runs:
+    for a, b, _, _ in runs:
         clean[a : b + 1] = np.nan
     clean.setflags(write=False)
     report = dataclasses.replace(report, warnings=(note, *report.warnings), excursions_s=found)

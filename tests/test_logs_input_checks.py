@@ -4,6 +4,7 @@ time-unit mistakes, isolated glitch readings, and what the drift fit leaves out.
 from __future__ import annotations
 
 import json
+import math
 import re
 
 import numpy as np
@@ -300,6 +301,37 @@ def test_turnarounds_steps_of_coarse_logs_and_noise_are_not_excursions():
             temp = np.round(temp / quant_c) * quant_c
         limit_c = glitch_rows(t, temp)[2]
         assert excursion_runs(t, temp, limit_c) == [], (tau_s, dt_s)
+
+
+def test_a_fast_device_a_gappy_turnaround_and_one_long_dropout_in_a_short_log():
+    """Reviewer, session 52: a device of tau 60 s read every 60 s under a 20 degC/min
+    setpoint ramp jumps 38 degC and holds (the setpoint did it: not an excursion); a
+    turnaround read through two long sampling gaps is not one either; one 7-reading
+    dropout in a 120-row log is excluded, not refused as a broken column."""
+    t = np.arange(0.0, 8 * 3600.0, 60.0)
+    setpoint = np.interp(t, [0, 7200, 7320, 7800, 7920, 1e9], [20, 20, 60, 60, 20, 20])
+    fine = np.arange(0.0, 8 * 3600.0, 1.0)
+    chamber = np.interp(fine, t, setpoint)
+    device = np.empty_like(fine)
+    device[0], a = 20.0, math.exp(-1.0 / 60.0)
+    for i in range(1, fine.size):
+        device[i] = chamber[i] + (device[i - 1] - chamber[i]) * a
+    temp = np.interp(t, fine, device)
+    assert excursion_runs(t, temp, 0.5, setpoint) == []
+    t10 = np.arange(0.0, 4 * 3600.0, 10.0)
+    bump = 20.0 + 40.0 * np.exp(-(((t10 - 7200.0) / 1500.0) ** 2))
+    bump[(np.abs(t10 - 7200.0) > 20.0) & (np.abs(t10 - 7200.0) < 3000.0)] = np.nan
+    flat = np.full(t10.size, 20.0)  # a chamber that did not move: only the gaps tell
+    assert excursion_runs(t10, bump, 0.5, flat) == []
+    f = _sample_run().iloc[:120].copy()
+    f.loc[60:66, "t_int_c"] = np.linspace(0.0, 0.6, 7)  # a wandering dropout, not held
+    log = log_from_frame(f)
+    ((_, _, n, _),) = log.report.excursions_s
+    assert n == 7 and np.isnan(log.t_int_c[60:67]).all()
+    f.loc[60:66, "t_int_c"] = 0.0  # held: the repeats as held, the first as an excursion
+    log = log_from_frame(f)
+    assert len(log.report.stuck_s) == 1 and len(log.report.excursions_s) == 1
+    assert np.isnan(log.t_int_c[60:67]).all() and np.isfinite(log.t_int_c[[59, 67]]).all()
 
 
 def test_a_column_of_many_dropouts_is_refused():
