@@ -888,10 +888,11 @@ def excursion_runs(
     if excluded is not None:
         blank = ~np.isfinite(v) & ~np.asarray(excluded, dtype=bool)
         cum_blank = np.concatenate(([0], np.cumsum(blank)))
-        for k in np.flatnonzero(np.diff(finite) > 1):
-            r0, r1 = finite[k], finite[k + 1]
-            if cum_blank[r1] == cum_blank[r0 + 1]:  # only excluded rows between
-                span_s[k] = float(np.max(row_dt[r0:r1]))
+        holes = np.flatnonzero(np.diff(finite) > 1)
+        r0, r1 = finite[holes], finite[holes + 1]
+        bridged = cum_blank[r1] == cum_blank[r0 + 1]  # only excluded rows between
+        for k, a, b in zip(holes[bridged], r0[bridged], r1[bridged], strict=True):
+            span_s[k] = float(np.max(row_dt[a:b]))
     plain = span_s <= EXCURSION_MAX_STEPS * float(np.median(row_dt))
     if chamber_c is None:  # only a jump no device makes
         plain &= ad > EXCURSION_MIN_RATE_C_PER_MIN * span_s / 60.0
