@@ -109,9 +109,10 @@ class StepTableMeta:
     min_step_min : float
         The shortest step the table was planned to have, min.
     segment_min : float
-        The control segment the planner chose the rates on, min: a step lasts a whole
-        number of them. Longer than requested when the planner went to coarser segments
-        to meet ``max_steps`` or ``min_step_min`` (the plan's notes say so).
+        The control segment the planner chose the rates on, min (a planned step is made
+        of such segments, before rounding; a re-planned rest's from the minute it starts).
+        Longer than requested when the planner went to coarser segments to meet
+        ``max_steps`` or ``min_step_min`` (the plan's notes say so).
     status : str
         The planner's verdict on the table: ``complete``, ``incomplete`` or ``limits
         violated`` (:attr:`schedsyn.planner.Plan.status`).
