@@ -1568,13 +1568,17 @@ class GradientEstimate:
         """Lag-1 autocorrelation of the normalised innovations over the rows kept (after
         the :data:`N_DIFFUSE` first): about 0 when the sensor noise is white and the model
         right (within ``2/sqrt(N)``); NaN with fewer than 50."""
+        return self._lag1_and_count()[0]
+
+    def _lag1_and_count(self) -> tuple[float, int]:
+        """:attr:`innovation_lag1` and the number of innovations it is taken over."""
         z = self.normalised_innovations[N_DIFFUSE:]
         z = z[np.isfinite(z)]
         if z.size < 50:
-            return math.nan
+            return math.nan, int(z.size)
         z = z - z.mean()
         den = float(np.dot(z, z))
-        return float(np.dot(z[:-1], z[1:]) / den) if den > 0 else math.nan
+        return (float(np.dot(z[:-1], z[1:]) / den) if den > 0 else math.nan), int(z.size)
 
     def warnings(self) -> list[str]:
         """What makes the stated standard deviations doubtful, one sentence each: the
@@ -1585,9 +1589,7 @@ class GradientEstimate:
         Judge, session 52: sensor noise correlated over 30-600 s (AR(1)) gave a
         gradient error 2-3x the stated sigma (48-67 % within 2 sigma), with the
         innovations' std 1.00 and nothing said."""
-        a1 = self.innovation_lag1
-        z = self.normalised_innovations[N_DIFFUSE:]
-        n = int(np.isfinite(z).sum())
+        a1, n = self._lag1_and_count()
         floor = self.noise.quant_c**2 / 12.0
         above_floor = self.r - floor > max(0.5 * floor, 100.0 * math.exp(LOG_R_BOUNDS[0]))
         if (
