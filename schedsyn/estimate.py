@@ -1667,6 +1667,8 @@ class GradientEstimate:
                 f"; T and g are the device's behind a sensor of time constant "
                 f"{self.sensor_tau_s:g} s (T = Ts + tau dTs/dt, g = dTs/dt + tau d²Ts/dt²)"
             )
+        a1 = self.innovation_lag1
+        lag1 = f"{a1:.2f}" if math.isfinite(a1) else "n/a (fewer than 50 innovations)"
         if self.staircase_readings:
             kinks += (
                 f"; the readings are a quantised staircase (a value repeated on many rows, "
@@ -1678,7 +1680,7 @@ class GradientEstimate:
             f"r = {self.r:.3g} °C² (σ {math.sqrt(self.r):.3g} °C; quantisation "
             f"{self.noise.quant_c:g} °C; fitted by ML: {fitted}); median gradient std "
             f"{np.nanmedian(self.g_std_c_per_min):.3g} °C/min; normalised innovations "
-            f"std {np.std(z):.2f}, lag-1 autocorrelation {self.innovation_lag1:.2f} (1 and 0 "
+            f"std {np.std(z):.2f}, lag-1 autocorrelation {lag1} (1 and 0 "
             f"if consistent){kinks}{every}"
         )
 

@@ -924,6 +924,8 @@ def test_correlated_sensor_noise_is_said_to_make_the_sigmas_too_small(tmp_path, 
     assert coarse.innovation_lag1 > 0.15  # correlated, yet not warned of
     white = estimate_gradient(log_from_frame(_wander_log("white")))
     assert abs(white.innovation_lag1) < 0.1
+    few = estimate_gradient(log_from_frame(_wander_log("white").iloc[:30]))
+    assert "lag-1 autocorrelation n/a (fewer than 50" in few.summary() and not few.warnings()
     path = tmp_path / "ar.csv"
     _wander_log("ar").to_csv(path, index=False)
     assert main(["estimate", str(path), "--out", str(tmp_path / "out")]) == 0
