@@ -894,13 +894,11 @@ def excursion_runs(
         for k, a, b in zip(holes[bridged], r0[bridged], r1[bridged], strict=True):
             span_s[k] = float(np.max(row_dt[a:b]))
     plain = span_s <= EXCURSION_MAX_STEPS * float(np.median(row_dt))
-    if chamber_c is None:  # only a jump no device makes
+    ch = None if chamber_c is None else np.asarray(chamber_c, dtype=float)
+    if ch is None or int(np.isfinite(ch).sum()) < 2:  # only a jump no device makes
         plain &= ad > EXCURSION_MIN_RATE_C_PER_MIN * span_s / 60.0
     else:  # not a jump of the chamber's, which the device follows
-        ch = np.asarray(chamber_c, dtype=float)
         ok = np.isfinite(ch)
-        if ok.sum() < 2:
-            return []
         ch_at = np.interp(t, t_all[ok], ch[ok])
         before = np.concatenate(([ch_at[0]], ch_at[:-2]))  # the chamber a step earlier
         moved = np.maximum(np.abs(ch_at[1:] - ch_at[:-1]), np.abs(ch_at[1:] - before))
@@ -946,9 +944,25 @@ def _exclude_glitches(
     excursions (:func:`excursion_runs`) set to NaN, and the report that lists them."""
     rows, off, limit_c = glitch_rows(values["time_s"], values["t_int_c"])
     temp, report = _exclude_spikes(values, report, source, rows, off, limit_c)
-    chamber = values.get("tk_set_c", values.get("tk_air_c"))
+    chamber = _chamber_reading(values)
     blanked = np.isfinite(values["t_int_c"]) & ~np.isfinite(temp)
     return _exclude_excursions(values["time_s"], temp, report, source, limit_c, chamber, blanked)
+
+
+def _chamber_reading(values: dict[str, np.ndarray]) -> np.ndarray | None:
+    """The chamber on every row: its setpoint where the log gives one, else its air
+    temperature; None when neither has two readings. (The setpoint alone was taken even
+    when blank throughout, and then no excursion was found at all.)"""
+    out: np.ndarray | None = None
+    for name in ("tk_set_c", "tk_air_c"):
+        col = values.get(name)
+        if col is None:
+            continue
+        col = np.asarray(col, dtype=float)
+        out = col.copy() if out is None else np.where(np.isfinite(out), out, col)
+    if out is None or int(np.isfinite(out).sum()) < 2:
+        return None
+    return out
 
 
 def _exclude_excursions(

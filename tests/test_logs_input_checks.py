@@ -334,6 +334,23 @@ def test_a_fast_device_a_gappy_turnaround_and_one_long_dropout_in_a_short_log():
     assert np.isnan(log.t_int_c[60:67]).all() and np.isfinite(log.t_int_c[[59, 67]]).all()
 
 
+def test_a_blank_setpoint_column_leaves_the_air_to_judge_excursions():
+    """Session 53: the setpoint column was taken even when blank throughout (a logger that
+    writes the column but not the values) and then no dropout was found at all; the air
+    column, when there, judges the jumps, and with neither the rate rule does."""
+    f = _sample_run()
+    at = 1500
+    f.loc[at : at + 4, "t_int_c"] = 0.0
+    air = f["tk_set_c"].to_numpy().copy()
+    blank = f.assign(tk_set_c=np.nan, tk_air_c=air)
+    ((t0, _, n, _),) = log_from_frame(blank, source="blank_set.csv").report.excursions_s
+    assert t0 == f.loc[at, "time_s"] and n >= 3
+    neither = f.assign(tk_set_c=np.nan)
+    assert len(log_from_frame(neither, source="none.csv").report.excursions_s) == 1
+    half = blank.assign(tk_set_c=np.where(np.arange(len(f)) < 1000, air, np.nan))
+    assert len(log_from_frame(half, source="half.csv").report.excursions_s) == 1
+
+
 def test_a_column_of_many_dropouts_is_refused():
     f = _sample_run()
     temp = f["t_int_c"].to_numpy().copy()
