@@ -33,7 +33,8 @@ class BinGrid:
                 raise ParameterError(f"{name} must be a finite number, got {v!r}")
         if not self.lo_c < self.hi_c:
             raise ParameterError(
-                f"the working region must have lo_c < hi_c, got {self.lo_c} .. {self.hi_c} degC"
+                f"the working region must have lo_c < hi_c, got {self.lo_c} .. {self.hi_c} "
+                "degC; give its lower edge first"
             )
         if self.bin_c <= 0:
             raise ParameterError(f"bin_c must be > 0 degC, got {self.bin_c}")

@@ -559,3 +559,27 @@ def test_cli_counts_coverage_at_the_tables_delta(tmp_path, capsys, programme):
     assert "(levels from the step table, delta given)" in capsys.readouterr().out
     frame = pd.read_csv(tmp_path / "b" / "sweep.csv")
     np.testing.assert_array_equal(frame["coverage"], at_005["coverage"])
+
+
+@pytest.mark.parametrize(
+    "region, approx, words",
+    [
+        (["13", "5"], [], "lo_c < hi_c"),
+        (["-30", "-20"], ["--approx", "-25", "-10"], "must contain the working region"),
+        (["-60", "-50"], [], "outside its limits -52 .. 62 °C"),
+    ],
+)
+def test_cli_replan_refuses_a_bad_request_up_front(
+    tmp_path, capsys, monkeypatch, region, approx, words
+):
+    """A request no point can plan is refused with plan's own checks, one line and exit 2
+    (judge: exit 0 with every row "failed")."""
+    import schedsyn.cli.sweep as cli_sweep
+
+    monkeypatch.setattr(cli_sweep, "PlanAtPoint", lambda *args: fake_plan)  # never asked
+    grid = ["--tau-s", "2000:2800:3", "--dt0-c", "0:6:3", "--workers", "1", "--quiet"]
+    rc = main(["sweep", "--replan", "--region", *region, *approx, *grid, "--out", str(tmp_path)])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and words in err and "Traceback" not in err
+    assert not (tmp_path / "sweep.csv").exists()

@@ -133,18 +133,46 @@ class PlanAtPoint:
     limits: Limits
 
     def __call__(self, params: ThermalParams):
-        from ..planner import ExperimentSpec, plan_experiment
+        from ..planner import plan_experiment
 
-        spec = ExperimentSpec(
-            "sweep",
-            self.region[0],
-            self.region[1],
-            self.approx[0],
-            self.approx[1],
-            levels_required=self.levels_required,
-            delta_c_per_min=self.delta_c_per_min,
-        )
+        spec = replan_spec(self.region, self.approx, self.levels_required, self.delta_c_per_min)
         return plan_experiment(spec, params, self.limits)
+
+
+def replan_spec(
+    region: tuple[float, float],
+    approx: tuple[float, float],
+    levels_required: int,
+    delta_c_per_min: float,
+):
+    """The planner's request at every grid point of ``--replan`` (an ``ExperimentSpec``,
+    which validates the regions, levels and delta as ``schedsyn plan``'s does)."""
+    from ..planner import ExperimentSpec
+
+    return ExperimentSpec(
+        "sweep",
+        region[0],
+        region[1],
+        approx[0],
+        approx[1],
+        levels_required=levels_required,
+        delta_c_per_min=delta_c_per_min,
+    )
+
+
+def check_replan_request(
+    region: tuple[float, float],
+    approx: tuple[float, float],
+    levels_required: int,
+    delta_c_per_min: float,
+    limits: Limits,
+) -> None:
+    """Refuse, before any planning, a re-plan request no grid point can plan: the checks
+    ``schedsyn plan`` makes (the request's own, then the planner's
+    :func:`~schedsyn.planner.check_request`). Without them every row was "failed"."""
+    from ..planner import check_request
+
+    check_request(replan_spec(region, approx, levels_required, delta_c_per_min), limits)
 
 
 def default_approx(region: tuple[float, float], limits: Limits) -> tuple[float, float]:
@@ -230,14 +258,21 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError("re-planning needs the working region: give --region LO HI (°C)")
     lo, hi = _common.region_from_table(args, meta, args.steps)
     levels, deltas, requirement = _coverage_requirement(args, meta)
+    approx: tuple[float, float] | None = None
+    if args.replan:
+        approx = (
+            (float(args.approx[0]), float(args.approx[1]))
+            if args.approx
+            else default_approx((lo, hi), limits)
+        )
+        check_replan_request((lo, hi), approx, levels, deltas[0], limits)
     backend = _backend(args)
     progress = _common.progress_of(args)
     inputs = [args.steps] if args.steps else []
     out = _common.output_dir(args.out, "out/sweep", inputs, ("sweep.csv", "sweep.png"))
     marker = (nominal.tau_s, nominal.dt0_c)
 
-    if args.replan:
-        approx = tuple(args.approx) if args.approx else default_approx((lo, hi), limits)
+    if approx is not None:
         plan_fn = PlanAtPoint((lo, hi), approx, levels, deltas[0], limits)
         replanned = sweep_replan(
             plan_fn, taus, dt0s, backend=backend, workers=args.workers, progress=progress

@@ -105,7 +105,8 @@ class ExperimentSpec:
             raise ParameterError(
                 f"{self.name}: the approximation region [{self.approx_lo_c:g}, "
                 f"{self.approx_hi_c:g}] °C must contain the working region "
-                f"[{self.working_lo_c:g}, {self.working_hi_c:g}] °C"
+                f"[{self.working_lo_c:g}, {self.working_hi_c:g}] °C; widen it to reach at least "
+                f"{self.working_lo_c:g} .. {self.working_hi_c:g} °C"
             )
         levels = self.levels_required
         if isinstance(levels, bool) or int(levels) != levels or not 2 <= levels <= 12:
