@@ -583,3 +583,29 @@ def test_cli_replan_refuses_a_bad_request_up_front(
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and words in err and "Traceback" not in err
     assert not (tmp_path / "sweep.csv").exists()
+
+
+def test_cli_says_where_the_nominal_point_came_from(tmp_path, capsys):
+    """--nominal-* over a table that records a model: said so (judge: "from the step
+    table" whatever the options)."""
+    steps = _table_with_meta(
+        tmp_path, working_lo_c=-50.0, working_hi_c=-30.0, tau_s=2900.0, dt0_c=1.5
+    )
+    grid = ["--tau-s", "2400", "--dt0-c", "3", "--workers", "1", "--quiet"]
+    cases = [
+        ([], "(tau 2900 s, dT0 1.5 °C)", "(nominal point: from the step table)"),
+        (
+            ["--nominal-tau-s", "2400"],
+            "(tau 2400 s, dT0 1.5 °C)",
+            "from the step table and the options",
+        ),
+        (
+            ["--nominal-tau-s", "2400", "--nominal-dt0-c", "3"],
+            "(tau 2400 s, dT0 3 °C)",
+            "(nominal point: given)",
+        ),
+    ]
+    for k, (opts, point, source) in enumerate(cases):
+        assert main(["sweep", str(steps), *grid, *opts, "--out", str(tmp_path / f"o{k}")]) == 0
+        (line,) = [x for x in capsys.readouterr().out.splitlines() if "nominal point" in x]
+        assert point in line and source in line, line

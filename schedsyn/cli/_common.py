@@ -77,18 +77,34 @@ def thermal_params(args: argparse.Namespace, base: ThermalParams | None = None) 
     return dataclasses.replace(base, **changes)
 
 
-def model_from_table(args: argparse.Namespace, meta) -> tuple[ThermalParams, str]:
+def model_from_table(
+    args: argparse.Namespace,
+    meta,
+    names: tuple[str, str] = ("tau_s", "dt0_c"),
+    table: bool = True,
+) -> tuple[ThermalParams, str]:
     """``(params, where they come from)``: the options over the step table's recorded model,
-    else the defaults (said so: "default")."""
+    else the defaults (said so: "default").
+
+    ``names``: the ``args`` attributes of the tau and dT0 options (``--tau-s``,
+    ``--dt0-c`` by default); ``table``: whether there is a step table at all (without one
+    the defaults are just "default").
+    """
     recorded = meta.params() if meta is not None else None
-    params = thermal_params(args, recorded)
-    given = [k for k in ("tau_s", "dt0_c") if getattr(args, k) is not None]
+    given = {
+        k: getattr(args, name)
+        for k, name in zip(("tau_s", "dt0_c"), names, strict=True)
+        if getattr(args, name) is not None
+    }
+    params = dataclasses.replace(ThermalParams() if recorded is None else recorded, **given)
     if len(given) == 2:
         source = "given"
     elif recorded is not None:
         source = "from the step table" + (" and the options" if given else "")
+    elif given:
+        source = "default and the options"
     else:
-        source = "default" + (" and the options" if given else "; the step table records none")
+        source = "default" + ("; the step table records none" if table else "")
     return params, source
 
 

@@ -235,16 +235,8 @@ def run(args: argparse.Namespace) -> int:
     taus = parse_grid(args.tau_s, "--tau-s", "s")
     dt0s = parse_grid(args.dt0_c, "--dt0-c", "°C")
     meta = read_step_meta(args.steps) if args.steps is not None else None
-    recorded = meta.params() if meta is not None else None
-    nominal = ThermalParams(
-        **{
-            **(recorded.to_dict() if recorded is not None else {}),
-            **{
-                k: v
-                for k, v in (("tau_s", args.nominal_tau_s), ("dt0_c", args.nominal_dt0_c))
-                if v is not None
-            },
-        }
+    nominal, nominal_src = _common.model_from_table(
+        args, meta, ("nominal_tau_s", "nominal_dt0_c"), table=args.steps is not None
     )
     limits = (meta.limits() if meta is not None else None) or Limits()
     if args.steps is None and not args.replan:
@@ -331,9 +323,6 @@ def run(args: argparse.Namespace) -> int:
     )
     out.commit()
     region_src = "given" if args.region is not None else "from the step table"
-    nominal_src = (
-        "from the step table" if recorded is not None else "default; the step table records none"
-    )
     lines = [
         f"programme: {programme.n_segments} steps, {programme.total_min:.1f} min; working "
         f"region [{lo:g}, {hi:g}] °C ({region_src})",
