@@ -609,3 +609,23 @@ def test_cli_says_where_the_nominal_point_came_from(tmp_path, capsys):
         assert main(["sweep", str(steps), *grid, *opts, "--out", str(tmp_path / f"o{k}")]) == 0
         (line,) = [x for x in capsys.readouterr().out.splitlines() if "nominal point" in x]
         assert point in line and source in line, line
+
+
+def test_cli_warns_of_a_tau_in_minutes(tmp_path, capsys):
+    """plan's unit-slip warning, for the grid's ends and the nominal point (judge: none)."""
+    rc = main(
+        ["sweep", STEPS, "--region", "-50", "-30", "--tau-s", "30:50:3", "--dt0-c", "3"]
+        + ["--nominal-tau-s", "40", "--workers", "1", "--quiet", "--out", str(tmp_path)]
+    )
+    assert rc == 0
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 3, err
+    assert err[0].startswith("warning: --tau-s 30:50:3: tau_s = 30 s") and "give 1800" in err[0]
+    assert err[1].startswith("warning: --tau-s 30:50:3: tau_s = 50 s") and "give 3000" in err[1]
+    assert err[2].startswith("warning: nominal point: tau_s = 40 s") and "give 2400" in err[2]
+    # a plausible grid and nominal: no warning
+    rc = main(
+        ["sweep", STEPS, "--region", "-50", "-30", "--tau-s", "2400", "--dt0-c", "3"]
+        + ["--workers", "1", "--quiet", "--out", str(tmp_path / "ok")]
+    )
+    assert rc == 0 and capsys.readouterr().err == ""

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import ParameterError, SchedsynError
 from ..io import write_frame_atomic
-from ..params import Limits, ThermalParams
+from ..params import Limits, ThermalParams, unit_slip_notes
 from ..programme import read_step_meta, read_steps
 from ..sweep import parse_grid, sweep_fixed, sweep_replan
 from . import _common
@@ -216,6 +216,35 @@ def _coverage_requirement(args: argparse.Namespace, meta) -> tuple[int, list[flo
     )
 
 
+def unit_slip_warnings(
+    args: argparse.Namespace,
+    taus: np.ndarray,
+    dt0s: np.ndarray,
+    nominal: ThermalParams,
+    limits: Limits,
+) -> list[str]:
+    """``plan``'s warnings for figures that look like a unit slip (``unit_slip_notes``: a
+    tau in minutes, a dT0 beyond 20 °C, a rate in °C/h) for the grids' ends and the
+    nominal point, each said once and where it comes from."""
+    checks = [
+        (f"--tau-s {args.tau_s}", ThermalParams(tau_s=float(tau), dt0_c=0.0))
+        for tau in dict.fromkeys((taus[0], taus[-1]))
+    ]
+    checks += [
+        (f"--dt0-c {args.dt0_c}", ThermalParams(dt0_c=float(dt0)))
+        for dt0 in dict.fromkeys((dt0s[0], dt0s[-1]))
+    ]
+    checks.append(("nominal point", nominal))
+    said: dict[str, str] = {}
+    for where, params in checks:
+        for note in unit_slip_notes(params, limits):
+            if note.startswith(("tau_s", "dt0_c")):
+                said.setdefault(f"{where}: {note}", "")
+            else:  # the limits' own (the table's rates): the same at every point
+                said.setdefault(note, "")
+    return list(said)
+
+
 def _planner_available() -> bool:
     try:
         return importlib.util.find_spec("schedsyn.planner") is not None
@@ -239,6 +268,8 @@ def run(args: argparse.Namespace) -> int:
         args, meta, ("nominal_tau_s", "nominal_dt0_c"), table=args.steps is not None
     )
     limits = (meta.limits() if meta is not None else None) or Limits()
+    for note in unit_slip_warnings(args, taus, dt0s, nominal, limits):
+        _common.stderr(f"warning: {note}")
     if args.steps is None and not args.replan:
         raise ParameterError("give the step table STEPS.csv to sweep (or --replan to re-plan)")
     if args.replan and not _planner_available():
