@@ -607,7 +607,9 @@ def test_cli_says_where_the_nominal_point_came_from(tmp_path, capsys):
     ]
     for k, (opts, point, source) in enumerate(cases):
         assert main(["sweep", str(steps), *grid, *opts, "--out", str(tmp_path / f"o{k}")]) == 0
-        (line,) = [x for x in capsys.readouterr().out.splitlines() if "nominal point" in x]
+        (line,) = [
+            x for x in capsys.readouterr().out.splitlines() if x.startswith("at the nominal")
+        ]
         assert point in line and source in line, line
 
 
@@ -629,3 +631,47 @@ def test_cli_warns_of_a_tau_in_minutes(tmp_path, capsys):
         + ["--workers", "1", "--quiet", "--out", str(tmp_path / "ok")]
     )
     assert rc == 0 and capsys.readouterr().err == ""
+
+
+def test_default_grid_is_around_the_nominal_and_takes_in_the_box():
+    from schedsyn.sweep import default_grid
+
+    taus, dt0s = default_grid(ThermalParams())  # the issue's grid around 2400 s, 3 degC
+    np.testing.assert_array_equal(taus, parse_grid("1800:3000:13"))
+    np.testing.assert_array_equal(dt0s, parse_grid("0:6:13"))
+    taus, dt0s = default_grid(ThermalParams(1600.0, -2.0), (1000.0, 2000.0), (-3.0, 2.0))
+    assert (taus[0], taus[-1], dt0s[0], dt0s[-1]) == (1000.0, 2000.0, -5.0, 2.0)
+    assert taus.size == dt0s.size == 13
+
+
+def test_cli_default_grid_covers_the_tables_nominal_and_robust_box(tmp_path, capsys):
+    """Judge: a table planned at tau 1600 s, dT0 -2 degC for the box 1200..2000 s x -3..-1
+    degC was swept over 1800..3000 s x 0..6 degC without a word, nominal and box outside."""
+    steps = _table_with_meta(
+        tmp_path,
+        working_lo_c=-50.0,
+        working_hi_c=-30.0,
+        tau_s=1600.0,
+        dt0_c=-2.0,
+        robust_tau_lo_s=1200.0,
+        robust_tau_hi_s=2000.0,
+        robust_dt0_lo_c=-3.0,
+        robust_dt0_hi_c=-1.0,
+    )
+    assert (
+        main(["sweep", str(steps), "--workers", "1", "--quiet", "--out", str(tmp_path / "d")]) == 0
+    )
+    text = capsys.readouterr().out
+    frame = pd.read_csv(tmp_path / "d" / "sweep.csv")
+    assert frame["tau_s"].min() <= 1200.0 and frame["tau_s"].max() >= 2000.0
+    assert frame["dt0_c"].min() <= -3.0 and frame["dt0_c"].max() >= -1.0
+    assert "grid (default)" in text and "robust box tau 1200 .. 2000 s x dT0 -3 .. -1 °C" in text
+    assert "leaves out" not in text
+    # a given grid that leaves them out is said to
+    grid = ["--tau-s", "1800:3000:3", "--dt0-c", "0:6:3"]
+    rc = main(
+        ["sweep", str(steps), *grid, "--workers", "1", "--quiet", "--out", str(tmp_path / "g")]
+    )
+    assert rc == 0
+    (note,) = [x for x in capsys.readouterr().out.splitlines() if x.startswith("note:")]
+    assert "leaves out the step table's robust box" in note and "the nominal point" in note

@@ -4,7 +4,8 @@ Writes ``DIR/sweep.csv`` (one row per grid point) and ``DIR/sweep.png`` (heatmap
 the nominal point marked) and prints a summary. Runs in parallel on the local cores by
 default, or on a Dask cluster with ``--dask tcp://HOST:PORT``. The working region, the
 nominal point and the coverage requirement are the step table's (its metadata) unless
-given; a table that records no working region needs --region.
+given; a table that records no working region needs --region. The default grid is around
+the nominal point and takes in the robust box the table records.
 """
 
 from __future__ import annotations
@@ -19,7 +20,14 @@ from ..errors import ParameterError, SchedsynError
 from ..io import write_frame_atomic
 from ..params import Limits, ThermalParams, unit_slip_notes
 from ..programme import read_step_meta, read_steps
-from ..sweep import parse_grid, sweep_fixed, sweep_replan
+from ..sweep import (
+    DEFAULT_DT0_SPREAD_C,
+    DEFAULT_TAU_SPREAD,
+    default_grid,
+    parse_grid,
+    sweep_fixed,
+    sweep_replan,
+)
 from . import _common
 
 
@@ -53,16 +61,18 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--tau-s",
-        default="1800:3000:13",
+        default=None,
         metavar="START:STOP:N",
-        help="grid of time constants, s (default 1800:3000:13)",
+        help="grid of time constants, s (default: 13 values from 0.75 to 1.25 x the "
+        "nominal tau, widened to the step table's robust box; 1800:3000:13 around 2400 s)",
     )
     p.add_argument(
         "--dt0-c",
-        default="0:6:13",
+        default=None,
         metavar="START:STOP:N",
-        help="grid of self-heating offsets, °C (default 0:6:13); attach a "
-        "negative start with '=', e.g. --dt0-c=-2:4:7",
+        help="grid of self-heating offsets, °C (default: 13 values within 3 °C of the "
+        "nominal dT0, widened to the step table's robust box; 0:6:13 around 3 °C); attach "
+        "a negative start with '=', e.g. --dt0-c=-2:4:7",
     )
     p.add_argument("--out", default=None, help="output directory (default out/sweep)")
     p.add_argument(
@@ -226,14 +236,17 @@ def unit_slip_warnings(
     """``plan``'s warnings for figures that look like a unit slip (``unit_slip_notes``: a
     tau in minutes, a dT0 beyond 20 °C, a rate in °C/h) for the grids' ends and the
     nominal point, each said once and where it comes from."""
-    checks = [
-        (f"--tau-s {args.tau_s}", ThermalParams(tau_s=float(tau), dt0_c=0.0))
-        for tau in dict.fromkeys((taus[0], taus[-1]))
-    ]
-    checks += [
-        (f"--dt0-c {args.dt0_c}", ThermalParams(dt0_c=float(dt0)))
-        for dt0 in dict.fromkeys((dt0s[0], dt0s[-1]))
-    ]
+    checks = []  # a default grid is around the nominal point: said once, for the point
+    if args.tau_s is not None:
+        checks += [
+            (f"--tau-s {args.tau_s}", ThermalParams(tau_s=float(tau), dt0_c=0.0))
+            for tau in dict.fromkeys((taus[0], taus[-1]))
+        ]
+    if args.dt0_c is not None:
+        checks += [
+            (f"--dt0-c {args.dt0_c}", ThermalParams(dt0_c=float(dt0)))
+            for dt0 in dict.fromkeys((dt0s[0], dt0s[-1]))
+        ]
     checks.append(("nominal point", nominal))
     said: dict[str, str] = {}
     for where, params in checks:
@@ -243,6 +256,67 @@ def unit_slip_warnings(
             else:  # the limits' own (the table's rates): the same at every point
                 said.setdefault(note, "")
     return list(said)
+
+
+def sweep_grid(
+    args: argparse.Namespace, nominal: ThermalParams, meta
+) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """``(tau_s_values, dt0_c_values, lines)``: the grids given, else the default grid
+    around the nominal point that takes in the step table's robust box
+    (:func:`~schedsyn.sweep.default_grid`); ``lines`` say how a default grid was made,
+    or what of the nominal point and the robust box a given grid leaves out."""
+    tau_box, dt0_box = meta.robust_box if meta is not None else (None, None)
+    default_taus, default_dt0s = default_grid(nominal, tau_box, dt0_box)
+    taus = default_taus if args.tau_s is None else parse_grid(args.tau_s, "--tau-s", "s")
+    dt0s = default_dt0s if args.dt0_c is None else parse_grid(args.dt0_c, "--dt0-c", "°C")
+    box = " x ".join(
+        part
+        for part in (
+            f"tau {tau_box[0]:g} .. {tau_box[1]:g} s" if tau_box else "",
+            f"dT0 {dt0_box[0]:g} .. {dt0_box[1]:g} °C" if dt0_box else "",
+        )
+        if part
+    )
+    lines = []
+    defaults = [
+        text
+        for given, text in (
+            (
+                args.tau_s,
+                f"tau {taus[0]:g} .. {taus[-1]:g} s (the nominal ±{DEFAULT_TAU_SPREAD:.0%})",
+            ),
+            (
+                args.dt0_c,
+                f"dT0 {dt0s[0]:g} .. {dt0s[-1]:g} °C (the nominal ±{DEFAULT_DT0_SPREAD_C:g} °C)",
+            ),
+        )
+        if given is None
+    ]
+    if defaults:
+        lines.append(
+            f"grid (default): {', '.join(defaults)}"
+            + (f", taking in the step table's robust box {box}" if box else "")
+            + "; --tau-s and --dt0-c set it"
+        )
+
+    def within(values: np.ndarray, lo: float, hi: float) -> bool:
+        tol = 1e-9 * max(1.0, abs(lo), abs(hi))
+        return bool(values[0] <= lo + tol and hi - tol <= values[-1])
+
+    left_out = []
+    if box and not (
+        (tau_box is None or within(taus, *tau_box)) and (dt0_box is None or within(dt0s, *dt0_box))
+    ):
+        left_out.append(f"the step table's robust box {box}")
+    if not (within(taus, nominal.tau_s, nominal.tau_s) and within(dt0s, *(nominal.dt0_c,) * 2)):
+        left_out.append(f"the nominal point (tau {nominal.tau_s:g} s, dT0 {nominal.dt0_c:g} °C)")
+    if left_out:
+        lines.append(
+            f"note: the grid (tau {taus[0]:g} .. {taus[-1]:g} s x dT0 {dt0s[0]:g} .. "
+            f"{dt0s[-1]:g} °C) leaves out {' and '.join(left_out)}; leave --tau-s and "
+            "--dt0-c out for a grid that takes them in"
+        )
+    return taus, dt0s, lines
 
 
 def _planner_available() -> bool:
@@ -261,12 +335,11 @@ def _backend(args: argparse.Namespace):
 def run(args: argparse.Namespace) -> int:
     from .. import plots
 
-    taus = parse_grid(args.tau_s, "--tau-s", "s")
-    dt0s = parse_grid(args.dt0_c, "--dt0-c", "°C")
     meta = read_step_meta(args.steps) if args.steps is not None else None
     nominal, nominal_src = _common.model_from_table(
         args, meta, ("nominal_tau_s", "nominal_dt0_c"), table=args.steps is not None
     )
+    taus, dt0s, grid_lines = sweep_grid(args, nominal, meta)
     limits = (meta.limits() if meta is not None else None) or Limits()
     for note in unit_slip_warnings(args, taus, dt0s, nominal, limits):
         _common.stderr(f"warning: {note}")
@@ -314,6 +387,7 @@ def run(args: argparse.Namespace) -> int:
         out.commit()
         _common.say(
             requirement,
+            *grid_lines,
             replanned.summary(),
             f"wrote {out.target}/sweep.csv" + (", sweep.png" if preferred else ""),
         )
@@ -361,6 +435,7 @@ def run(args: argparse.Namespace) -> int:
         f"at the nominal point (tau {nominal.tau_s:g} s, dT0 {nominal.dt0_c:g} °C): coverage "
         f"{at_nominal.coverage_grid[0, 0]:.1%}, min {at_nominal.min_levels_grid[0, 0]} "
         f"levels (nominal point: {nominal_src})",
+        *grid_lines,
         result.summary(),
     ]
     box = result.covered_box()
