@@ -77,6 +77,12 @@ class Band:
             np.interp(t, self.knots_c, self.hi_c_per_min),
         )
 
+    def widened(self, extra_c: float) -> Band:
+        """The band with its end knots ``extra_c`` further out, its bounds and speeds at
+        the ends held (a robust sweep's reference placed beyond the edges)."""
+        knots = (self.knots_c[0] - extra_c, *self.knots_c[1:-1], self.knots_c[-1] + extra_c)
+        return replace(self, knots_c=knots)
+
     def piece(self, i: int) -> tuple[float, float, float, float, float]:
         """``(t_ref, lo0, lo1, hi0, hi1)`` of the affine piece between knots i and i+1."""
         t0, t1 = self.knots_c[i], self.knots_c[i + 1]

@@ -86,7 +86,7 @@ class _Effort:
     hit_limit: bool = False
     answered: bool = False
     #: what the optional searches that the limit stops are
-    what: str = "some fewer-level counts or sub-regions"
+    what: str = "some fewer-level counts or sub-regions were not searched"
     #: the call's tables will end with a soak (plan_experiment's ``end_soak``): carried
     #: here so that every plan made on the way (fewer levels, sub-regions, longer
     #: segments) honours it too
@@ -117,7 +117,7 @@ class _Effort:
             f"{self.effort_s:g} reference seconds of LP work ({nonzeros / 1e6:.3g} million "
             "constraint-matrix nonzeros solved, counting the probes the bounds prove "
             "infeasible as solved: not wall or CPU time, which can be far less): "
-            f"{self.what} were not searched; allow more with effort_s (CLI --effort-s, "
+            f"{self.what}; allow more with effort_s (CLI --effort-s, "
             "0 = no limit)"
         )
 
@@ -685,13 +685,14 @@ def _plan(
 
         inner_tic: list[int] = []
 
-        def inner_stop() -> bool:
-            """Asked once the nominal plan is in hand: the inner boxes are optional, and
-            get ``effort_s`` of work of their own (from the first time this is asked)."""
+        def inner_stop(what: str) -> bool:
+            """Asked once the nominal plan is in hand: the later searches (``what``) are
+            optional, and get ``effort_s`` of work of their own (from the first time this
+            is asked)."""
             if not inner_tic:
                 inner_tic.append(lp_nonzeros_solved())
                 effort.work_tic, effort.answered = inner_tic[0], True
-                effort.what = "the robust box's inner half or quarter"
+            effort.what = f"{what} (and the searches after it) were not searched to the end"
             return effort.spent()
 
         search, notes, fallback = search_robust(

@@ -342,9 +342,12 @@ class Context:
         responses: Responses,
         stats: LpStats,
         device_margin_c: float = 0.0,
+        robust_slack_c_per_min: float = ROBUST_SLACK_C_PER_MIN,
     ):
         self.spec, self.limits, self.responses, self.stats = spec, limits, responses, stats
         self.device_margin_c = device_margin_c
+        #: robust: how far outside a band the scenarios other than the reference may stray
+        self.robust_slack_c_per_min = robust_slack_c_per_min
         ref = responses.scenarios[0].params
         self.offsets_c = [sc.params.dt0_c - ref.dt0_c for sc in responses.scenarios]
         self.size = {"variables": 0, "constraints": 0}
@@ -362,7 +365,14 @@ class Context:
 
     def tightened(self, device_margin_c: float) -> Context:
         """The same synthesis with the device limits tightened by ``device_margin_c``."""
-        return Context(self.spec, self.limits, self.responses, self.stats, device_margin_c)
+        return Context(
+            self.spec,
+            self.limits,
+            self.responses,
+            self.stats,
+            device_margin_c,
+            self.robust_slack_c_per_min,
+        )
 
     def solve_cvxpy(self, problem: cp.Problem) -> bool:
         """Solve an LP with Clarabel, HiGHS if Clarabel fails; True when solved.
@@ -541,11 +551,19 @@ class SubLP:
             self.le(at, lim.device_max_c - pad - bt)
             self.ge(at, lim.device_min_c + pad - bt)
 
-    def window(self, win: Window, margin_g: int | None = None, margin_t: int | None = None) -> None:
+    def window(
+        self,
+        win: Window,
+        margin_g: int | None = None,
+        margin_t: int | None = None,
+        extra_edge_c: float = 0.0,
+    ) -> None:
         """Band constraints inside the window and the edge conditions at its ends.
 
         ``margin_g`` / ``margin_t``: indices of extra columns that tighten the band and
-        the edge conditions (maximised by the polish LP).
+        the edge conditions (maximised by the polish LP). ``extra_edge_c``: the window
+        starts and ends that much further beyond the edges (a robust sweep's reference
+        placed far enough out for the scenarios that fall short of it).
         """
         spec = self.ctx.spec
         d, m = win.direction, spec.edge_margin_c
@@ -563,9 +581,10 @@ class SubLP:
                 off = self.ctx.offsets_c[si]
                 t_ref += off
                 if si != 0 and self.ctx.robust:
-                    # robust: the other scenarios may stray ROBUST_SLACK outside the band
-                    # (the bands are 2 ROBUST_SLACK further apart, so still disjoint)
-                    lo0, hi0 = lo0 - ROBUST_SLACK_C_PER_MIN, hi0 + ROBUST_SLACK_C_PER_MIN
+                    # robust: the other scenarios may stray the slack outside the band
+                    # (the bands are twice the slack further apart, so still disjoint)
+                    slack = self.ctx.robust_slack_c_per_min
+                    lo0, hi0 = lo0 - slack, hi0 + slack
                 # q = d g >= lo0 + lo1 (T - t_ref) + margin
                 self.ge(d * ag[w] - lo1 * at[w], lo0 + lo1 * (bt[w] - t_ref) - d * bg[w], mg)
                 # q <= hi0 + hi1 (T - t_ref) - margin (robust: not for the fastest band,
@@ -584,7 +603,8 @@ class SubLP:
             if win.pins is not None:
                 self._pins(win, si, at, bt, ag, bg, mt)
                 continue
-            lo_edge, hi_edge = spec.working_lo_c - m, spec.working_hi_c + m
+            lo_edge = spec.working_lo_c - m - extra_edge_c
+            hi_edge = spec.working_hi_c + m + extra_edge_c
             if d < 0:  # starts above the region, ends below it
                 self.ge(at[s0], hi_edge - bt[s0], mt)
                 self.le(at[s1], lo_edge - bt[s1], mt)

@@ -5,15 +5,17 @@ scenarios together stay linear: the box centre (the reference the sweeps are pla
 three tau values x both ends of the dT0 range (T and g are affine in dT0, so its ends
 bound it; :func:`~.request.robust_scenarios`). A robust plan is verified on a dense grid
 over the whole box (:func:`verify_robust`) and is complete only if coverage holds at every
-grid point. When no programme fits the box, :func:`search_robust` falls back to the nominal
-point with the widest margins if its programme holds on the box after all, else to the
-box's inner half, its inner quarter, then that nominal plan.
+grid point. When its search finds no programme for the box, :func:`search_robust` falls
+back to the nominal point with the widest margins if its programme holds on the box after
+all, else searches the box again with the scenarios held closer to their bands, then the
+box's inner half, its inner quarter, and last takes that nominal plan.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 import pandas as pd
@@ -28,6 +30,12 @@ from .search import Progress, Search, synthesise
 
 Range = tuple[float, float] | None
 
+#: The slack (how far outside its band a scenario other than the reference may stray)
+#: tried for the whole box after the default (:data:`~.lp.ROBUST_SLACK_C_PER_MIN`),
+#: degC/min: the bands' spacing shrinks with it, so more levels fit, but the scenarios are
+#: held closer to them (red team: a 6-level box with cooling at 0.6 degC/min had no
+#: room for the default's bands and fitted at half of it).
+NARROWER_SLACKS_C_PER_MIN = (0.025, 0.0125)
 #: Shares of the box (each range about its centre) tried when the whole box does not fit.
 INNER_SHARES = ((0.5, "half"), (0.25, "quarter"))
 
@@ -58,60 +66,88 @@ def search_robust(
     progress: Progress,
     stats: LpStats,
     holds_on_box: Callable[[Search], bool] | None = None,
-    stop: Callable[[], bool] | None = None,
+    stop: Callable[[str], bool] | None = None,
 ) -> tuple[Search, list[str], str | None]:
     """Search a programme for the whole box, else the fallbacks: the search, notes saying
     which was used, and the fallback's name (None: the whole box).
 
     The fallbacks: the nominal plan with the widest margins when ``holds_on_box`` (the
-    dense check of its programme over the box) says it holds after all; else a programme
-    for the box's inner half, then its inner quarter; else that nominal plan. The search
-    is stricter than the dense check (each scenario's windows are placed from the box
-    centre), and the nominal plan is one scenario's search: checked first, it spares the
-    inner boxes' searches and answers for the whole box where they would answer for a part.
-    ``stop()`` is asked before each inner box (the nominal plan is then in hand) and by
-    its search: True skips the rest (an effort limit; a wide box's search ran 10 min per
-    rung).
+    dense check of its programme over the box) says it holds after all; else the whole
+    box again with the scenarios held closer to their bands
+    (:data:`NARROWER_SLACKS_C_PER_MIN`); else a programme for the box's inner half, then
+    its inner quarter; else that nominal plan. The search is stricter than the dense
+    check (each scenario's windows are placed from the box centre, its bands spaced for
+    the slack), and finding nothing is not a proof that no programme fits: the notes say
+    "the search found none", never "none fits". The nominal plan is one scenario's
+    search: checked first, it spares the other searches and answers for the whole box
+    where the inner boxes would answer for a part. ``stop(what)`` is asked before each
+    later search (the nominal plan is then in hand) and by it, ``what`` naming it: True
+    skips the rest (an effort limit; a wide box's search ran 10 min per rung).
     """
     params_list = box_scenarios(params, tau_s, dt0_c)
     models = [FirstOrderLag(p) for p in params_list]
     search = synthesise(spec, params_list, limits, models, progress, stats)
     if search.best is not None:
         return search, [], None
-    nominal_note = [
-        "FALLBACK: no single programme meeting the target for every scenario of the "
-        "robust box (or its inner half or quarter) was found; planned at the nominal "
-        "point with the widest margins that fit"
-    ]
+    not_found = (
+        "FALLBACK: the search found no single programme meeting the target for every "
+        "scenario of the robust box (not a proof that none exists: the search holds "
+        "every scenario to bands placed from the box centre)"
+    )
     if progress:
         progress(
-            "no programme fits the robust box; checking the nominal plan with the widest "
-            "margins on it"
+            "the search found no programme for the robust box; checking the nominal plan "
+            "with the widest margins on it"
         )
     spec_margin = replace(spec, objective="margin")
     margin = synthesise(spec_margin, [params], limits, [FirstOrderLag(params)], progress, stats)
     if holds_on_box is not None and holds_on_box(margin):
         note = (
-            "FALLBACK: no single programme meeting the target for every scenario of the "
-            "robust box was found by its search; planned at the nominal point with the "
-            "widest margins that fit, whose programme as first planned (before its steps "
-            "were shaped) held on the whole box by the dense check (its inner half and "
-            "quarter were not searched)"
+            f"{not_found}; planned at the nominal point with the widest margins that fit, "
+            "whose programme as first planned (before its steps were shaped) held on the "
+            "whole box by the dense check"
         )
         return margin, [note], "nominal point"
-    for share, word in INNER_SHARES:
-        if stop is not None and stop():  # the caller's effort limit: the nominal plan
-            if progress:
-                progress(f"effort limit: the robust box's inner {word} is not searched")
-            nominal_note = [
-                "FALLBACK: no single programme meeting the target for every scenario of the "
-                f"robust box was found, and its inner {word} was not searched (effort "
-                "limit); planned at the nominal point with the widest margins that fit"
-            ]
+    skipped = ""
+
+    def stopped(what: str) -> bool:
+        nonlocal skipped
+        if stop is not None and stop(what):
+            skipped = what
+            return True
+        return False
+
+    # the bands spaced for the default slack may leave too little room for the levels
+    # (many levels, slow rate limits): the same box, the scenarios held closer to their
+    # bands. Only then: where the bands fitted, the slack was not what failed, and the
+    # inner boxes deserve the effort more (red team: a wide box's slack rungs spent it)
+    for slack in NARROWER_SLACKS_C_PER_MIN if search.no_room else ():
+        what = f"the robust box with its scenarios held within {slack:g} °C/min of their bands"
+        if stopped(what):
+            break
+        if progress:
+            progress(f"the search found no programme for the robust box; trying {what}")
+        search = synthesise(
+            spec,
+            params_list,
+            limits,
+            models,
+            progress,
+            stats,
+            stop=partial(stopped, what),
+            robust_slack_c_per_min=slack,
+        )
+        if search.best is not None:
+            return search, [], None
+        if skipped or not search.no_room:  # the limit cut it, or the bands now fit
+            break
+    for share, word in INNER_SHARES if not skipped else ():
+        what = f"the robust box's inner {word}"
+        if stopped(what):
             break
         in_tau, in_dt0 = _inner(tau_s, share), _inner(dt0_c, share)
         if progress:
-            progress(f"no programme fits the robust box; trying its inner {word}")
+            progress(f"the search found no programme for the robust box; trying its inner {word}")
         inner_list = [params_list[0], *robust_scenarios(params, in_tau, in_dt0)]
         search = synthesise(
             spec,
@@ -120,7 +156,7 @@ def search_robust(
             [FirstOrderLag(p) for p in inner_list],
             progress,
             stats,
-            stop=stop,
+            stop=partial(stopped, what),
         )
         if search.best is not None:
             box = " x ".join(
@@ -130,13 +166,22 @@ def search_robust(
             )
             return (
                 search,
-                [
-                    "FALLBACK: no single programme meeting the target for every scenario of "
-                    f"the robust box was found; planned robustly for its inner {word} ({box})"
-                ],
-                f"inner {word}",
+                [f"{not_found}; planned robustly for its inner {word} ({box})"],
+                (f"inner {word}"),
             )
-    return margin, nominal_note, "nominal point"
+        if skipped:
+            break
+    if skipped:
+        if progress:
+            progress(f"effort limit: {skipped} and what follows it are not searched")
+        tail = f"; the search stopped at its effort limit before finishing {skipped}"
+    else:
+        tail = ", nor for its inner half or quarter"
+    return (
+        margin,
+        [f"{not_found}{tail}; planned at the nominal point with the widest margins that fit"],
+        "nominal point",
+    )
 
 
 #: The robust box check's grid: tau x dT0 points, ends included. Two passes' gradients

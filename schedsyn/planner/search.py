@@ -82,6 +82,11 @@ PROBE_L1_WEIGHT = 1e-4
 #: Robust plans: segments simulated past a sweep's planned end to find where the lagging
 #: scenarios leave the region (the last rate is held).
 SCENARIO_LOOKAHEAD_SEG = 6
+#: Robust plans: times a sweep's reference is placed further beyond the edges for the
+#: scenarios that turn round short of them (:func:`edge_shortfall_c`), and the margin
+#: added each time beyond the shortfall, degC.
+WIDEN_TRIES = 3
+WIDEN_PAD_C = 0.1
 
 
 @dataclass(frozen=True, slots=True)
@@ -457,11 +462,13 @@ def place_sweep(
             options.append(np.maximum(1, np.diff(np.concatenate(([0.0], at)))).astype(int))
     d_fast = int(options[0].sum())
 
-    def solve_window(win: Window, j1: int, scenarios: list[int] | None) -> np.ndarray | None:
+    def solve_window(
+        win: Window, j1: int, scenarios: list[int] | None, extra_edge_c: float = 0.0
+    ) -> np.ndarray | None:
         lp = SubLP(ctx, u_fixed, j1, extra=1, scenarios=scenarios)
         lp.chamber()
         lp.device()
-        lp.window(win)
+        lp.window(win, extra_edge_c=extra_edge_c)
         lp.exit_speed(win, 0)
         # leave the window slowly: the next turnaround is then shorter
         cost = np.zeros(lp.n + 1)
@@ -497,12 +504,47 @@ def place_sweep(
             if sol is None:
                 continue
             found = scenario_windows(ctx, u_fixed, sol, win, max_seg)
+            if found is None and pins is None:
+                found = wider_reference(sol, win, k_opt)
             if found is None:
                 continue
             win_all, j1_all = found
             sol_all = solve_window(win_all, j1_all, None)
             if sol_all is not None:
                 return sol_all, win_all
+        return None
+
+    def wider_reference(sol: np.ndarray, win: Window, k_opt: int) -> tuple[Window, int] | None:
+        """Robust: when a scenario falls short of an edge under the reference's solution
+        ``sol`` (it turns round before it), the reference placed as far again beyond
+        the edges (its band held constant out there, timed alike), up to
+        ``WIDEN_TRIES`` times; the scenarios' windows then, or None."""
+        extra = 0.0
+        for _ in range(WIDEN_TRIES):
+            short = edge_shortfall_c(ctx, u_fixed, sol, d, max_seg)
+            if short <= 0.0:
+                return None  # every scenario passes the edges: it failed elsewhere
+            extra += short + WIDEN_PAD_C
+            wide = band.widened(extra)
+            minutes = wide.timing_options(slow)[k_opt]
+            if d < 0:
+                minutes = minutes[::-1]
+            at = np.round(np.cumsum(minutes) / SAMPLE_MIN)
+            steps = np.maximum(1, np.diff(np.concatenate(([0.0], at)))).astype(int)
+            bounds = win.start_sample + np.concatenate(([0], np.cumsum(steps)))
+            if int(bounds[-1]) > s_max:
+                return None
+            wide_win = Window(
+                d, wide, win.start_sample, int(bounds[-1]), tuple(int(c) for c in bounds[1:-1])
+            )
+            j1 = min(r.segments_to(wide_win.end_sample), max_seg)
+            wide_sol = solve_window(wide_win, j1, [0], extra)
+            if wide_sol is None:
+                return None
+            sol = wide_sol
+            found = scenario_windows(ctx, u_fixed, sol, win, max_seg)
+            if found is not None:
+                return found
         return None
 
     if pin_plan is not None:
@@ -605,6 +647,54 @@ def pinned_timings(
     return plans, (spans[0], spans[1], spans[2], spans[3])
 
 
+def _sweep_edges(spec: ExperimentSpec, d: int) -> tuple[float, float]:
+    """The temperatures a sweep in direction ``d`` starts beyond and ends beyond, degC."""
+    m = spec.edge_margin_c
+    lo, hi = spec.working_lo_c - m, spec.working_hi_c + m
+    return (hi, lo) if d < 0 else (lo, hi)
+
+
+def _scenario_traces(
+    ctx: Context, u_fixed: np.ndarray, u_new: np.ndarray, max_seg: int
+) -> tuple[int, list[np.ndarray]]:
+    """Every scenario's device temperature from the start of ``u_new`` to
+    ``SCENARIO_LOOKAHEAD_SEG`` segments past its end (its last rate held): the first
+    sample and the traces, degC."""
+    r = ctx.responses
+    j_end = min(u_fixed.size + u_new.size + SCENARIO_LOOKAHEAD_SEG, max_seg)
+    pad = j_end - u_fixed.size - u_new.size
+    u = np.concatenate((u_fixed, u_new, np.full(max(pad, 0), u_new[-1] if u_new.size else 0.0)))
+    u = u[:j_end]
+    s_from, s_to = r.sample_of(u_fixed.size), r.sample_of(j_end)
+    return s_from, [
+        resp.a_t[s_from : s_to + 1, :j_end] @ u + resp.b_t[s_from : s_to + 1] for resp in r.resp
+    ]
+
+
+def edge_shortfall_c(
+    ctx: Context, u_fixed: np.ndarray, u_new: np.ndarray, d: int, max_seg: int
+) -> float:
+    """How far short of a sweep's edges the scenario that falls shortest stays under the
+    reference's solution ``u_new`` (0: every scenario gets beyond both), degC.
+
+    The reference scenario turns round just beyond the edges; a scenario that lags it
+    or sits lower in the box (a smaller dT0, a longer tau) may turn round before them.
+    The reference placed that much further out turns them round beyond the edges too
+    (to first order: the scenarios' traces shift alike).
+    """
+    _, traces = _scenario_traces(ctx, u_fixed, u_new, max_seg)
+    e_start, e_end = _sweep_edges(ctx.spec, d)
+    short = 0.0
+    for t in traces:
+        q = d * t  # increases along the sweep
+        beyond = np.flatnonzero(q < d * e_start)
+        if beyond.size == 0:  # never beyond the start edge: by how much
+            short = max(short, float(q.min()) - d * e_start)
+            continue
+        short = max(short, d * e_end - float(q[beyond[0] :].max()))
+    return short
+
+
 def scenario_windows(
     ctx: Context, u_fixed: np.ndarray, u_new: np.ndarray, win: Window, max_seg: int
 ) -> tuple[Window, int] | None:
@@ -616,29 +706,28 @@ def scenario_windows(
     edge. Returns the window and the number of segments it needs, or None when some
     scenario does not make the sweep in the look-ahead.
     """
-    r, spec = ctx.responses, ctx.spec
-    j_end = min(u_fixed.size + u_new.size + SCENARIO_LOOKAHEAD_SEG, max_seg)
-    pad = j_end - u_fixed.size - u_new.size
-    u = np.concatenate((u_fixed, u_new, np.full(max(pad, 0), u_new[-1] if u_new.size else 0.0)))
-    u = u[:j_end]
-    s_from = r.sample_of(u_fixed.size)
-    s_to = r.sample_of(j_end)
-    d, m = win.direction, spec.edge_margin_c
-    e_start = spec.working_hi_c + m if d < 0 else spec.working_lo_c - m
-    e_end = spec.working_lo_c - m if d < 0 else spec.working_hi_c + m
+    r = ctx.responses
+    s_from, traces = _scenario_traces(ctx, u_fixed, u_new, max_seg)
+    d = win.direction
+    e_start, e_end = _sweep_edges(ctx.spec, d)
     knots = [k for _, _, _, k in win.pieces() if k is not None]
     per, tol_all = [], []
-    for resp, off in zip(r.resp, ctx.offsets_c, strict=True):
-        t = resp.a_t[s_from : s_to + 1, :j_end] @ u + resp.b_t[s_from : s_to + 1]
+    for t, off in zip(traces, ctx.offsets_c, strict=True):
         q = d * t  # increases along the sweep
 
         def first_past(level, after, q=q):
             idx = np.flatnonzero(q[after:] >= d * level)
             return None if idx.size == 0 else int(after + idx[0])
 
-        c0 = first_past(e_start, 0)
-        if c0 is None or c0 == 0:
-            return None  # never reaches the region, or already inside it at the start
+        # the scenario may begin the transition inside the region (the run's start, or a
+        # lagging scenario still finishing the last sweep): its window starts where it
+        # passes the start edge after it was last beyond it
+        outside = np.flatnonzero(q < d * e_start)
+        if outside.size == 0:
+            return None  # never gets beyond the start edge
+        c0 = first_past(e_start, int(outside[0]))
+        if c0 is None:
+            return None
         cuts, tols, after = [], [], c0
         for k in knots:
             k = k + off
@@ -788,6 +877,9 @@ class Search:
     #: the best structure repeats levels (the level-split family): levels per direction
     #: (+1 heating, -1 cooling) and the number of sweeps; None for the usual structures
     split: tuple[dict[int, int], int] | None = None
+    #: candidates whose bands found no room for the levels at the separation asked (a
+    #: robust search with a narrower slack spaces them closer: :mod:`.robust`)
+    no_room: int = 0
 
 
 def synthesise(
@@ -801,6 +893,7 @@ def synthesise(
     continuation: Continuation | None = None,
     n_sweeps: int | None = None,
     stop: Callable[[], bool] | None = None,
+    robust_slack_c_per_min: float = ROBUST_SLACK_C_PER_MIN,
 ) -> Search:
     """Search structures (first direction, band separation, edge caps).
 
@@ -809,6 +902,8 @@ def synthesise(
     band separation that fits. ``n_sweeps`` (default ``levels_required``) sweeps are
     placed; with a ``continuation``, after its executed steps. ``stop()`` is asked before
     each candidate: True ends the search with what it has (an effort limit).
+    ``robust_slack_c_per_min``: how far outside its band a scenario other than the
+    reference may stray (robust plans; the bands are spaced twice that further apart).
 
     When no candidate fits (after the slow retry, at every separation), one plan with
     ``levels_required`` sweeps and not robust: the level-split family -- ``L + 1`` or
@@ -827,7 +922,7 @@ def synthesise(
     ext_seg = n_fixed + int(math.ceil(max_new * OVERRUN_FACTOR))
     scenarios = [Scenario(p, m) for p, m in zip(params_list, models, strict=True)]
     responses = Responses(scenarios, ext_seg, seg, limits, continuation)
-    ctx = Context(spec, limits, responses, stats)
+    ctx = Context(spec, limits, responses, stats, robust_slack_c_per_min=robust_slack_c_per_min)
     if progress is not None:
         heart = progress if isinstance(progress, Heartbeat) else Heartbeat(progress, time.monotonic)
         progress, ctx.beat = heart, heart.beat
@@ -839,7 +934,7 @@ def synthesise(
     base_sep = spec.delta_c_per_min + BAND_SAFETY_C_PER_MIN
     robust = len(params_list) > 1
     if robust:
-        base_sep += 2 * ROBUST_SLACK_C_PER_MIN
+        base_sep += 2 * robust_slack_c_per_min
     # "informative" starts from the shortest plan's sweeps (.informative runs them on)
     seps = [base_sep + x for x in MARGIN_SEPARATIONS] if spec.objective == "margin" else [base_sep]
     firsts = first_directions(spec, limits, start_t)
@@ -876,6 +971,7 @@ def synthesise(
                     else f" ({split[0][+1]} heating + {split[0][-1]} cooling levels)"
                 )
             )
+            search.no_room += 1
             return "none"
         if split is not None:  # sweeps that repeat a level: the fastest band, widened
             for d in (+1, -1):
