@@ -323,6 +323,22 @@ def test_a_nominal_plan_that_holds_on_the_box_spares_the_inner_searches(monkeypa
         assert (levels_per_bin(temp[i], grad[i], -10.0, 0.0, 0.05) >= 2).all(), i
 
 
+def test_a_robust_plan_at_the_reported_delta_is_checked_once_per_delta():
+    """A robust plan for delta 0.1 degC/min (the second separation every report counts
+    at) failed with "deltas_c_per_min has repeated values: (0.1, 0.1)" from its own box
+    check (judge's helper): the check counts each separation once."""
+    spec = ExperimentSpec("D", -4.0, 0.0, -14.0, 10.0, levels_required=2, delta_c_per_min=0.1)
+    plan = plan_experiment(
+        spec,
+        ThermalParams(dt0_c=2.5),
+        Limits(duration_max_min=150.0),
+        robust_tau_s=(2300.0, 2500.0),
+        robust_dt0_c=(2.0, 3.0),
+    )
+    assert plan.box_check is not None and plan.box_check["grid_points"] == 25 * 19
+    assert plan.complete == plan.box_check["holds"]
+
+
 def test_a_box_over_tau_only_says_dt0_is_taken_as_exactly_nominal():
     """A box given for tau alone plans for dT0 exactly at its nominal value: legitimate,
     but a user who meant a box over both (and left out one option) must be told, not left

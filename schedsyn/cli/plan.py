@@ -501,28 +501,19 @@ def with_end_soak(plan: Plan, model=None) -> Plan:
 
 
 def _box_check(programme, plan: Plan, scenarios) -> dict:
-    """The robust box check of a modified programme (same grid as the planner's)."""
-    from ..sweep import verify_box
+    """The robust box check of a modified programme (the planner's own check)."""
+    from ..planner.robust import verify_robust
 
     taus = [p.tau_s for p in scenarios]
     dt0s = [p.dt0_c for p in scenarios]
-    res = verify_box(
+    return verify_robust(
         programme,
-        (plan.spec.working_lo_c, plan.spec.working_hi_c),
+        plan.spec,
+        plan.params,
         (min(taus), max(taus)),
         (min(dt0s), max(dt0s)),
-        levels_required=plan.spec.levels_required,
-        deltas_c_per_min=(plan.spec.delta_c_per_min, 0.1),
-        t0_c=plan.limits.t_init_c,
+        plan.limits,
     )
-    return {
-        "holds": res.holds(),
-        "full_share": res.full_share,
-        "worst": res.worst(),
-        "min_levels": int(res.min_levels_grid.min()),
-        "covered_box": res.covered_box(),
-        "grid_points": int(np.prod(res.shape)),
-    }
 
 
 #: A complete shortest plan this far above its proven bound (share of the bound, and at

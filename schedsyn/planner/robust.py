@@ -212,7 +212,8 @@ def verify_robust(
         n_tau=BOX_CHECK_N_TAU,
         n_dt0=BOX_CHECK_N_DT0,
         levels_required=spec.levels_required,
-        deltas_c_per_min=(spec.delta_c_per_min, REPORT_DELTA_C_PER_MIN),
+        # (once: the table's own delta may be the reported one)
+        deltas_c_per_min=tuple(dict.fromkeys((spec.delta_c_per_min, REPORT_DELTA_C_PER_MIN))),
         t0_c=limits.t_init_c,
     )
     return {
