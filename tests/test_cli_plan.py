@@ -417,3 +417,18 @@ def test_room_for_the_soak_that_cannot_be_planned_leaves_the_first_plan():
 
     assert informative_with_room_for_soak(first, replan) is first
     assert asked and asked[0] < 240.0
+
+
+def test_an_incomplete_robust_plan_advises_what_helps_not_the_refused_advise(tmp_path, capsys):
+    """An incomplete robust plan told the user to "run again with --advise", which
+    refuses a robust box (exit 2; judge): it names what does help instead."""
+    argv = ["plan", "--working", "-2", "0", "--approx", "-12", "10", "--levels", "2"]
+    argv += ["--duration-max-min", "75", "--robust-tau-s", "1800:3000"]
+    argv += ["--robust-dt0-c", "0:6", "--effort-s", "1e-9", "--quiet"]
+    assert main([*argv, "--out", str(tmp_path / "o")]) == 1
+    out = capsys.readouterr().out
+    assert "IS NOT COMPLETE" in out
+    assert "run again with --advise" not in out
+    assert "narrow the box (--robust-tau-s/--robust-dt0-c)" in out
+    # and what it names does run: the advice it refuses is not offered
+    assert main([*argv, "--advise", "--out", str(tmp_path / "a")]) == 2

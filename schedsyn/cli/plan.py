@@ -836,6 +836,22 @@ def run(args: argparse.Namespace) -> int:
                 "campaign file) to what the controller takes, or split the region "
                 "(schedsyn split)"
             ]
+        elif robust_tau is not None or robust_dt0 is not None:
+            # --advise searches with the nominal model and refuses a box: say what helps
+            advice_lines = [
+                "  the plan does not hold on the whole robust box: plan.json's "
+                "robust_box_check names the part it covers; narrow the box "
+                "(--robust-tau-s/--robust-dt0-c) to what the device's uncertainty needs, "
+                "allow more time (--duration-max-min) or search effort (--effort-s, 0 = no "
+                "limit); --advise searches the nominal model only (run it without the box "
+                "to see what the nominal plan needs)"
+            ]
+        elif model is not None:
+            advice_lines = [
+                "  --advise searches the nominal first-order model only: run it without "
+                "--model to see what the nominal plan needs, or allow more time "
+                "(--duration-max-min) or search effort (--effort-s, 0 = no limit)"
+            ]
         else:
             advice_lines = [
                 "  run again with --advise to search what would make it complete "
