@@ -117,6 +117,11 @@ def test_a_nonlinear_model_file_is_refused(tmp_path, capsys):
             ["--working", "-10", "0", "--robust-tau-s", "2200:2600", "--robust-dt0-c", "4:5"],
             ["--robust-dt0-c", "does not contain the nominal dT0 3 °C"],
         ),
+        # a zero-width box was planned and priced (57 min of robustness for one point)
+        (
+            ["--working", "-10", "0", "--robust-tau-s", "2400:2400", "--robust-dt0-c", "3:3"],
+            ["--robust-tau-s", "2400..2400 s has no width", "give LO < HI"],
+        ),
         # the box's ends, not its centre (which the user never typed), are named
         (
             ["--working", "-10", "0", "--robust-tau-s", "2200:2600", "--robust-dt0-c", "2:4e3"],

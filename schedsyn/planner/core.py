@@ -550,6 +550,12 @@ def _check_nominal_in_box(
                 dataclasses.replace(params, **{"tau_s" if name == "tau" else "dt0_c": end})
             except ParameterError as exc:
                 raise ParameterError(f"the robust box {option} {lo:g}..{hi:g}: {exc}") from None
+        if lo == hi:  # (a zero-width box held, the plan priced robustness for one point)
+            raise ParameterError(
+                f"the robust box {option} {lo:g}..{hi:g} {unit} has no width: give LO < HI "
+                f"(the range the device's {name} may take), or leave it out to plan for "
+                f"{name} exactly its nominal value"
+            )
         if lo - 1e-9 <= value <= hi + 1e-9:
             continue
         hint = ""
