@@ -209,9 +209,9 @@ def test_a_pinned_sweep_that_fits_nowhere_scans_pin_scan_min_of_starts(monkeypat
     starts: list[int] = []
     window = lp.SubLP.window
 
-    def recording_window(self, win):
+    def recording_window(self, win, **kwargs):
         starts.append(win.start_sample)
-        return window(self, win)
+        return window(self, win, **kwargs)
 
     def nothing_fits(self, cost, l1_weight=0.0):
         self.ctx.stats.record("infeasible", 0.0)  # solved, not ruled out by bounds
