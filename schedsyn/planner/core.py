@@ -691,14 +691,14 @@ def _plan(
 
         inner_tic: list[int] = []
 
-        def inner_stop(what: str) -> bool:
-            """Asked once the nominal plan is in hand: the later searches (``what``) are
-            optional, and get ``effort_s`` of work of their own (from the first time this
-            is asked)."""
+        def inner_stop(phrase: str) -> bool:
+            """Asked once the nominal plan is in hand: the later searches are optional,
+            and get ``effort_s`` of work of their own (from the first time this is
+            asked); ``phrase`` says what stopping now leaves out, for the effort note."""
             if not inner_tic:
                 inner_tic.append(lp_nonzeros_solved())
                 effort.work_tic, effort.answered = inner_tic[0], True
-            effort.what = f"{what} (and the searches after it) were not searched to the end"
+            effort.what = phrase
             return effort.spent()
 
         search, notes, fallback = search_robust(

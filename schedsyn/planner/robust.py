@@ -80,9 +80,11 @@ def search_robust(
     the slack), and finding nothing is not a proof that no programme fits: the notes say
     "the search found none", never "none fits". The nominal plan is one scenario's
     search: checked first, it spares the other searches and answers for the whole box
-    where the inner boxes would answer for a part. ``stop(what)`` is asked before each
-    later search (the nominal plan is then in hand) and by it, ``what`` naming it: True
-    skips the rest (an effort limit; a wide box's search ran 10 min per rung).
+    where the inner boxes would answer for a part. ``stop(phrase)`` is asked before
+    each later search (the nominal plan is then in hand) and by it, ``phrase`` saying
+    which search that skips or cuts ("... was not searched", "... was not searched to
+    the end"): True skips the rest (an effort limit; a wide box's search ran 10 min per
+    rung).
     """
     params_list = box_scenarios(params, tau_s, dt0_c)
     models = [FirstOrderLag(p) for p in params_list]
@@ -110,9 +112,12 @@ def search_robust(
         return margin, [note], "nominal point"
     skipped = ""
 
-    def stopped(what: str) -> bool:
+    def stopped(what: str, begun: bool = False) -> bool:
+        """The effort limit, asked before the search ``what`` (``begun``: by it): the
+        phrase given to ``stop`` says which, for the effort note."""
         nonlocal skipped
-        if stop is not None and stop(what):
+        phrase = f"{what} was {'not searched to the end' if begun else 'not searched'}"
+        if stop is not None and stop(phrase):
             skipped = what
             return True
         return False
@@ -134,7 +139,7 @@ def search_robust(
             models,
             progress,
             stats,
-            stop=partial(stopped, what),
+            stop=partial(stopped, what, True),
             robust_slack_c_per_min=slack,
         )
         if search.best is not None:
@@ -156,7 +161,7 @@ def search_robust(
             [FirstOrderLag(p) for p in inner_list],
             progress,
             stats,
-            stop=partial(stopped, what),
+            stop=partial(stopped, what, True),
         )
         if search.best is not None:
             box = " x ".join(
