@@ -437,3 +437,27 @@ def test_an_incomplete_robust_plan_advises_what_helps_not_the_refused_advise(tmp
     assert "narrow the box (--robust-tau-s/--robust-dt0-c)" in out
     # and what it names does run: the advice it refuses is not offered
     assert main([*argv, "--advise", "--out", str(tmp_path / "a")]) == 2
+
+
+def test_a_negative_range_after_an_option_is_read_as_its_value(tmp_path):
+    """``--robust-dt0-c -1:4`` printed argparse's 20 lines of usage (it took the value for
+    an option; red team): a range starting with a negative number is the option's value,
+    a plain negative number was already (argparse knows those), other options are left."""
+    from schedsyn.cli import join_negative_ranges
+
+    argv = ["plan", "--working", "-10", "0", "--robust-dt0-c", "-1:4", "--tau-s", "-.5:2:3"]
+    assert join_negative_ranges(argv) == [
+        "plan",
+        "--working",
+        "-10",
+        "0",
+        "--robust-dt0-c=-1:4",
+        "--tau-s=-.5:2:3",
+    ]
+    assert join_negative_ranges(["--quiet", "-x"]) == ["--quiet", "-x"]
+    out = tmp_path / "o"
+    argv = ["plan", "--working", "0", "2", "--levels", "2", "--robust-dt0-c", "-1:4"]
+    assert main([*argv, "--out", str(out), "--quiet"]) == 0
+    doc = json.loads((out / "plan.json").read_text())
+    dt0s = [sc["dt0_c"] for sc in doc["robust_scenarios"]]
+    assert (min(dt0s), max(dt0s)) == (-1.0, 4.0), doc["robust_scenarios"]

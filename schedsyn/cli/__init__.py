@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import re
 import sys
 
 from ..errors import EnvironmentFaultError, SchedsynError
@@ -72,6 +73,34 @@ def _fail(command: str, kind: str, message: str) -> None:
     print(f"schedsyn {command}: {kind}: {text}", file=sys.stderr)
 
 
+#: An option's value that argparse takes for an option: a range or grid starting with a
+#: negative number ("-3:-1", "-.5:2", "-30:-10:5"); plain negative numbers it knows.
+_NEGATIVE_RANGE = re.compile(r"^-(\d|\.\d)[^\s]*:")
+
+
+def join_negative_ranges(argv: list[str]) -> list[str]:
+    """``--opt -3:-1`` as ``--opt=-3:-1``: argparse reads a value starting with "-" that
+    is not a plain number as an option and stops with its usage (red team:
+    ``--robust-dt0-c -1:4`` printed 20 lines of usage and no hint)."""
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        arg = argv[i]
+        nxt = argv[i + 1] if i + 1 < len(argv) else None
+        if (
+            arg.startswith("--")
+            and "=" not in arg
+            and nxt is not None
+            and _NEGATIVE_RANGE.match(nxt)
+        ):
+            out.append(f"{arg}={nxt}")
+            i += 2
+            continue
+        out.append(arg)
+        i += 1
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     from concurrent.futures.process import BrokenProcessPool
 
@@ -79,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args = parser.parse_args(join_negative_ranges(sys.argv[1:] if argv is None else argv))
     except SystemExit as exc:  # argparse: usage errors exit 2, --help exits 0
         return int(exc.code) if isinstance(exc.code, int) else EXIT_BAD_INPUT
     command = args.command
