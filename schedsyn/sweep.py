@@ -609,15 +609,25 @@ class SweepResult:
         """Share of grid points with complete coverage (at the first delta)."""
         return float(np.mean(self.covered_mask(1.0)))
 
-    def covered_box(self, min_coverage: float = 1.0) -> dict[str, Any] | None:
+    def covered_box(
+        self,
+        min_coverage: float = 1.0,
+        also: np.ndarray | None = None,
+        containing: tuple[int, int] | None = None,
+    ) -> dict[str, Any] | None:
         """Largest axis-aligned sub-box of grid points that all reach ``min_coverage``.
 
         "Largest" counts grid points (ties: the first found, smallest tau then dT0).
         Returns ``{"tau_s_range": (lo, hi), "dt0_c_range": (lo, hi), "n_points": n}``
         or None when no point reaches ``min_coverage``. Used to say which part of a box
-        a plan covers.
+        a plan covers. ``also``: an ``(n_tau, n_dt0)`` mask the points must hold too (the
+        device within its limits); ``containing``: only boxes holding that grid point
+        ``(i_tau, j_dt0)`` (the nominal point a plan was made for).
         """
-        ok = self.covered_mask(min_coverage).astype(np.int64)
+        mask = self.covered_mask(min_coverage)
+        if also is not None:
+            mask = mask & also
+        ok = mask.astype(np.int64)
         n_tau, n_dt0 = ok.shape
         # prefix sums: points covered in [i0, i1) x [j0, j1) in O(1)
         s = np.zeros((n_tau + 1, n_dt0 + 1), dtype=np.int64)
@@ -629,6 +639,10 @@ class SweepResult:
                     for j1 in range(j0 + 1, n_dt0 + 1):
                         n = (i1 - i0) * (j1 - j0)
                         if n <= best_n:
+                            continue
+                        if containing is not None and not (
+                            i0 <= containing[0] < i1 and j0 <= containing[1] < j1
+                        ):
                             continue
                         if s[i1, j1] - s[i0, j1] - s[i1, j0] + s[i0, j0] == n:
                             best, best_n = (i0, i1, j0, j1), n

@@ -33,7 +33,7 @@ from schedsyn.planner import (
 from schedsyn.planner.core import EFFORT_S, operator_programme
 from schedsyn.planner.lp import ROBUST_SLACK_C_PER_MIN, LpStats
 from schedsyn.planner.polish import polish
-from schedsyn.planner.robust import search_robust
+from schedsyn.planner.robust import box_note, search_robust, verify_robust
 
 SMALL = dict(
     name="S",
@@ -523,6 +523,58 @@ def test_a_robust_box_with_no_room_for_the_default_slack_is_searched_at_a_narrow
     programme = operator_programme(u, spec, limits)
     cov = _box_coverage(programme, tmp_path, (-2.0, 0.0), 5, *box.values())
     assert cov.min() == 1.0
+
+
+def test_the_box_check_holds_only_where_the_device_stays_within_its_limits(tmp_path):
+    """A table that takes the low-dT0 device past its limit was said to hold there ("it
+    holds for dT0 1..3.89 °C" with the device at -52.92 °C at dT0 1; red team), and a
+    nominal-point plan's note named a corner of the box without the point it was made
+    for. The box check's points hold only where the device stays within its limits
+    too, and the part named holds the nominal point where one can: checked against
+    scipy's integration of the table at every grid point."""
+    spec = ExperimentSpec("L", -2.0, 0.0, -12.0, 10.0, levels_required=2)
+    params = ThermalParams()
+    plan = plan_experiment(spec, params, Limits(duration_max_min=120.0))
+    box = ((1800.0, 3000.0), (0.0, 6.0))
+    taus, dt0s = np.meshgrid(np.linspace(*box[0], 25), np.linspace(*box[1], 19), indexing="ij")
+    knots_t, knots_tk = chamber_knots(plan.programme.to_csv(tmp_path / "s.csv"))
+    _, temp, grad = ode_trajectories(knots_t, knots_tk, taus.ravel(), dt0s.ravel())
+    # a device limit between the box's coldest and the nominal device's coldest point
+    t_min = temp.min(axis=1).reshape(taus.shape)
+    floor_c = 0.5 * (t_min.min() + t_min[12, 9])
+    limits = dataclasses.replace(plan.limits, device_min_c=floor_c)
+    check = verify_robust(plan.programme, spec, params, *box, limits)
+    cov = np.array(
+        [
+            np.mean(levels_per_bin(t, g, -2.0, 0.0, 0.05) >= 2)
+            for t, g in zip(temp, grad, strict=True)
+        ]
+    ).reshape(taus.shape)
+    within = t_min >= floor_c
+    assert not within.all() and within[12, 9]
+    assert not check["holds"] and not check["device_held"]
+    part = check["covered_box"]
+    assert part is not None
+    inside = (
+        (taus >= part["tau_s_range"][0])
+        & (taus <= part["tau_s_range"][1])
+        & (dt0s >= part["dt0_c_range"][0])
+        & (dt0s <= part["dt0_c_range"][1])
+    )
+    assert inside.sum() == part["n_points"]
+    assert (cov[inside] >= 1.0).all() and within[inside].all()  # every point named holds
+    assert inside[12, 9]  # around the nominal point (tau 2400 s, dT0 3 degC)
+    assert "the device passes its limits" in box_note(check)
+    # a narrow box the table covers everywhere does not hold where the device goes past
+    narrow = ((2300.0, 2500.0), (2.5, 3.5))
+    _, temp, grad = ode_trajectories(knots_t, knots_tk, [2300.0, 2500.0], [2.5, 2.5])
+    assert all(
+        (levels_per_bin(t, g, -2.0, 0.0, 0.05) >= 2).all() for t, g in zip(temp, grad, strict=True)
+    )
+    limits = dataclasses.replace(plan.limits, device_min_c=float(temp.min()) + 0.05)
+    check = verify_robust(plan.programme, spec, params, *narrow, limits)
+    assert check["worst"]["coverage"] == 1.0 and not check["holds"]
+    assert box_note(check).startswith("coverage holds everywhere in the robust box, but")
 
 
 def test_too_short_a_request_names_the_requirement():

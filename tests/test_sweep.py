@@ -675,3 +675,29 @@ def test_cli_default_grid_covers_the_tables_nominal_and_robust_box(tmp_path, cap
     assert rc == 0
     (note,) = [x for x in capsys.readouterr().out.splitlines() if x.startswith("note:")]
     assert "leaves out the step table's robust box" in note and "the nominal point" in note
+
+
+def test_covered_box_can_be_held_to_a_mask_and_a_point():
+    """The robust box check names the part around the nominal point where the device is
+    within its limits too (``also``, ``containing``): the largest such box, not the
+    largest overall."""
+    cov = np.array(
+        [
+            [1.0, 1.0, 0.0, 1.0],
+            [1.0, 1.0, 0.0, 1.0],
+            [1.0, 1.0, 0.0, 1.0],
+            [1.0, 1.0, 0.0, 1.0],
+        ]
+    )
+    res = _result_with_coverage(cov)
+    assert res.covered_box()["n_points"] == 8  # the two left columns
+    right = res.covered_box(containing=(1, 3))
+    assert right == {"tau_s_range": (2000.0, 2300.0), "dt0_c_range": (3.0, 3.0), "n_points": 4}
+    also = np.ones(cov.shape, dtype=bool)
+    also[0, :] = False  # the first tau row past a device limit
+    assert res.covered_box(also=also) == {
+        "tau_s_range": (2100.0, 2300.0),
+        "dt0_c_range": (0.0, 1.0),
+        "n_points": 6,
+    }
+    assert res.covered_box(also=also, containing=(0, 0)) is None
