@@ -278,19 +278,17 @@ def coverage_sources(
     """``((levels_required, where from), (delta_c_per_min, where from))``: the given
     value (``"given"``), else the step table's (``"from the step table"``), else 6 and
     0.05 °C/min (``"default"``)."""
-    if levels is not None:
-        lv = (int(levels), "given")
-    elif meta is not None and meta.levels_required:
-        lv = (int(meta.levels_required), "from the step table")
-    else:
-        lv = (6, "default")
-    if delta_c_per_min is not None:
-        dv = (float(delta_c_per_min), "given")
-    elif meta is not None and meta.delta_c_per_min:
-        dv = (float(meta.delta_c_per_min), "from the step table")
-    else:
-        dv = (0.05, "default")
-    return lv, dv
+
+    def pick(value, recorded, default):
+        if value is not None:
+            return value, "given"
+        if recorded:
+            return recorded, "from the step table"
+        return default, "default"
+
+    lv, lv_src = pick(levels, meta.levels_required if meta is not None else None, 6)
+    dv, dv_src = pick(delta_c_per_min, meta.delta_c_per_min if meta is not None else None, 0.05)
+    return (int(lv), lv_src), (float(dv), dv_src)
 
 
 def end_soak_text(programme, t_end_c: float, soak_min: float, settled_c: float, limits) -> str:

@@ -454,12 +454,7 @@ def place_sweep(
     if pin_plan is not None:
         options = [np.asarray(cuts, dtype=int) for cuts, _, _ in pin_plan[0]]
     else:
-        for minutes in band.timing_options(slow):
-            if d < 0:
-                minutes = minutes[::-1]
-            # round the planned knot times, not each piece (rounded pieces drift)
-            at = np.round(np.cumsum(minutes) / SAMPLE_MIN)
-            options.append(np.maximum(1, np.diff(np.concatenate(([0.0], at)))).astype(int))
+        options = [_piece_samples(minutes, d) for minutes in band.timing_options(slow)]
     d_fast = int(options[0].sum())
 
     def solve_window(
@@ -526,11 +521,7 @@ def place_sweep(
                 return None  # every scenario passes the edges: it failed elsewhere
             extra += short + WIDEN_PAD_C
             wide = band.widened(extra)
-            minutes = wide.timing_options(slow)[k_opt]
-            if d < 0:
-                minutes = minutes[::-1]
-            at = np.round(np.cumsum(minutes) / SAMPLE_MIN)
-            steps = np.maximum(1, np.diff(np.concatenate(([0.0], at)))).astype(int)
+            steps = _piece_samples(wide.timing_options(slow)[k_opt], d)
             bounds = win.start_sample + np.concatenate(([0], np.cumsum(steps)))
             if int(bounds[-1]) > s_max:
                 return None
@@ -597,6 +588,15 @@ def place_sweep(
         else:
             lo_x = mid
     return found[1]
+
+
+def _piece_samples(minutes: np.ndarray, d: int) -> np.ndarray:
+    """Samples per band piece in travel order, from its minutes per piece (ascending T):
+    the planned knot times are rounded, not each piece (rounded pieces drift)."""
+    if d < 0:
+        minutes = minutes[::-1]
+    at = np.round(np.cumsum(minutes) / SAMPLE_MIN)
+    return np.maximum(1, np.diff(np.concatenate(([0.0], at)))).astype(int)
 
 
 #: A pinned sweep leaves its exit bin at most this long after the timing speed would.
