@@ -525,6 +525,75 @@ def _timetable_plan(
     return with_table_meta(plan)
 
 
+def _ramp_plan(
+    spec: ExperimentSpec,
+    params: ThermalParams,
+    limits: Limits,
+    robust_tau_s: tuple[float, float] | None,
+    robust_dt0_c: tuple[float, float] | None,
+    fallback: str | None,
+    box_check: dict,
+    stats: LpStats,
+    progress: Callable[[str], None] | None,
+    tic: float,
+) -> Plan | None:
+    """The ramp rung's plan for a robust box whose band-search programme does not hold on
+    it (:mod:`.ramps`), checked like every robust plan (dense re-simulation of the rounded
+    table at the design scenarios, limits, step limits, the dense box check), or None.
+    ``fallback``, ``box_check``: what the band search planned and how it fared."""
+    from .ramps import ramp_search
+
+    if progress:
+        progress(
+            f"{spec.name}: the band search's programme does not hold on the whole robust box "
+            f"(worst point {box_check['worst']['coverage']:.0%}); searching ramp programmes"
+        )
+    found = ramp_search(spec, params, limits, robust_tau_s, robust_dt0_c, progress)
+    if found is None:
+        if progress:
+            progress(f"{spec.name}: the ramp search found no programme for the whole box")
+        return None
+    programme = found.programme
+    scenarios = box_scenarios(params, robust_tau_s, robust_dt0_c)
+    cov, cov01, problems, t_lo, t_hi = check_programme(programme, spec, limits, scenarios)
+    problems = [*problems, *step_limit_problems(programme, spec)]
+    if not cov.complete or problems or not found.box_check["holds"]:
+        return None  # cannot happen: the rung checks its tables so
+    band = f"the band search's {fallback} plan" if fallback else "the band search's programme"
+    note = (
+        f"planned by the ramp rung: {band} covered the robust box only in part (worst point "
+        f"{box_check['worst']['coverage']:.0%}); a programme of {found.legs} constant-rate "
+        f"legs turning beyond the region, searched on {len(found.screened)} scenarios of the "
+        f"box, holds at all {found.box_check['grid_points']} points of the box's grid "
+        f"(dense check; {found.evals} evaluations)"
+    )
+    bound = max(duration_lower_bound(spec, p, limits).lower_bound_min for p in scenarios)
+    return Plan(
+        spec=spec,
+        params=params,
+        limits=limits,
+        programme=programme,
+        coverage=cov,
+        coverage_0p1=cov01,
+        complete=True,
+        status="complete",
+        solve_s=time.perf_counter() - tic,
+        margin_g_c_per_min=found.min_separation_c_per_min - spec.delta_c_per_min,
+        margin_t_c=float("nan"),
+        lp={**stats.to_dict(), "ramp_evals": found.evals},
+        problem_size={},
+        scenarios=tuple(scenarios),
+        violations=(),
+        notes=(note,),
+        t_min_c=t_lo,
+        t_max_c=t_hi,
+        box_check=found.box_check,
+        duration_lower_bound_min=bound,
+        coverage_nominal=check_programme(programme, spec, limits, [params])[0],
+        robust_fallback=None,
+    )
+
+
 #: A device time constant below this is not a gyro in a chamber: the robust box was
 #: likely given in minutes (the refusal says so).
 TAU_MINUTES_HINT_S = 120.0
@@ -799,6 +868,20 @@ def _plan(
         cov_nominal = check_programme(programme, spec, limits, [params])[0]
         box_check = verify_robust(programme, spec, params, robust_tau_s, robust_dt0_c, limits)
         if not box_check["holds"]:
+            ramp = _ramp_plan(
+                spec,
+                params,
+                limits,
+                robust_tau_s,
+                robust_dt0_c,
+                fallback,
+                box_check,
+                stats,
+                progress,
+                tic,
+            )
+            if ramp is not None:
+                return with_table_meta(_timed(ramp, tic))
             complete = False
             notes.append(box_note(box_check))
         elif fallback is not None:

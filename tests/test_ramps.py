@@ -1,0 +1,173 @@
+"""The robust search's ramp rung (schedsyn.planner.ramps): its exact sampler, pass
+gradients and level separation against independent code, and its programmes for a box
+the band search falls back on, re-checked by scipy's ODE solver over the whole box."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from independent import chamber_knots, levels_per_bin, ode_trajectories
+
+from schedsyn.coverage import level_separation
+from schedsyn.params import Limits, ThermalParams
+from schedsyn.planner import ExperimentSpec, plan_experiment
+from schedsyn.planner.ramps import _lag_samples, pass_gradients, ramp_search, separation
+from schedsyn.programme import read_step_meta
+
+HAND = Path(__file__).resolve().parents[1] / "data" / "robust_hand"
+
+
+def _plain_passes(temp, grad, lo_c, n_bins):
+    """Mean gradient of every pass of every bin, by a plain loop (as levels_per_bin)."""
+    out = [[] for _ in range(n_bins)]
+    current, run, count = -1, 0.0, 0
+    for t, g in zip(temp.tolist(), grad.tolist(), strict=True):
+        k = int(np.floor(t - lo_c)) if lo_c <= t < lo_c + n_bins else -1
+        if k != current:
+            if current >= 0:
+                out[current].append(run / count)
+            current, run, count = k, 0.0, 0
+        run, count = run + g, count + 1
+    if current >= 0:
+        out[current].append(run / count)
+    return out
+
+
+def test_exact_sampler_matches_scipy_ode_solver():
+    """T and g of a ramp-and-hold programme for several (tau, dT0), against solve_ivp."""
+    durations = np.array([25.0, 12.0, 30.0, 7.0, 41.0])
+    rates = np.array([-1.0, 0.0, 2.5, 0.0, -0.35])
+    knots_t = np.concatenate(([0.0], np.cumsum(durations)))
+    knots_tk = 20.0 + np.concatenate(([0.0], np.cumsum(durations * rates)))
+    taus = np.array([1200.0, 2400.0, 3600.0])
+    dt0s = np.array([0.5, 3.0, -2.0])
+    t, temp_ref, grad_ref = ode_trajectories(knots_t, knots_tk, taus, dt0s, t0_c=18.0)
+    temp, grad = _lag_samples(durations, rates, 20.0, 18.0, taus / 60.0, dt0s, t)
+    np.testing.assert_allclose(temp, temp_ref, atol=1e-8)
+    np.testing.assert_allclose(grad, grad_ref, atol=1e-8)
+
+
+def test_pass_gradients_are_the_passes_a_plain_loop_finds(rng):
+    """Every scenario's passes per bin: the same means as a plain loop finds, none lost at
+    the row boundaries (a scenario ending in a bin the next one starts in)."""
+    n_s, n_t, lo, nb = 4, 400, -3.0, 5
+    temp = lo + nb / 2 + np.cumsum(rng.normal(0, 0.35, (n_s, n_t)), axis=1)
+    temp[1] = temp[0, -1] - np.cumsum(np.full(n_t, 1e-3))  # starts where row 0 ends
+    grad = rng.normal(0, 1, (n_s, n_t))
+    got = pass_gradients(temp, grad, lo, nb)
+    for s in range(n_s):
+        want = _plain_passes(temp[s], grad[s], lo, nb)
+        for b in range(nb):
+            row = got[s * nb + b]
+            np.testing.assert_allclose(row[np.isfinite(row)], want[b], atol=1e-12)
+
+
+def test_separation_is_the_level_separation_of_every_row(rng):
+    """The vectorised bisection agrees with coverage.level_separation (to its 1e-4
+    degC/min), rows with too few passes give 0."""
+    grads = rng.uniform(-1, 1, (300, 7))
+    grads[rng.random(grads.shape) < 0.3] = np.nan
+    for levels in (2, 3, 5):
+        got = separation(grads, levels)
+        for row, value in zip(grads, got, strict=True):
+            want = level_separation(row[np.isfinite(row)], levels)
+            assert value == pytest.approx(0.0 if np.isnan(want) else want, abs=2e-4)
+
+
+# the red team's r10 (data/robust_hand/README.md): the band search falls back (its worst
+# box point 0 %); the red team's hand table covers the box in 190 min
+R10 = dict(working=(-10.0, -5.0), levels=3, tau_s=(1500.0, 3300.0), dt0_c=(0.5, 5.5))
+R10_LIMITS = Limits(duration_max_min=200.0)
+
+
+def _r10_spec():
+    lo, hi = R10["working"]
+    return ExperimentSpec(
+        name="r10",
+        working_lo_c=lo,
+        working_hi_c=hi,
+        approx_lo_c=lo - 10,
+        approx_hi_c=hi + 10,
+        levels_required=R10["levels"],
+    )
+
+
+def _independent_box_check(steps_csv, spec, limits, tau_s, dt0_c, n_tau=9, n_dt0=7):
+    """The table's fewest levels over a tau x dT0 grid and the device's range, by
+    solve_ivp and plain counting."""
+    knots_t, knots_tk = chamber_knots(steps_csv)
+    taus, dt0s = np.meshgrid(np.linspace(*tau_s, n_tau), np.linspace(*dt0_c, n_dt0))
+    _, temp, grad = ode_trajectories(
+        knots_t, knots_tk, taus.ravel(), dt0s.ravel(), t0_c=limits.t_init_c
+    )
+    fewest = min(
+        int(
+            levels_per_bin(
+                temp[i], grad[i], spec.working_lo_c, spec.working_hi_c, spec.delta_c_per_min
+            ).min()
+        )
+        for i in range(temp.shape[0])
+    )
+    rates = np.diff(knots_tk) / np.diff(knots_t)
+    return {
+        "fewest_levels": fewest,
+        "device_c": (float(temp.min()), float(temp.max())),
+        "duration_min": float(knots_t[-1]),
+        "rates": (float(rates.min()), float(rates.max())),
+        "ends_c": (float(knots_tk[0]), float(knots_tk[-1])),
+    }
+
+
+@pytest.fixture(scope="module")
+def r10_ramp():
+    return ramp_search(_r10_spec(), ThermalParams(), R10_LIMITS, R10["tau_s"], R10["dt0_c"])
+
+
+def test_ramp_rung_covers_a_box_the_band_search_falls_back_on(r10_ramp, tmp_path):
+    """r10: a ramp programme within every limit whose coverage holds over the whole box,
+    by scipy's ODE solver at points the rung never screened."""
+    assert r10_ramp is not None
+    spec = _r10_spec()
+    assert r10_ramp.box_check["holds"] and r10_ramp.box_check["grid_points"] == 25 * 19
+    csv = r10_ramp.programme.to_csv(tmp_path / "ramp.csv")
+    got = _independent_box_check(csv, spec, R10_LIMITS, R10["tau_s"], R10["dt0_c"])
+    assert got["fewest_levels"] >= spec.levels_required
+    assert R10_LIMITS.device_min_c <= got["device_c"][0]
+    assert got["device_c"][1] <= R10_LIMITS.device_max_c
+    assert got["duration_min"] <= R10_LIMITS.duration_max_min
+    assert R10_LIMITS.rate_min_c_per_min - 1e-9 <= got["rates"][0]
+    assert got["rates"][1] <= R10_LIMITS.rate_max_c_per_min + 1e-9
+    assert got["ends_c"][0] == pytest.approx(20.0)
+    assert abs(got["ends_c"][1] - 20.0) <= R10_LIMITS.end_tol_c
+
+
+def test_ramp_rung_gives_up_within_its_budget():
+    """A budget too small to find anything: None, not a partial programme."""
+    spec = _r10_spec()
+    found = ramp_search(spec, ThermalParams(), R10_LIMITS, R10["tau_s"], R10["dt0_c"], max_evals=60)
+    assert found is None
+
+
+def test_planner_plans_the_box_with_the_ramp_rung(r10_ramp):
+    """plan_experiment: the band search's programme does not hold on r10's box, the ramp
+    rung's does; the plan is complete for the whole box and says how it was made."""
+    plan = plan_experiment(
+        _r10_spec(),
+        ThermalParams(),
+        R10_LIMITS,
+        robust_tau_s=R10["tau_s"],
+        robust_dt0_c=R10["dt0_c"],
+    )
+    assert plan.complete and plan.box_check["holds"] and plan.robust_fallback is None
+    assert any(n.startswith("planned by the ramp rung") for n in plan.notes)
+    assert not any(n.startswith("FALLBACK") for n in plan.notes)
+    assert plan.duration_min == r10_ramp.programme.total_min  # the same deterministic search
+
+
+def test_hand_table_request_matches_the_readme():
+    """The r10 request above is the one data/robust_hand/ records for its hand table."""
+    meta = read_step_meta(HAND / "r10_hand_190min.csv")
+    assert (meta.working_lo_c, meta.working_hi_c) == R10["working"]
+    assert meta.levels_required == R10["levels"]
+    assert meta.robust_box == (R10["tau_s"], R10["dt0_c"])
+    assert meta.duration_max_min == R10_LIMITS.duration_max_min
