@@ -22,7 +22,7 @@ def rng():
 #: were spread as if unmarked.) Every other test is its own unit, as with ``--dist load``.
 WHOLE_MODULES = frozenset(
     f"tests/test_{name}.py"
-    for name in ("advise", "graded_effort", "informative", "reach", "replan", "split")
+    for name in ("advise", "graded_effort", "informative", "ramps", "reach", "replan", "split")
 )
 
 #: Modules that read another whole module's memo run in that module's unit, after it:

@@ -149,16 +149,22 @@ def test_ramp_rung_gives_up_within_its_budget():
 
 
 def test_planner_plans_the_box_with_the_ramp_rung(r10_ramp):
-    """plan_experiment: the band search's programme does not hold on r10's box, the ramp
-    rung's does; the plan is complete for the whole box and says how it was made."""
+    """plan_experiment: the band search finds no programme for r10's box, the ramp rung
+    does (before the inner boxes are searched); the plan is complete for the whole box and
+    says how it was made."""
+    said: list[str] = []
     plan = plan_experiment(
         _r10_spec(),
         ThermalParams(),
         R10_LIMITS,
         robust_tau_s=R10["tau_s"],
         robust_dt0_c=R10["dt0_c"],
+        progress=said.append,
     )
     assert plan.complete and plan.box_check["holds"] and plan.robust_fallback is None
+    # the rung comes before the inner boxes, which could only answer for a part
+    assert any("searching ramp programmes" in m for m in said)
+    assert not any("inner half" in m or "inner quarter" in m for m in said)
     assert any(n.startswith("planned by the ramp rung") for n in plan.notes)
     assert not any(n.startswith("FALLBACK") for n in plan.notes)
     assert plan.duration_min == r10_ramp.programme.total_min  # the same deterministic search

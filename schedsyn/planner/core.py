@@ -531,23 +531,26 @@ def _ramp_plan(
     limits: Limits,
     robust_tau_s: tuple[float, float] | None,
     robust_dt0_c: tuple[float, float] | None,
-    fallback: str | None,
-    box_check: dict,
+    box_check: dict | None,
     stats: LpStats,
     progress: Callable[[str], None] | None,
     tic: float,
 ) -> Plan | None:
-    """The ramp rung's plan for a robust box whose band-search programme does not hold on
-    it (:mod:`.ramps`), checked like every robust plan (dense re-simulation of the rounded
-    table at the design scenarios, limits, step limits, the dense box check), or None.
-    ``fallback``, ``box_check``: what the band search planned and how it fared."""
+    """The ramp rung's plan for a robust box (:mod:`.ramps`), checked like every robust
+    plan (dense re-simulation of the rounded table at the design scenarios, limits, step
+    limits, the dense box check), or None. ``box_check``: the dense check of the band
+    search's programme for the whole box, which does not hold on it (None: the band search
+    found no programme for the whole box)."""
     from .ramps import ramp_search
 
+    band = (
+        "the band search found no programme for the whole robust box"
+        if box_check is None
+        else "the band search's programme for the robust box does not hold on all of it "
+        f"(worst point {box_check['worst']['coverage']:.0%})"
+    )
     if progress:
-        progress(
-            f"{spec.name}: the band search's programme does not hold on the whole robust box "
-            f"(worst point {box_check['worst']['coverage']:.0%}); searching ramp programmes"
-        )
+        progress(f"{spec.name}: {band}; searching ramp programmes")
     found = ramp_search(spec, params, limits, robust_tau_s, robust_dt0_c, progress)
     if found is None:
         if progress:
@@ -559,11 +562,9 @@ def _ramp_plan(
     problems = [*problems, *step_limit_problems(programme, spec)]
     if not cov.complete or problems or not found.box_check["holds"]:
         return None  # cannot happen: the rung checks its tables so
-    band = f"the band search's {fallback} plan" if fallback else "the band search's programme"
     note = (
-        f"planned by the ramp rung: {band} covered the robust box only in part (worst point "
-        f"{box_check['worst']['coverage']:.0%}); a programme of {found.legs} constant-rate "
-        f"legs turning beyond the region, searched on {len(found.screened)} scenarios of the "
+        f"planned by the ramp rung: {band}; a programme of {found.legs} constant-rate legs "
+        f"turning beyond the region, searched on {len(found.screened)} scenarios of the "
         f"box, holds at all {found.box_check['grid_points']} points of the box's grid "
         f"(dense check; {found.evals} evaluations)"
     )
@@ -770,6 +771,26 @@ def _plan(
             effort.what = phrase
             return effort.spent()
 
+        ramp_tried: list[Plan | None] = []
+
+        def ramp_rung(box_check: dict | None = None) -> bool:
+            """The ramp rung (once): True when it planned the whole box."""
+            if not ramp_tried:
+                ramp_tried.append(
+                    _ramp_plan(
+                        spec,
+                        params,
+                        limits,
+                        robust_tau_s,
+                        robust_dt0_c,
+                        box_check,
+                        stats,
+                        progress,
+                        tic,
+                    )
+                )
+            return ramp_tried[0] is not None
+
         search, notes, fallback = search_robust(
             spec,
             params,
@@ -780,7 +801,10 @@ def _plan(
             stats,
             holds_on_box,
             stop=inner_stop,
+            whole_box=ramp_rung,
         )
+        if ramp_tried and ramp_tried[0] is not None:
+            return with_table_meta(_timed(ramp_tried[0], tic))
     else:
         params_list = [params]
         search = synthesise(
@@ -867,21 +891,11 @@ def _plan(
     if robust:
         cov_nominal = check_programme(programme, spec, limits, [params])[0]
         box_check = verify_robust(programme, spec, params, robust_tau_s, robust_dt0_c, limits)
+        if not box_check["holds"] and not ramp_tried and ramp_rung(box_check):
+            ramp = ramp_tried[0]
+            assert ramp is not None  # (ramp_rung said so)
+            return with_table_meta(_timed(ramp, tic))
         if not box_check["holds"]:
-            ramp = _ramp_plan(
-                spec,
-                params,
-                limits,
-                robust_tau_s,
-                robust_dt0_c,
-                fallback,
-                box_check,
-                stats,
-                progress,
-                tic,
-            )
-            if ramp is not None:
-                return with_table_meta(_timed(ramp, tic))
             complete = False
             notes.append(box_note(box_check))
         elif fallback is not None:

@@ -8,7 +8,9 @@ over the whole box (:func:`verify_robust`) and is complete only if coverage hold
 grid point. When its search finds no programme for the box, :func:`search_robust` falls
 back to the nominal point with the widest margins if its programme holds on the box after
 all, else searches the box again with the scenarios held closer to their bands, then the
-box's inner half, its inner quarter, and last takes that nominal plan.
+box's inner half, its inner quarter, and last takes that nominal plan. When the
+programme the planner keeps does not hold on the whole box, the ramp rung
+(:mod:`.ramps`) searches ramp-and-hold programmes for it before the plan is reported.
 """
 
 from __future__ import annotations
@@ -71,6 +73,7 @@ def search_robust(
     stats: LpStats,
     holds_on_box: Callable[[Search], bool] | None = None,
     stop: Callable[[str], bool] | None = None,
+    whole_box: Callable[[], bool] | None = None,
 ) -> tuple[Search, list[str], str | None]:
     """Search a programme for the whole box, else the fallbacks: the search, notes saying
     which was used, and the fallback's name (None: the whole box).
@@ -88,7 +91,8 @@ def search_robust(
     each later search (the nominal plan is then in hand) and by it, ``phrase`` saying
     which search that skips or cuts ("... was not searched", "... was not searched to
     the end"): True skips the rest (an effort limit; a wide box's search ran 10 min per
-    rung).
+    rung). ``whole_box()`` is asked before the inner boxes are searched, the effort limit
+    aside: True (another search planned the whole box) skips them.
     """
     params_list = box_scenarios(params, tau_s, dt0_c)
     models = [FirstOrderLag(p) for p in params_list]
@@ -150,6 +154,10 @@ def search_robust(
             return search, [], None
         if skipped or not search.no_room:  # the limit cut it, or the bands now fit
             break
+    if whole_box is not None and whole_box():
+        # another search covered the whole box (the ramp rung): the inner boxes could
+        # only answer for a part of it
+        return margin, [f"{not_found}; planned for the whole box otherwise"], "nominal point"
     for share, word in INNER_SHARES if not skipped else ():
         what = f"the robust box's inner {word}"
         if stopped(what):
