@@ -139,6 +139,9 @@ def main(argv=None) -> int:
         print(f"  {row}", flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
     df = pd.DataFrame(rows)
+    for col in ("legs", "evals", "independent_min_levels"):
+        if col in df:
+            df[col] = df[col].astype("Int64")
     df.to_csv(args.out / "summary.csv", index=False)
     cols = list(df.columns)
     md = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]

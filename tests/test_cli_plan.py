@@ -439,6 +439,24 @@ def test_an_incomplete_robust_plan_advises_what_helps_not_the_refused_advise(tmp
     assert main([*argv, "--advise", "--out", str(tmp_path / "a")]) == 2
 
 
+def test_a_box_no_programme_covers_says_so_and_advises_no_more_time(tmp_path, capsys):
+    """[-50, -48] degC, 2 degC above the device's floor, dT0 1-5 degC: no programme can
+    cover the box (the warmer device in the bottom bin takes the colder past the floor).
+    The plan says so with the numbers, does not search the whole box in vain, and the
+    advice names the box or the limit, not more time or effort."""
+    argv = ["plan", "--working", "-50", "-48", "--levels", "2", "--robust-dt0-c", "1:5"]
+    argv += ["--effort-s", "1", "--quiet", "--out", str(tmp_path / "o")]
+    assert main(argv) == 1
+    out = capsys.readouterr().out
+    assert "IS NOT COMPLETE" in out
+    assert "note: no programme covers the whole robust box: its devices at tau 2400 s" in out
+    assert "past device_min_c = -52 °C" in out
+    assert "(proven: see the note that says why), so it was not searched" in out
+    advice = out[out.index("the note above proves it") :]
+    assert "--robust-dt0-c" in advice and "more time or search effort would not help" in advice
+    assert "allow more time (--duration-max-min)" not in out
+
+
 def test_a_negative_range_after_an_option_is_read_as_its_value(tmp_path):
     """``--robust-dt0-c -1:4`` printed argparse's 20 lines of usage (it took the value for
     an option; red team): a range starting with a negative number is the option's value,

@@ -2,6 +2,7 @@
 gradients and level separation against independent code, and its programmes for a box
 the band search falls back on, re-checked by scipy's ODE solver over the whole box."""
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +12,14 @@ from independent import chamber_knots, levels_per_bin, ode_trajectories
 from schedsyn.coverage import level_separation
 from schedsyn.params import Limits, ThermalParams
 from schedsyn.planner import ExperimentSpec, plan_experiment
-from schedsyn.planner.ramps import _lag_samples, pass_gradients, ramp_search, separation
+from schedsyn.planner.ramps import (
+    NO_PROGRAMME_COVERS_BOX,
+    _lag_samples,
+    box_spread_proof,
+    pass_gradients,
+    ramp_search,
+    separation,
+)
 from schedsyn.programme import read_step_meta
 
 HAND = Path(__file__).resolve().parents[1] / "data" / "robust_hand"
@@ -177,3 +185,62 @@ def test_hand_table_request_matches_the_readme():
     assert meta.levels_required == R10["levels"]
     assert meta.robust_box == (R10["tau_s"], R10["dt0_c"])
     assert meta.duration_max_min == R10_LIMITS.duration_max_min
+
+
+# the red team's r03: [-50, -47] degC 2 degC above the device's floor, dT0 1-5 degC
+R03 = ExperimentSpec("r03", -50.0, -47.0, -52.0, -37.0, levels_required=3)
+
+
+def test_a_box_no_programme_covers_is_proven_so_and_the_proof_holds_on_any_programme(rng):
+    """r03: the proof names the bottom bin and device_min_c; its claim, checked by scipy's
+    ODE solver on the fastest cooling path and on random programmes: whenever the warmer
+    device (dT0 5) is in the bottom bin, the colder (dT0 1) is below the bound the proof
+    gives, which is past device_min_c."""
+    limits = Limits()
+    proof = box_spread_proof(R03, ThermalParams(), limits, None, (1.0, 5.0))
+    assert proof is not None and proof.startswith(NO_PROGRAMME_COVERS_BOX)
+    assert "bottom bin" in proof and "device_min_c = -52" in proof
+    bound_c = float(re.search(r"the colder is then below (-?[\d.]+) °C", proof).group(1))
+    assert bound_c < limits.device_min_c
+    fastest = [(90.0, -1.0), (450.0, 0.0)]  # -1 degC/min to the -70 degC floor, then held
+    programmes = [fastest]
+    for _ in range(40):  # random programmes within the limits, most reaching the floor
+        down = float(rng.uniform(-1.0, -0.8))  # to the floor, held there a while
+        steps = [(-90.0 / down, down), (float(rng.uniform(30, 150)), 0.0)]
+        tk = -70.0
+        for _ in range(int(rng.integers(2, 7))):
+            dur = float(rng.uniform(10, 120))
+            rate = float(rng.uniform(max(-1.0, (-70 - tk) / dur), min(3.0, (80 - tk) / dur)))
+            steps.append((dur, rate))
+            tk += dur * rate
+        programmes.append(steps)
+    entered = 0
+    for steps in programmes:
+        knots_t = np.concatenate(([0.0], np.cumsum([d for d, _ in steps])))
+        knots_tk = 20.0 + np.concatenate(([0.0], np.cumsum([d * r for d, r in steps])))
+        _, temp, _ = ode_trajectories(knots_t, knots_tk, 2400.0, np.array([1.0, 5.0]))
+        inside = temp[1] < R03.working_lo_c + 1.0
+        if inside.any():
+            entered += 1
+            # the colder device is below the proof's bound whenever the warmer is in the
+            # bin (the bound is past the limit)
+            assert temp[0][inside].max() < bound_c + 1e-6
+    assert entered >= 20  # (the check saw the warmer device in the bin)
+
+
+def test_the_proof_names_the_top_bin_near_the_device_ceiling():
+    """[57, 61] degC below the 62 degC ceiling, dT0 1-5 degC: the colder device in the top
+    bin takes the warmer past device_max_c."""
+    spec = ExperimentSpec("hot", 57.0, 61.0, 47.0, 62.0, levels_required=3)
+    proof = box_spread_proof(spec, ThermalParams(), Limits(), None, (1.0, 5.0))
+    assert proof is not None and "top bin" in proof and "device_max_c = 62" in proof
+
+
+def test_no_proof_for_boxes_a_programme_covers(r10_ramp):
+    """r10 (the ramp rung covers it) and r03 with a narrow dT0 range: no proof."""
+    assert r10_ramp is not None
+    assert (
+        box_spread_proof(_r10_spec(), ThermalParams(), R10_LIMITS, R10["tau_s"], R10["dt0_c"])
+        is None
+    )
+    assert box_spread_proof(R03, ThermalParams(), Limits(), None, (2.0, 4.0)) is None

@@ -37,6 +37,7 @@ import numpy as np
 from ..errors import InfeasiblePlanError, ParameterError
 from ..params import Limits, ThermalParams, unit_slip_notes
 from ..planner import OBJECTIVES, ExperimentSpec, Plan
+from ..planner.ramps import NO_PROGRAMME_COVERS_BOX
 from . import _common
 
 #: ExperimentSpec's defaults (the CLI's are the same as a campaign file's)
@@ -835,6 +836,12 @@ def run(args: argparse.Namespace) -> int:
                 "also tried longer segments): raise --max-steps (or lower min_step_min in a "
                 "campaign file) to what the controller takes, or split the region "
                 "(schedsyn split)"
+            ]
+        elif any(n.startswith(NO_PROGRAMME_COVERS_BOX) for n in plan.notes):
+            advice_lines = [  # proven: more time or effort would not help
+                "  no programme covers the whole robust box (the note above proves it): "
+                "narrow the box (--robust-dt0-c) or widen the device limit (--device-min-c / "
+                "--device-max-c) as the note says; more time or search effort would not help"
             ]
         elif robust_tau is not None or robust_dt0 is not None:
             # --advise searches with the nominal model and refuses a box: say what helps

@@ -29,6 +29,7 @@ from .informative import L1_WEIGHT_LADDER, informative_rates
 from .lp import Context, LpStats, lp_nonzeros_solved, require_solvable
 from .physics import LIMIT_FRACTION
 from .polish import honour_step_limits, merge_small_changes, polish, step_runs
+from .ramps import box_spread_proof, ramp_search
 from .request import Continuation, ExperimentSpec, check_request, check_start_excursion
 from .robust import box_note, box_scenarios, held_note, search_robust, verify_robust
 from .search import Search, Structure, split_note, subregions, synthesise, truncate
@@ -541,8 +542,6 @@ def _ramp_plan(
     limits, the dense box check), or None. ``box_check``: the dense check of the band
     search's programme for the whole box, which does not hold on it (None: the band search
     found no programme for the whole box)."""
-    from .ramps import ramp_search
-
     band = (
         "the band search found no programme for the whole robust box"
         if box_check is None
@@ -771,7 +770,9 @@ def _plan(
             effort.what = phrase
             return effort.spent()
 
-        ramp_tried: list[Plan | None] = []
+        # a box no programme covers (proof): the ramp rung would search in vain
+        spread = box_spread_proof(spec, params, limits, robust_tau_s, robust_dt0_c)
+        ramp_tried: list[Plan | None] = [] if spread is None else [None]
 
         def ramp_rung(box_check: dict | None = None) -> bool:
             """The ramp rung (once): True when it planned the whole box."""
@@ -802,6 +803,7 @@ def _plan(
             holds_on_box,
             stop=inner_stop,
             whole_box=ramp_rung,
+            proven_impossible=spread is not None,
         )
         if ramp_tried and ramp_tried[0] is not None:
             return with_table_meta(_timed(ramp_tried[0], tic))
@@ -898,6 +900,8 @@ def _plan(
         if not box_check["holds"]:
             complete = False
             notes.append(box_note(box_check))
+            if spread is not None:
+                notes.append(spread)
         elif fallback is not None:
             # the search for the whole box failed, yet the fallback's programme holds on it
             notes = [n for n in notes if not n.startswith("FALLBACK")]

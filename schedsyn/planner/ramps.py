@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import differential_evolution, minimize
@@ -583,3 +583,100 @@ def _verified(
             return None
         x = again
     return None
+
+
+#: How the box-spread proof's note begins.
+NO_PROGRAMME_COVERS_BOX = "no programme covers the whole robust box"
+#: Sampling of the fastest paths the box-spread proof follows, min.
+PROOF_STEP_MIN = 0.05
+#: tau values of the box the proof tries (its ends and evenly between).
+PROOF_N_TAU = 9
+
+
+def _first_time_past(
+    spec_c: float, up: bool, params: ThermalParams, limits: Limits
+) -> float | None:
+    """The latest sample time before the device (``params``) can first pass ``spec_c``
+    (below it when not ``up``): on the chamber's fastest path that way (the full rate to
+    the chamber's limit, then held), which takes the device there first of all programmes
+    (the lag is monotone in the chamber's path). A lower bound on when any programme gets
+    it there; None when none does within the duration limit."""
+    rate = limits.rate_max_c_per_min if up else limits.rate_min_c_per_min
+    bound = limits.chamber_max_c if up else limits.chamber_min_c
+    total = limits.duration_max_min
+    ramp = min(total, (bound - limits.start_c) / rate) if rate else 0.0
+    durations = [d for d in (ramp, total - ramp) if d > 0]
+    rates = [rate, 0.0][: len(durations)] if ramp > 0 else [0.0]
+    times = np.arange(0.0, total + 1e-9, PROOF_STEP_MIN)
+    temp, _ = _lag_samples(
+        np.array(durations),
+        np.array(rates),
+        limits.start_c,
+        limits.t_init_c,
+        np.array([params.tau_s / 60.0]),
+        np.array([params.dt0_c]),
+        times,
+    )
+    past = temp[0] >= spec_c if up else temp[0] < spec_c
+    if not past.any():
+        return None
+    k = int(np.argmax(past))
+    return float(times[max(k - 1, 0)])
+
+
+def box_spread_proof(
+    spec: ExperimentSpec, params: ThermalParams, limits: Limits, tau_s: Range, dt0_c: Range
+) -> str | None:
+    """A proof that no programme covers the whole robust box, or None (not a proof that one
+    does).
+
+    Two devices of the box with the same tau and offsets ``a < b`` differ by ``(b - a)(1 -
+    e^(-t/tau))`` at time ``t`` whatever the chamber does (the lag is linear; both start at
+    ``t_init_c``). The warmer must reach the region's bottom bin, ``T < lo + 1``, which no
+    programme brings about before ``t_b`` (its fastest cooling path); then the colder is
+    below ``lo + 1 - (b - a)(1 - e^(-t_b/tau))``. Where that is below ``device_min_c``,
+    every programme that covers the bottom bin for the warmer takes the colder past its
+    limit. Likewise at the top bin for the colder device and ``device_max_c``. Tried for
+    :data:`PROOF_N_TAU` tau values of the box; the strongest is reported with what would
+    not rule the box out.
+    """
+    if dt0_c is None or dt0_c[1] <= dt0_c[0]:
+        return None
+    a, b = float(dt0_c[0]), float(dt0_c[1])
+    taus = np.linspace(*tau_s, PROOF_N_TAU) if tau_s is not None else [params.tau_s]
+    lo, hi = spec.working_lo_c, spec.working_hi_c
+    best: tuple[float, str] | None = None
+    for tau in taus:
+        for bottom in (True, False):
+            mover = replace(params, tau_s=float(tau), dt0_c=b if bottom else a)
+            edge = lo + 1.0 if bottom else hi - 1.0
+            t = _first_time_past(edge, not bottom, mover, limits)
+            if t is None:
+                continue
+            share = 1.0 - math.exp(-t * 60.0 / float(tau))
+            apart = (b - a) * share
+            if bottom:
+                other, limit, key = edge - apart, limits.device_min_c, "device_min_c"
+                excess = limit - other
+            else:
+                other, limit, key = edge + apart, limits.device_max_c, "device_max_c"
+                excess = other - limit
+            if excess <= 1e-6 or (best is not None and excess <= best[0]):
+                continue
+            room = abs(edge - limit)
+            width = room / share if share > 0 else math.inf
+            warm, cold = ("warmer", "colder") if bottom else ("colder", "warmer")
+            best = (
+                excess,
+                f"{NO_PROGRAMME_COVERS_BOX}: its devices at tau {tau:g} s with "
+                f"dT0 {a:g} and {b:g} °C differ by {b - a:g} x (1 - e^(-t/tau)) °C at time t "
+                f"whatever the chamber does; the {warm} can be in the region's "
+                f"{'bottom' if bottom else 'top'} bin ({'below' if bottom else 'from'} "
+                f"{edge:g} °C) {t:.0f} min into the run at the earliest (the chamber's "
+                f"fastest path), when they differ by {apart:.2f} °C or more, so the {cold} is "
+                f"then {'below' if bottom else 'above'} {other:.2f} °C, past {key} = "
+                f"{limit:g} °C by {excess:.2f} °C. This argument does not rule out a dT0 "
+                f"range under about {width:.2f} °C wide at this tau, or {key} at "
+                f"{other:.2f} °C",
+            )
+    return None if best is None else best[1]

@@ -74,6 +74,7 @@ def search_robust(
     holds_on_box: Callable[[Search], bool] | None = None,
     stop: Callable[[str], bool] | None = None,
     whole_box: Callable[[], bool] | None = None,
+    proven_impossible: bool = False,
 ) -> tuple[Search, list[str], str | None]:
     """Search a programme for the whole box, else the fallbacks: the search, notes saying
     which was used, and the fallback's name (None: the whole box).
@@ -92,22 +93,30 @@ def search_robust(
     which search that skips or cuts ("... was not searched", "... was not searched to
     the end"): True skips the rest (an effort limit; a wide box's search ran 10 min per
     rung). ``whole_box()`` is asked before the inner boxes are searched, the effort limit
-    aside: True (another search planned the whole box) skips them.
+    aside: True (another search planned the whole box) skips them. ``proven_impossible``
+    (no programme covers the whole box: :func:`~.ramps.box_spread_proof`) skips the
+    searches for the whole box.
     """
     params_list = box_scenarios(params, tau_s, dt0_c)
     models = [FirstOrderLag(p) for p in params_list]
-    search = synthesise(spec, params_list, limits, models, progress, stats)
-    if search.best is not None:
-        return search, [], None
-    not_found = (
-        "FALLBACK: the search found no single programme meeting the target for every "
-        "scenario of the robust box (not a proof that none exists: the search holds "
-        "every scenario to bands placed from the box centre)"
-    )
+    if proven_impossible:
+        not_found = (
+            "FALLBACK: no programme meets the target for every scenario of the robust box "
+            "(proven: see the note that says why), so it was not searched"
+        )
+    else:
+        search = synthesise(spec, params_list, limits, models, progress, stats)
+        if search.best is not None:
+            return search, [], None
+        not_found = (
+            "FALLBACK: the search found no single programme meeting the target for every "
+            "scenario of the robust box (not a proof that none exists: the search holds "
+            "every scenario to bands placed from the box centre)"
+        )
     if progress:
         progress(
-            "the search found no programme for the robust box; checking the nominal plan "
-            "with the widest margins on it"
+            "no programme for the robust box; checking the nominal plan with the widest "
+            "margins on it"
         )
     spec_margin = replace(spec, objective="margin")
     margin = synthesise(spec_margin, [params], limits, [FirstOrderLag(params)], progress, stats)
@@ -134,7 +143,7 @@ def search_robust(
     # (many levels, slow rate limits): the same box, the scenarios held closer to their
     # bands. Only then: where the bands fitted, the slack was not what failed, and the
     # inner boxes deserve the effort more (red team: a wide box's slack rungs spent it)
-    for slack in NARROWER_SLACKS_C_PER_MIN if search.no_room else ():
+    for slack in NARROWER_SLACKS_C_PER_MIN if not proven_impossible and search.no_room else ():
         what = f"the robust box with its scenarios held within {slack:g} °C/min of their bands"
         if stopped(what):
             break
