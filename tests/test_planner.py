@@ -372,6 +372,8 @@ def test_the_effort_limit_skips_the_robust_boxs_inner_rungs():
     # quarter not begun
     first = "the robust box's inner half"
     assert not any("held within" in m for m in said), said
+    # the ramp rung's budget scales with effort_s: so small a limit skips it
+    assert not any("searching ramp programmes" in m for m in said), said
     assert any("trying its inner half" in m for m in said), said
     assert not any("trying its inner quarter" in m for m in said), said
     fallback = [n for n in plan.notes if n.startswith("FALLBACK")]
@@ -400,7 +402,10 @@ def test_too_wide_a_robust_box_says_which_part_is_covered(tmp_path):
     # the nominal plan with the widest margins does not hold on so wide a box: the inner
     # boxes are searched after it
     assert any("checking the nominal plan" in m for m in said)
-    assert any("trying its inner half" in m for m in said)
+    # at the default effort the ramp rung is searched (in vain), before the inner boxes
+    ramp = [i for i, m in enumerate(said) if "searching ramp programmes" in m]
+    inner = [i for i, m in enumerate(said) if "trying its inner half" in m]
+    assert ramp and inner and ramp[0] < inner[0], said
     assert any("inner" in n or "nominal point" in n for n in plan.notes), plan.notes
     check = plan.box_check
     assert not check["holds"] and check["grid_points"] == 25 * 19

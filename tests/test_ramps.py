@@ -244,3 +244,23 @@ def test_no_proof_for_boxes_a_programme_covers(r10_ramp):
         is None
     )
     assert box_spread_proof(R03, ThermalParams(), Limits(), None, (2.0, 4.0)) is None
+
+
+def test_every_parameter_vector_decodes_to_a_programme_within_the_rate_limits(rng):
+    """The family's decoding (what the optimiser explores): random and extreme parameters
+    give a programme, each rate within the chamber's limits, each turn within its
+    temperature limits, ending at the end temperature."""
+    from schedsyn.planner.ramps import _Family
+
+    limits = Limits(rate_min_c_per_min=-0.8, chamber_min_c=-40.0, chamber_max_c=70.0)
+    spec = ExperimentSpec("mid", 19.0, 21.0, 10.0, 30.0, levels_required=4)
+    for legs, first in ((4, -1), (5, 1)):
+        family = _Family(spec, limits, legs, first, (1800.0, 3000.0), (1.0, 4.0))
+        for x in [*rng.normal(0, 4, (200, family.n)), np.full(family.n, -40.0)]:
+            prog = family.programme(x)
+            assert np.all(prog.rates_c_per_min >= limits.rate_min_c_per_min - 1e-9)
+            assert np.all(prog.rates_c_per_min <= limits.rate_max_c_per_min + 1e-9)
+            tk = prog.boundary_temps_c
+            assert tk.min() >= limits.chamber_min_c - 1e-9
+            assert tk.max() <= limits.chamber_max_c + 1e-9
+            assert abs(prog.end_c - limits.end_c) < 1e-6

@@ -29,7 +29,7 @@ from .informative import L1_WEIGHT_LADDER, informative_rates
 from .lp import Context, LpStats, lp_nonzeros_solved, require_solvable
 from .physics import LIMIT_FRACTION
 from .polish import honour_step_limits, merge_small_changes, polish, step_runs
-from .ramps import box_spread_proof, ramp_search
+from .ramps import EVALS_PER_LEVEL, box_spread_proof, ramp_search
 from .request import Continuation, ExperimentSpec, check_request, check_start_excursion
 from .robust import box_note, box_scenarios, held_note, search_robust, verify_robust
 from .search import Search, Structure, split_note, subregions, synthesise, truncate
@@ -536,6 +536,7 @@ def _ramp_plan(
     stats: LpStats,
     progress: Callable[[str], None] | None,
     tic: float,
+    max_evals: int,
 ) -> Plan | None:
     """The ramp rung's plan for a robust box (:mod:`.ramps`), checked like every robust
     plan (dense re-simulation of the rounded table at the design scenarios, limits, step
@@ -550,7 +551,9 @@ def _ramp_plan(
     )
     if progress:
         progress(f"{spec.name}: {band}; searching ramp programmes")
-    found = ramp_search(spec, params, limits, robust_tau_s, robust_dt0_c, progress)
+    found = ramp_search(
+        spec, params, limits, robust_tau_s, robust_dt0_c, progress, max_evals=max_evals
+    )
     if found is None:
         if progress:
             progress(f"{spec.name}: the ramp search found no programme for the whole box")
@@ -593,6 +596,10 @@ def _ramp_plan(
         robust_fallback=None,
     )
 
+
+#: The ramp rung (robust boxes) runs when ``effort_s`` is at least this share of
+#: :data:`EFFORT_S` (its budget scales with the share).
+RAMP_MIN_EFFORT_SHARE = 0.05
 
 #: A device time constant below this is not a gyro in a chamber: the robust box was
 #: likely given in minutes (the refusal says so).
@@ -775,21 +782,35 @@ def _plan(
         ramp_tried: list[Plan | None] = [] if spread is None else [None]
 
         def ramp_rung(box_check: dict | None = None) -> bool:
-            """The ramp rung (once): True when it planned the whole box."""
-            if not ramp_tried:
-                ramp_tried.append(
-                    _ramp_plan(
-                        spec,
-                        params,
-                        limits,
-                        robust_tau_s,
-                        robust_dt0_c,
-                        box_check,
-                        stats,
-                        progress,
-                        tic,
-                    )
+            """The ramp rung (once): True when it planned the whole box. An optional
+            search: its budget of evaluations (a count, not a clock) scales with
+            ``effort_s`` against its default, and an effort limit under
+            :data:`RAMP_MIN_EFFORT_SHARE` of it, or already spent, skips it."""
+            if ramp_tried:
+                return ramp_tried[0] is not None
+            share = 1.0 if effort.effort_s is None else min(1.0, effort.effort_s / EFFORT_S)
+            phrase = "the ramp rung (ramp-and-hold programmes for the whole box) was not searched"
+            if share < RAMP_MIN_EFFORT_SHARE:
+                effort.hit = effort.hit_limit = True  # (the note says so)
+                effort.what = phrase
+            if share < RAMP_MIN_EFFORT_SHARE or inner_stop(phrase):
+                ramp_tried.append(None)
+                return False
+            budget = round(share * EVALS_PER_LEVEL * spec.levels_required)
+            ramp_tried.append(
+                _ramp_plan(
+                    spec,
+                    params,
+                    limits,
+                    robust_tau_s,
+                    robust_dt0_c,
+                    box_check,
+                    stats,
+                    progress,
+                    tic,
+                    budget,
                 )
+            )
             return ramp_tried[0] is not None
 
         search, notes, fallback = search_robust(

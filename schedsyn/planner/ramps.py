@@ -7,24 +7,27 @@ cover the whole box (red team: long ramps at the rate limits, turning 10-35 degC
 the region; data/robust_hand/).
 
 This rung searches that family directly. A programme is ``K`` legs of constant chamber
-rate, alternating direction; leg ``k`` ends at a turn temperature beyond the region and
-holds there for ``hold_k`` min; a last leg runs to the end temperature. Its parameters
-(per leg: the rate's share of the chamber limit, the turn temperature, the hold; the last
-leg's share) are scored by exact simulation of the scenarios of a screening set:
+rate, alternating direction: each approaches at the chamber's limit rate, passes at a
+share of it, turns beyond (or inside) the region and holds there; a last leg runs to the
+end temperature (:class:`_Family`, 4 parameters per leg). A candidate is simulated exactly
+(:func:`_lag_samples`) for the box's 3 x 3 corner, edge and centre scenarios, every device
+also shifted ``T_MARGIN_C`` up and down, and scored by a penalty objective:
 
-* every leg must carry every scenario's device out of the region at its far edge (how far
-  short it stays is penalised);
-* per bin and scenario, the passes' mean gradients must hold ``levels_required`` levels
-  at least ``delta + SAFETY_C_PER_MIN`` apart (:func:`separation`: the widest spacing at
-  which they do, vectorised over bins and scenarios);
+* per bin and scenario, the passes (:func:`pass_gradients`, as the coverage metric finds
+  them) must hold ``levels_required`` levels at least ``delta + SAFETY_C_PER_MIN`` apart
+  (:func:`separation`: the widest spacing at which they do, vectorised);
 * the device stays within its limits, the programme within the duration limit;
+* a small term on the duration shortens what meets all that.
 
-and, once all that holds, the duration is shortened. The optimiser is Nelder-Mead from a
-few starts (fixed seeds: the same answer on any machine). A candidate is rounded to the
-step table an operator types and accepted only when the dense box check
-(:func:`~.robust.verify_robust`, 25 x 19 points) holds; where it fails, the worst grid
-point joins the screening set and the search goes on (a cutting-plane loop). Finding
-nothing proves nothing.
+The optimiser is SciPy's differential evolution, its population seeded with starts built
+from the lag (:func:`_starts`), fixed seeds and a budget of evaluations (the same answer
+on any machine), for ``K`` = levels, levels + 1, levels + 2. A candidate is rounded to
+the step table an operator types and accepted only when the dense box check
+(:func:`~.robust.verify_robust`, 25 x 19 points) holds and
+:func:`~.check.check_programme` finds it complete within every limit; where the box check
+fails, its worst point joins the screening set and a Nelder-Mead run repairs the
+candidate (a cutting-plane loop). Finding nothing proves nothing; :func:`box_spread_proof`
+proves some boxes uncoverable.
 """
 
 from __future__ import annotations
@@ -50,8 +53,6 @@ Progress = Callable[[str], None] | None
 SAFETY_C_PER_MIN = 0.006
 #: The screening asks coverage of every device shifted this much up and down, degC.
 T_MARGIN_C = 0.5
-#: How far beyond each edge of the region every screened device must go at least once.
-REACH_C = 0.05
 #: Screening simulation step, min (the dense check uses 0.1 min).
 SCREEN_DT_MIN = 0.25
 #: Slowest leg, as a share of the chamber's rate limit in its direction.
@@ -72,6 +73,10 @@ RUN_EVALS_PER_PARAM = 100
 #: Differential evolution: population per parameter, generations.
 POPSIZE = 15
 GENERATIONS = 100
+#: Differential evolution stops when its best improved by less than this share over this
+#: many generations.
+STALL_SHARE = 0.005
+STALL_GENERATIONS = 25
 #: Starting points per leg count and first direction (:func:`_starts`), in the population.
 STARTS = 6
 #: Times the dense box check may send a candidate back with its worst point added.
@@ -81,9 +86,8 @@ MAX_CUTS = 4
 _W_SEP = 100.0  # per degC/min of the worst (scenario, bin) separation below target
 _W_SEP_MEAN = 20.0  # per degC/min of the mean shortfall (a gradient off the worst bin)
 _W_DEVICE = 1.0  # per degC past a device limit
-_W_REACH = 0.0  # per degC a device stays short of an edge (REACH_C beyond it)
 _W_OVER = 0.05  # per min over the duration limit
-_W_DURATION = 0.2  # per duration limit of length (only shortening once feasible)
+_W_DURATION = 0.2  # per duration limit of length (shortens what meets the rest)
 
 
 @dataclass(frozen=True)
@@ -230,16 +234,13 @@ class _Family:
         """(near, far) edge of the region for a leg in direction ``d``."""
         return (self.lo, self.hi) if d > 0 else (self.hi, self.lo)
 
-    def decode(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
-        """Parameters to the programme's segment durations and rates, each leg's window
-        (segment indices) and direction."""
+    def decode(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Parameters to the programme's segment durations and rates."""
         y = 1.0 / (1.0 + np.exp(-np.clip(x, -30, 30)))
         lim = self.limits
         tk = lim.start_c
         durations: list[float] = []
         rates: list[float] = []
-        windows: list[int] = [0]
-        dirs = []
 
         def ramp(to_c: float, rate: float) -> None:
             nonlocal tk
@@ -263,17 +264,12 @@ class _Family:
             if hold > 0.5:
                 durations.append(hold)
                 rates.append(0.0)
-            windows.append(len(durations))
-            dirs.append(d)
+        share = MIN_SHARE + (1 - MIN_SHARE) * y[4 * self.legs]
         gap = lim.end_c - tk
-        if abs(gap) > 1e-6:
-            share = MIN_SHARE + (1 - MIN_SHARE) * y[4 * self.legs]
-            rate = share * (lim.rate_max_c_per_min if gap > 0 else lim.rate_min_c_per_min)
-            durations.append(gap / rate)
-            rates.append(rate)
-            dirs.append(1 if gap > 0 else -1)
-        windows.append(len(durations))
-        return np.array(durations), np.array(rates), np.array(windows), dirs
+        ramp(lim.end_c, share * (lim.rate_max_c_per_min if gap > 0 else lim.rate_min_c_per_min))
+        if not durations:  # (every turn behind the chamber, no hold: nothing to run)
+            durations, rates = [1.0], [0.0]
+        return np.array(durations), np.array(rates)
 
     def encode(self, legs: list[tuple[float, float, float, float]], last_share: float):
         """Parameters for per-leg (approach before the near edge degC, share, overshoot
@@ -289,7 +285,7 @@ class _Family:
         return x
 
     def programme(self, x: np.ndarray) -> Programme:
-        d, u, _, _ = self.decode(x)
+        d, u = self.decode(x)
         return Programme(d, u, self.limits.start_c)
 
 
@@ -307,12 +303,10 @@ class _Scorer:
         #: the best parameters seen that meet every requirement, and their objective
         self.best_x: np.ndarray | None = None
         self.best_value = math.inf
-        #: this scorer's evaluations, and how many it took to meet every requirement
-        self.evals = 0
-        self.first_met: int | None = None
+        self.lowest = math.inf  # the lowest objective seen, requirements met or not
 
     def parts(self, x: np.ndarray) -> dict:
-        d, u, _, _ = self.f.decode(x)
+        d, u = self.f.decode(x)
         return self.parts_of(d, u)
 
     def parts_of(self, d: np.ndarray, u: np.ndarray, dt_min: float = SCREEN_DT_MIN) -> dict:
@@ -335,14 +329,7 @@ class _Scorer:
             + np.maximum(0.0, temp.max(axis=1) - lim.device_max_c).sum()
         )
         over = max(0.0, total - lim.duration_max_min)
-        # how far the devices stay from the region's edges (no passes there give no
-        # separation to improve: this leads the turns out)
-        reach = float(
-            np.maximum(0.0, shifted.min(axis=1) - spec.working_lo_c + REACH_C).sum()
-            + np.maximum(0.0, spec.working_hi_c + REACH_C - shifted.max(axis=1)).sum()
-        )
         return {
-            "reach_c": reach,
             "sep_min": float(sep.min()),
             "short_max": float(short.max()),
             "short_mean": float(short.mean()),
@@ -360,16 +347,13 @@ class _Scorer:
             _W_SEP * p["short_max"]
             + _W_SEP_MEAN * p["short_mean"]
             + _W_DEVICE * p["device_c"]
-            + _W_REACH * p["reach_c"]
             + _W_OVER * p["over_min"]
         )
         value = penalty + _W_DURATION * p["total_min"] / self.f.limits.duration_max_min
+        self.lowest = min(self.lowest, value)
         met = p["short_max"] <= 0 and p["device_c"] <= 0 and p["over_min"] <= 0
         if met and value < self.best_value:  # (kept when the budget ends a run)
             self.best_value, self.best_x = value, np.array(x, copy=True)
-            if self.first_met is None:
-                self.first_met = self.evals
-        self.evals += 1
         return value
 
     def feasible(self, x: np.ndarray) -> bool:
@@ -503,10 +487,23 @@ def _evolve(
     population = rng.random((size, family.n))
     for i, x in enumerate(_starts(family, rng, STARTS)):
         population[i] = 1.0 / (1.0 + np.exp(-x))
+    history: list[float] = []
+
+    def stalled(*_args, **_kwargs) -> bool:
+        """After each generation: stop when the best has improved by less than
+        :data:`STALL_SHARE` over the last :data:`STALL_GENERATIONS` (a family that cannot
+        meet the target plateaus early; r04 and r13 of data/robust_hand/)."""
+        history.append(scorer.lowest)
+        if len(history) <= STALL_GENERATIONS:
+            return False
+        before = history[-1 - STALL_GENERATIONS]
+        return before - history[-1] <= STALL_SHARE * abs(before)
+
     try:
         differential_evolution(
             objective,
             [(0.0, 1.0)] * family.n,
+            callback=stalled,
             init=population,
             maxiter=GENERATIONS,
             seed=int(rng.integers(2**31)),
