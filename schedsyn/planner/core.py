@@ -496,18 +496,14 @@ def _timetable_plan(
             f" (a near miss, searched again with {found.safety_c_per_min:g} °C/min above "
             f"delta instead of {SAFETY_C_PER_MIN:g})"
         )
-    plan = Plan(
-        spec=spec,
-        params=params,
-        limits=limits,
-        programme=programme,
-        coverage=cov,
-        coverage_0p1=cov01,
-        complete=True,
-        status="complete",
-        solve_s=time.perf_counter() - tic,
-        margin_g_c_per_min=found.min_separation_c_per_min - spec.delta_c_per_min,
-        margin_t_c=float("nan"),
+    plan = _stage_plan(
+        spec,
+        params,
+        limits,
+        programme,
+        (cov, cov01, t_lo, t_hi),
+        found.min_separation_c_per_min,
+        tic,
         lp={
             **(band_plan.lp if band_plan is not None else LpStats().to_dict()),
             "timetable_lps": found.n_lp,
@@ -515,10 +511,7 @@ def _timetable_plan(
         },
         problem_size=band_plan.problem_size if band_plan is not None else {},
         scenarios=(params,),
-        violations=(),
         notes=(note,),
-        t_min_c=t_lo,
-        t_max_c=t_hi,
         duration_lower_bound_min=bound,
     )
     if progress:
@@ -571,6 +564,39 @@ def _ramp_plan(
         f"(dense check; {found.evals} evaluations)"
     )
     bound = max(duration_lower_bound(spec, p, limits).lower_bound_min for p in scenarios)
+    return _stage_plan(
+        spec,
+        params,
+        limits,
+        programme,
+        (cov, cov01, t_lo, t_hi),
+        found.min_separation_c_per_min,
+        tic,
+        lp={**stats.to_dict(), "ramp_evals": found.evals},
+        problem_size={},
+        scenarios=tuple(scenarios),
+        notes=(note,),
+        duration_lower_bound_min=bound,
+        box_check=found.box_check,
+        coverage_nominal=check_programme(programme, spec, limits, [params])[0],
+    )
+
+
+def _stage_plan(
+    spec: ExperimentSpec,
+    params: ThermalParams,
+    limits: Limits,
+    programme: Programme,
+    checked: tuple[CoverageReport, CoverageReport, float, float],
+    min_separation_c_per_min: float,
+    tic: float,
+    **fields,
+) -> Plan:
+    """The complete plan of a stage that searches tables directly (the timetable stage,
+    the ramp rung): ``programme`` checked complete within every limit (``checked``:
+    :func:`~.check.check_programme`'s coverage at delta and at 0.1 degC/min and the
+    device's range), its worst level separation, and the stage's own ``fields``."""
+    cov, cov01, t_lo, t_hi = checked
     return Plan(
         spec=spec,
         params=params,
@@ -581,19 +607,12 @@ def _ramp_plan(
         complete=True,
         status="complete",
         solve_s=time.perf_counter() - tic,
-        margin_g_c_per_min=found.min_separation_c_per_min - spec.delta_c_per_min,
+        margin_g_c_per_min=min_separation_c_per_min - spec.delta_c_per_min,
         margin_t_c=float("nan"),
-        lp={**stats.to_dict(), "ramp_evals": found.evals},
-        problem_size={},
-        scenarios=tuple(scenarios),
         violations=(),
-        notes=(note,),
         t_min_c=t_lo,
         t_max_c=t_hi,
-        box_check=found.box_check,
-        duration_lower_bound_min=bound,
-        coverage_nominal=check_programme(programme, spec, limits, [params])[0],
-        robust_fallback=None,
+        **fields,
     )
 
 
