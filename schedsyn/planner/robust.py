@@ -8,9 +8,11 @@ over the whole box (:func:`verify_robust`) and is complete only if coverage hold
 grid point. When its search finds no programme for the box, :func:`search_robust` falls
 back to the nominal point with the widest margins if its programme holds on the box after
 all, else searches the box again with the scenarios held closer to their bands, then the
-box's inner half, its inner quarter, and last takes that nominal plan. When the
-programme the planner keeps does not hold on the whole box, the ramp rung
-(:mod:`.ramps`) searches ramp-and-hold programmes for it before the plan is reported.
+box's inner half, its inner quarter, and last takes that nominal plan. Before the inner
+boxes (``whole_box``), and when the programme the planner keeps does not hold on the
+whole box, the ramp rung (:mod:`.ramps`) searches ramp-and-hold programmes for the whole
+box; a box :func:`~.ramps.box_spread_proof` proves no programme covers is not searched
+as a whole.
 """
 
 from __future__ import annotations
