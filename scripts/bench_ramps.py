@@ -21,7 +21,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from schedsyn.planner import ExperimentSpec
@@ -57,39 +56,36 @@ def request(path: Path):
 
 
 def check(steps_csv: Path, spec, params, limits, tau, dt0, ind) -> dict:
-    """Fewest levels over the grid, device range, duration, rates, ends: independent code."""
-    knots_t, knots_tk = ind.chamber_knots(steps_csv)
-    tau = tau or (params.tau_s, params.tau_s)
-    dt0 = dt0 or (params.dt0_c, params.dt0_c)
-    taus, dt0s = np.meshgrid(np.linspace(*tau, N_TAU), np.linspace(*dt0, N_DT0))
-    _, temp, grad = ind.ode_trajectories(
-        knots_t, knots_tk, taus.ravel(), dt0s.ravel(), t0_c=limits.t_init_c
+    """The table over the box by independent code (tests/independent.py): fewest levels,
+    device range, and every limit of the request."""
+    got = ind.box_table_check(
+        steps_csv,
+        (spec.working_lo_c, spec.working_hi_c),
+        spec.delta_c_per_min,
+        tau or (params.tau_s, params.tau_s),
+        dt0 or (params.dt0_c, params.dt0_c),
+        limits.t_init_c,
+        N_TAU,
+        N_DT0,
     )
-    fewest = min(
-        int(
-            ind.levels_per_bin(
-                temp[i], grad[i], spec.working_lo_c, spec.working_hi_c, spec.delta_c_per_min
-            ).min()
-        )
-        for i in range(temp.shape[0])
-    )
-    rates = np.diff(knots_tk) / np.diff(knots_t)
+    (dev_lo, dev_hi), (rate_lo, rate_hi) = got["device_c"], got["rates"]
+    (tk_lo, tk_hi), (start, end) = got["chamber_c"], got["ends_c"]
     ok = (
-        fewest >= spec.levels_required
-        and limits.device_min_c - 1e-6 <= temp.min()
-        and temp.max() <= limits.device_max_c + 1e-6
-        and knots_t[-1] <= limits.duration_max_min + 1e-9
-        and limits.rate_min_c_per_min - 1e-9 <= rates.min()
-        and rates.max() <= limits.rate_max_c_per_min + 1e-9
-        and limits.chamber_min_c - 1e-9 <= knots_tk.min()
-        and knots_tk.max() <= limits.chamber_max_c + 1e-9
-        and abs(knots_tk[0] - limits.start_c) < 1e-9
-        and abs(knots_tk[-1] - limits.end_c) <= limits.end_tol_c + 1e-9
+        got["fewest_levels"] >= spec.levels_required
+        and limits.device_min_c - 1e-6 <= dev_lo
+        and dev_hi <= limits.device_max_c + 1e-6
+        and got["duration_min"] <= limits.duration_max_min + 1e-9
+        and limits.rate_min_c_per_min - 1e-9 <= rate_lo
+        and rate_hi <= limits.rate_max_c_per_min + 1e-9
+        and limits.chamber_min_c - 1e-9 <= tk_lo
+        and tk_hi <= limits.chamber_max_c + 1e-9
+        and abs(start - limits.start_c) < 1e-9
+        and abs(end - limits.end_c) <= limits.end_tol_c + 1e-9
     )
     return {
-        "independent_min_levels": fewest,
-        "device_min_c": round(float(temp.min()), 2),
-        "device_max_c": round(float(temp.max()), 2),
+        "independent_min_levels": got["fewest_levels"],
+        "device_min_c": round(dev_lo, 2),
+        "device_max_c": round(dev_hi, 2),
         "independent_ok": bool(ok),
     }
 
@@ -102,6 +98,10 @@ def main(argv=None) -> int:
     ind = _independent()
     rows = []
     tables = sorted(HAND.glob("*.csv"))
+    names = {p.stem.split("_")[0] for p in tables}
+    unknown = sorted(set(args.only or ()) - names)
+    if unknown:
+        ap.error(f"--only: no hand table for {', '.join(unknown)} (there are {sorted(names)})")
     seen = set()
     for path in tables:
         name = path.stem.split("_")[0]

@@ -160,3 +160,34 @@ def assert_plan_complete(plan, tmp_path: Path) -> dict:
     assert rates.max() <= limits.rate_max_c_per_min + 1e-3
     res["steps_csv"] = steps
     return res
+
+
+def box_table_check(
+    steps_csv: Path | str,
+    region: tuple[float, float],
+    delta: float,
+    tau_range_s: tuple[float, float],
+    dt0_range_c: tuple[float, float],
+    t0_c: float = 20.0,
+    n_tau: int = 9,
+    n_dt0: int = 7,
+) -> dict:
+    """A step table over a tau x dT0 grid (ends included), all scenarios integrated
+    together: the fewest levels of any bin at any point, the device's range over the box,
+    and the table's duration, rate range, chamber range and end temperatures."""
+    knots_t, knots_tk = chamber_knots(steps_csv)
+    taus, dt0s = np.meshgrid(np.linspace(*tau_range_s, n_tau), np.linspace(*dt0_range_c, n_dt0))
+    _, temp, grad = ode_trajectories(knots_t, knots_tk, taus.ravel(), dt0s.ravel(), t0_c=t0_c)
+    fewest = min(
+        int(levels_per_bin(temp[i], grad[i], region[0], region[1], delta).min())
+        for i in range(temp.shape[0])
+    )
+    rates = np.diff(knots_tk) / np.diff(knots_t)
+    return {
+        "fewest_levels": fewest,
+        "device_c": (float(temp.min()), float(temp.max())),
+        "duration_min": float(knots_t[-1]),
+        "rates": (float(rates.min()), float(rates.max())),
+        "chamber_c": (float(knots_tk.min()), float(knots_tk.max())),
+        "ends_c": (float(knots_tk[0]), float(knots_tk[-1])),
+    }

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from independent import chamber_knots, levels_per_bin, ode_trajectories
+from independent import box_table_check, ode_trajectories
 
 from schedsyn.coverage import level_separation
 from schedsyn.params import Limits, ThermalParams
@@ -100,32 +100,6 @@ def _r10_spec():
     )
 
 
-def _independent_box_check(steps_csv, spec, limits, tau_s, dt0_c, n_tau=9, n_dt0=7):
-    """The table's fewest levels over a tau x dT0 grid and the device's range, by
-    solve_ivp and plain counting."""
-    knots_t, knots_tk = chamber_knots(steps_csv)
-    taus, dt0s = np.meshgrid(np.linspace(*tau_s, n_tau), np.linspace(*dt0_c, n_dt0))
-    _, temp, grad = ode_trajectories(
-        knots_t, knots_tk, taus.ravel(), dt0s.ravel(), t0_c=limits.t_init_c
-    )
-    fewest = min(
-        int(
-            levels_per_bin(
-                temp[i], grad[i], spec.working_lo_c, spec.working_hi_c, spec.delta_c_per_min
-            ).min()
-        )
-        for i in range(temp.shape[0])
-    )
-    rates = np.diff(knots_tk) / np.diff(knots_t)
-    return {
-        "fewest_levels": fewest,
-        "device_c": (float(temp.min()), float(temp.max())),
-        "duration_min": float(knots_t[-1]),
-        "rates": (float(rates.min()), float(rates.max())),
-        "ends_c": (float(knots_tk[0]), float(knots_tk[-1])),
-    }
-
-
 @pytest.fixture(scope="module")
 def r10_ramp():
     return ramp_search(_r10_spec(), ThermalParams(), R10_LIMITS, R10["tau_s"], R10["dt0_c"])
@@ -138,7 +112,9 @@ def test_ramp_rung_covers_a_box_the_band_search_falls_back_on(r10_ramp, tmp_path
     spec = _r10_spec()
     assert r10_ramp.box_check["holds"] and r10_ramp.box_check["grid_points"] == 25 * 19
     csv = r10_ramp.programme.to_csv(tmp_path / "ramp.csv")
-    got = _independent_box_check(csv, spec, R10_LIMITS, R10["tau_s"], R10["dt0_c"])
+    got = box_table_check(
+        csv, R10["working"], spec.delta_c_per_min, R10["tau_s"], R10["dt0_c"], R10_LIMITS.t_init_c
+    )
     assert got["fewest_levels"] >= spec.levels_required
     assert R10_LIMITS.device_min_c <= got["device_c"][0]
     assert got["device_c"][1] <= R10_LIMITS.device_max_c

@@ -39,6 +39,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import differential_evolution, minimize
 
+from ..errors import StepTableError
 from ..params import Limits, ThermalParams
 from ..programme import Programme
 from .check import check_programme, step_limit_problems
@@ -109,7 +110,7 @@ class RampResult:
 
 
 class _Budget(Exception):
-    """The evaluation budget or the effort limit is spent."""
+    """The search's budget of objective evaluations is spent."""
 
 
 def _lag_samples(
@@ -123,7 +124,10 @@ def _lag_samples(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Exact T and g of ``tau dT/dt + T = Tk + dT0`` under a piecewise-linear ``Tk``, at
     ``times_min`` for every scenario (rows): per segment ``T = Tk + dT0 - U tau + c
-    e^(-t/tau)`` with ``c`` from the segment's start."""
+    e^(-t/tau)`` with ``c`` from the segment's start. (The simulator's
+    :func:`~schedsyn.model.affine_response` builds a matrix per scenario for any linear
+    model; the objective needs only this lag, for 18 scenarios at once, tens of thousands
+    of times.)"""
     edges = np.concatenate(([0.0], np.cumsum(durations_min)))
     tk_edges = start_c + np.concatenate(([0.0], np.cumsum(durations_min * rates_c_per_min)))
     seg = np.clip(np.searchsorted(edges, times_min, side="right") - 1, 0, durations_min.size - 1)
@@ -351,14 +355,14 @@ class _Scorer:
         )
         value = penalty + _W_DURATION * p["total_min"] / self.f.limits.duration_max_min
         self.lowest = min(self.lowest, value)
-        met = p["short_max"] <= 0 and p["device_c"] <= 0 and p["over_min"] <= 0
-        if met and value < self.best_value:  # (kept when the budget ends a run)
+        if _met(p) and value < self.best_value:  # (kept when the budget ends a run)
             self.best_value, self.best_x = value, np.array(x, copy=True)
         return value
 
-    def feasible(self, x: np.ndarray) -> bool:
-        p = self.parts(x)
-        return p["short_max"] <= 0 and p["device_c"] <= 0 and p["over_min"] <= 0
+
+def _met(parts: dict) -> bool:
+    """Every requirement of the screening met (the objective's terms, :meth:`_Scorer.parts`)."""
+    return parts["short_max"] <= 0 and parts["device_c"] <= 0 and parts["over_min"] <= 0
 
 
 def _logit(y: float) -> float:
@@ -391,19 +395,20 @@ def _starts(family: _Family, rng: np.random.Generator, n: int) -> list[np.ndarra
             full = lim.rate_max_c_per_min if d > 0 else -lim.rate_min_c_per_min
             for k, share in zip(ks, shares, strict=True):
                 lag = share * full * tau_min
-                # the turn in device terms: every dT0 carried a degree out, within the
-                # chamber's and the device's limits (then held for the device to get there)
+                # variant 2 turns in device terms: every dT0 carried a degree out, within
+                # the chamber's and the device's limits (then held for it to get there)
                 if d > 0:
                     want = spec.working_hi_c - dt0_lo + 1.0 + 0.5 * lag
                     turn = min(want, lim.chamber_max_c, lim.device_max_c - dt0_hi - 0.2)
                 else:
                     want = spec.working_lo_c - dt0_hi - 1.0 - 0.5 * lag
                     turn = max(want, lim.chamber_min_c, lim.device_min_c - dt0_lo + 0.2)
-                hold = 0.2 * tau_min if turn == want else 0.6 * tau_min
-                far = family.edges(d)[1]
-                legs[k] = (min(lag, APPROACH_C), float(share), d * (turn - far), hold)
-                if variant != 2:  # turning a lag plus the dT0 spread beyond, short holds
-                    legs[k] = (min(lag, APPROACH_C), float(share), lag + dt0_hi - dt0_lo + 1, 5.0)
+                if variant == 2:
+                    over = d * (turn - family.edges(d)[1])
+                    hold = 0.2 * tau_min if turn == want else 0.6 * tau_min
+                else:  # turning a lag plus the dT0 spread beyond, short holds
+                    over, hold = lag + dt0_hi - dt0_lo + 1, 5.0
+                legs[k] = (min(lag, APPROACH_C), float(share), over, hold)
         x = family.encode(legs, 0.95)
         if variant >= 3:
             x = x + rng.normal(0.0, 0.3, x.size)
@@ -425,13 +430,12 @@ def ramp_search(
     tau_s: Range,
     dt0_c: Range,
     progress: Progress = None,
-    stop: Callable[[], bool] | None = None,
     max_evals: int | None = None,
 ) -> RampResult | None:
     """A ramp programme that covers the whole robust box, or None (see the module doc).
 
-    ``stop()`` is asked between optimiser runs (an effort limit); ``max_evals`` bounds the
-    objective evaluations (default :data:`EVALS_PER_LEVEL` per level required).
+    ``max_evals`` bounds the objective evaluations (default :data:`EVALS_PER_LEVEL` per
+    level required).
     """
     tau_range = (float(tau_s[0]), float(tau_s[1])) if tau_s else (params.tau_s, params.tau_s)
     dt0_range = (float(dt0_c[0]), float(dt0_c[1])) if dt0_c else (params.dt0_c, params.dt0_c)
@@ -445,7 +449,7 @@ def ramp_search(
     scenarios = box_scenarios(params, tau_s, dt0_c)
     for legs in (levels, levels + 1, levels + 2):
         for first in first_directions(spec, limits):
-            if (stop is not None and stop()) or counter[0] >= counter[1]:
+            if counter[0] >= counter[1]:
                 return None
             family = _Family(spec, limits, legs, first, tau_range, dt0_range)
             found = _evolve(family, points, counter, rng)
@@ -554,7 +558,7 @@ def _verified(
     for _ in range(MAX_CUTS + 1):
         try:
             programme = family.programme(x).rounded(limits).ending_at(limits.end_c, limits)
-        except Exception:  # noqa: BLE001 (a degenerate candidate: not a plan)
+        except StepTableError:  # (a degenerate candidate: not a plan)
             return None
         box = verify_robust(programme, spec, params, tau_s, dt0_c, limits)
         if box["holds"]:
@@ -591,9 +595,9 @@ PROOF_N_TAU = 9
 
 
 def _first_time_past(
-    spec_c: float, up: bool, params: ThermalParams, limits: Limits
+    edge_c: float, up: bool, params: ThermalParams, limits: Limits
 ) -> float | None:
-    """The latest sample time before the device (``params``) can first pass ``spec_c``
+    """The latest sample time before the device (``params``) can first pass ``edge_c``
     (below it when not ``up``): on the chamber's fastest path that way (the full rate to
     the chamber's limit, then held), which takes the device there first of all programmes
     (the lag is monotone in the chamber's path). A lower bound on when any programme gets
@@ -614,7 +618,7 @@ def _first_time_past(
         np.array([params.dt0_c]),
         times,
     )
-    past = temp[0] >= spec_c if up else temp[0] < spec_c
+    past = temp[0] >= edge_c if up else temp[0] < edge_c
     if not past.any():
         return None
     k = int(np.argmax(past))
