@@ -45,7 +45,7 @@ of the chamber-limited gradient).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import numpy as np
@@ -644,7 +644,10 @@ def fastest_entry_min(space: DesignSpace, *, dt_min: float = ENTRY_STEP_MIN) -> 
 
 
 def level_floor_dph(
-    walk_dph_per_rt_h: float, white_dph_per_rt_hz: float, entry_min: float
+    walk_dph_per_rt_h: float,
+    white_dph_per_rt_hz: float,
+    entry_min: float,
+    record_min: float = math.inf,
 ) -> float:
     """The smallest RMS error, deg/h, with which any fit can know the drift's level when
     the device first reaches the approximation region ``entry_min`` after the bias random
@@ -658,7 +661,9 @@ def level_floor_dph(
     with the drift's shape known, a level observed through white noise N while it walks
     at K is known at the start of the record to ``sqrt(K N)`` at best (the stationary
     variance of the Kalman filter for a random walk in white noise, run backward from the
-    end of an infinitely long record; a finite or gappy record knows it worse). Every
+    end of an infinitely long record). A record of at most ``record_min`` from the entry
+    on (what a run of that much more time can have) knows it worse, ``K N coth(K D / N)``
+    (the same filter started at the record's end; ``N^2 / D`` without a walk). Every
     point of the compensation table carries the level, so this bounds the RMS error of
     the fitted drift over any grid (for any fit whose error does not depend on the
     drift's unknown level, as least squares' does not).
@@ -667,11 +672,140 @@ def level_floor_dph(
         ("walk_dph_per_rt_h", walk_dph_per_rt_h),
         ("white_dph_per_rt_hz", white_dph_per_rt_hz),
         ("entry_min", entry_min),
+        ("record_min", record_min),
     ):
         if not (v >= 0.0):
             raise ParameterError(f"{name} must be >= 0, got {v!r}")
+    if record_min == 0.0:
+        return math.inf  # nothing recorded in the region
     k = walk_dph_per_rt_h / 60.0  # deg/h per sqrt(s)
-    return math.sqrt(k * k * entry_min * 60.0 + k * white_dph_per_rt_hz)
+    n = white_dph_per_rt_hz
+    record_s = record_min * 60.0
+    if k == 0.0:
+        at_entry = n * n / record_s  # white noise alone: its mean over the record
+    elif n == 0.0:
+        at_entry = 0.0  # the level at the entry is read off exactly
+    else:
+        at_entry = k * n / math.tanh(k * record_s / n)
+    return math.sqrt(k * k * entry_min * 60.0 + at_entry)
+
+
+#: The shape part of :func:`fit_error_floor_dph` takes its optimum's certificate over the
+#: reachable band on a grid this much finer than the candidates' (and on the band's edges).
+CERTIFICATE_REFINE = 10
+
+
+def every_gradient(space: DesignSpace) -> DesignSpace:
+    """``space`` with the chamber's rate limits as its fastest gradients: its band then
+    holds every run that keeps within the device limits (a gradient relaxes towards the
+    chamber's rate, so it never passes it), not only the planner's."""
+    lim = space.limits
+    return replace(
+        space,
+        max_cool_c_per_min=max(-lim.rate_min_c_per_min, 1e-9),
+        max_heat_c_per_min=max(lim.rate_max_c_per_min, 1e-9),
+    )
+
+
+@lru_cache(maxsize=64)
+def shape_floor_factor(
+    space: DesignSpace, terms: tuple[str, ...], reach: DesignSpace | None = None
+) -> float:
+    """``L*``: the smallest mean variance of the fitted drift's *shape* over the working
+    grid that any distribution of samples on the reachable band of the approximation
+    region gives, in units of ``N^2 / D`` (white noise N, D seconds of samples; module
+    docstring of :func:`fit_error_floor_dph`).
+
+    ``L* = min_xi tr(M(xi)^-1 C)``, ``C`` the covariance of the terms over the working
+    grid (the grid's mean, the level, taken out); an L-optimal design, convex in the
+    weights, found by :func:`i_optimal_design` on the candidate grid of the band the
+    samples can lie on (``reach``'s approximation region and band, by default
+    :func:`every_gradient` of ``space``) and its edges. What is returned is its **lower
+    bound** by convexity, ``2 L(w) - max d(x)`` with ``d`` the directional derivative over
+    a grid :data:`CERTIFICATE_REFINE` times finer (edges included): a finer or continuous
+    design cannot beat it (to that grid's resolution). ``terms``: a tuple of term names
+    (:func:`~schedsyn.terms.parse_terms`; hashable, the result is cached).
+    """
+    terms_t = parse_terms(terms)
+    t_w, g_w = space.grid("working")
+    z = monomials(*space.code(t_w, g_w), terms_t)
+    zc = z - z.mean(axis=0)
+    cov = zc.T @ zc / z.shape[0]
+
+    reach = every_gradient(space) if reach is None else reach
+
+    def band(t_step_c: float, g_step: float) -> np.ndarray:
+        # the grid over the band and its edges (where the optimum puts much of its weight),
+        # in the working grid's coding
+        t, g = reach.grid("approx", t_step_c, g_step)
+        n_t = max(int(round((reach.approx_hi_c - reach.approx_lo_c) / t_step_c)), 1)
+        t_e = np.linspace(reach.approx_lo_c, reach.approx_hi_c, n_t + 1)
+        g_lo, g_hi = reach.gradient_band(t_e)
+        return monomials(
+            *space.code(np.concatenate([t, t_e, t_e]), np.concatenate([g, g_lo, g_hi])),
+            terms_t,
+        )
+
+    c = band(CANDIDATE_T_STEP_C, CANDIDATE_G_STEP_C_PER_MIN)
+    phi, w = i_optimal_design(c, cov)
+    m_inv = np.linalg.inv(c.T @ (w[:, None] * c))
+    f = band(
+        CANDIDATE_T_STEP_C / CERTIFICATE_REFINE, CANDIDATE_G_STEP_C_PER_MIN / CERTIFICATE_REFINE
+    )
+    d_max = float(np.einsum("ij,jk,ik->i", f, m_inv @ cov @ m_inv, f).max())
+    return max(2.0 * phi - d_max, 0.0)
+
+
+def fit_error_floor_dph(
+    space: DesignSpace,
+    walk_dph_per_rt_h: float,
+    white_dph_per_rt_hz: float,
+    entry_min: float,
+    duration_min: float,
+    terms: str | tuple = "full",
+    reach: DesignSpace | None = None,
+) -> float:
+    """The smallest RMS error over the working grid, deg/h, with which any run of
+    ``duration_min`` (switch-on at 0, first in the approximation region at ``entry_min``)
+    can fit the drift polynomial ``terms`` by a linear unbiased fit (least squares,
+    weighted or not, with T and g known: estimating them only adds)::
+
+        MSE >= K^2 t_e + K N coth(K D / N) + (N^2 / D) L*        D = duration - t_e
+
+    ``space`` gives the working grid the error is taken over; ``reach`` the band the
+    samples can lie on, by default :func:`every_gradient` of ``space`` (give the device's
+    ``params``: the band then holds every run within the device limits,
+    :func:`reachable_gradients`).
+
+    Why: with ``f = (1, f_s)`` the terms, ``W`` their mean square over the grid and ``v``
+    their mean, ``tr(M^-1 W) = v' M^-1 v + tr((M^-1)_ss C)``, ``C = W - v v'`` (only the
+    shape block). By Cauchy-Schwarz ``v' M^-1 v >= 1 / M_00``, the variance of the
+    level with the shape known: the walk before the entry plus the level at the entry
+    seen through white noise from a record of at most ``D`` (the backward Kalman filter of
+    a random walk, ``K N coth(K D / N)``; :func:`level_floor_dph` is its long-record
+    limit). ``(M^-1)_ss`` is the shape's covariance with the level a nuisance; told the
+    walk (an oracle), a fit only gains, and what is left is white noise of ``N^2 / h``
+    per sample over at most ``D`` seconds: ``(N^2 / D) Cov_xi(f_s)^-1`` for the samples'
+    distribution ``xi``, whose best over the band is :func:`shape_floor_factor`.
+    """
+    for name, v in (
+        ("walk_dph_per_rt_h", walk_dph_per_rt_h),
+        ("white_dph_per_rt_hz", white_dph_per_rt_hz),
+        ("entry_min", entry_min),
+        ("duration_min", duration_min),
+    ):
+        if not (v >= 0.0):
+            raise ParameterError(f"{name} must be >= 0, got {v!r}")
+    record_min = duration_min - entry_min
+    if not record_min > 0.0:
+        return math.inf  # the run never reaches the region
+    level = level_floor_dph(walk_dph_per_rt_h, white_dph_per_rt_hz, entry_min, record_min)
+    shape = (
+        white_dph_per_rt_hz**2
+        / (record_min * 60.0)
+        * shape_floor_factor(space, parse_terms(terms), reach)
+    )
+    return math.sqrt(level**2 + shape)
 
 
 @dataclass(frozen=True)

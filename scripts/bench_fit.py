@@ -19,6 +19,9 @@ and the drift fitted over the approximation region that both runs reached
     and the level floor no programme and no fit can beat
     (``schedsyn.design.level_floor_dph``: the walk accumulated before the fastest possible
     entry into the fit's region, plus ``K N``), as a share of the baseline's error;
+    and the floor of the full model's error for any programme of the plan's length
+    (``schedsyn.design.fit_error_floor_dph``: that level's and the shape's white noise
+    leaves at the best distribution of samples over the reachable band);
 (b) on gyros with gradient terms: the error of the full model and of the T-only cubic
     fitted on the plan's run, held out on the baseline's run (a different trajectory,
     independent noise), over its samples inside the fit's domain: against the noise-free
@@ -52,7 +55,14 @@ import pandas as pd
 
 import schedsyn
 from schedsyn.baseline import paper_like_programme
-from schedsyn.design import DesignSpace, fastest_entry_min, level_floor_dph, programme_design
+from schedsyn.design import (
+    DesignSpace,
+    every_gradient,
+    fastest_entry_min,
+    fit_error_floor_dph,
+    level_floor_dph,
+    programme_design,
+)
 from schedsyn.driftfit import (
     ESTIMATORS,
     WEIGHTINGS,
@@ -157,7 +167,7 @@ def run_case(case: Case) -> dict:
         "walk_dph_per_rt_h": gyro.bias_walk_dph_per_rt_h,
         "plan_selected": _name(fit_p),
         "baseline_selected": _name(fit_b),
-        **_level_floor(gyro, device, region, (f_plan, f_base)),
+        **_level_floor(gyro, device, region, (f_plan, f_base), case),
     }
     for tag, fit in (("plan", fit_p), ("baseline", fit_b)):
         full = fit_samples(fit.samples, "full", fit.model.coding, weighting=case.weighting)
@@ -187,10 +197,13 @@ def run_case(case: Case) -> dict:
     return row
 
 
-def _level_floor(gyro, device, region, frames) -> dict:
+def _level_floor(gyro, device, region, frames, case) -> dict:
     """When the device first reached the fit's region (fastest possible; the plan's and
-    the baseline's runs), and the level floor no run or fit can beat
-    (:func:`schedsyn.design.level_floor_dph`, the walk starting with the log)."""
+    the baseline's runs), the level floor no run or fit can beat
+    (:func:`schedsyn.design.level_floor_dph`, the walk starting with the log), and the
+    floor of the full model's error over target (a)'s grid for a run of the plan's length
+    (:func:`schedsyn.design.fit_error_floor_dph`: the level's and the shape's; samples
+    anywhere the device can be in the approximation region)."""
     lo, hi = region
     space = DesignSpace(lo, hi, lo, hi, device, max_cool_c_per_min=99.0, max_heat_c_per_min=99.0)
     fastest = fastest_entry_min(space)
@@ -201,6 +214,15 @@ def _level_floor(gyro, device, region, frames) -> dict:
         out[f"{tag}_entry_min"] = float(f["time_s"].to_numpy()[inside[0]]) / 60.0
     out["level_floor_dph"] = level_floor_dph(
         gyro.bias_walk_dph_per_rt_h, gyro.white_noise_dph_per_rt_hz, fastest
+    )
+    grid = DesignSpace(*case.working, *case.approx)  # target (a)'s grid
+    out["fit_floor_dph"] = fit_error_floor_dph(
+        grid,
+        gyro.bias_walk_dph_per_rt_h,
+        gyro.white_noise_dph_per_rt_hz,
+        fastest,
+        case.duration_min,
+        reach=every_gradient(DesignSpace(*case.working, *case.approx, device)),
     )
     return out
 
@@ -246,6 +268,15 @@ def summarise(cases: pd.DataFrame, designs: dict) -> pd.DataFrame:
                 "floor_over_baseline_median": (
                     c["level_floor_dph"] / c["baseline_full_rms_dph"]
                 ).median(),
+                # the level's and the shape's floor together (full model, any programme of
+                # the plan's length)
+                "fit_floor_rms_dph": _rms(c["fit_floor_dph"]),
+                "fit_floor_over_baseline_rms": (
+                    _rms(c["fit_floor_dph"]) / _rms(c["baseline_full_rms_dph"])
+                ),
+                "fit_floor_over_baseline_median": (
+                    c["fit_floor_dph"] / c["baseline_full_rms_dph"]
+                ).median(),
                 "ratio_selected_median": ratio_sel.median(),
                 "selected_rms_dph_median_plan": c["plan_selected_rms_dph"].median(),
                 "selected_rms_dph_median_baseline": c["baseline_selected_rms_dph"].median(),
@@ -280,6 +311,7 @@ def markdown(summary: pd.DataFrame) -> str:
         "ratio_shape_median": "(a) ratio, offset removed",
         "ratio_full_rms": "(a) ratio of RMS over gyros",
         "floor_over_baseline_rms": "level floor / baseline, RMS over gyros (no plan can beat)",
+        "fit_floor_over_baseline_rms": "level + shape floor / baseline, RMS over gyros",
         "holdout_tonly_over_full_median": "(b) T-only / full held out (target >= 2)",
         "holdout_measured_tonly_over_full_median": "(b) same, measured residuals",
         "tonly_selected_share_no_gradient": "(b) T-only chosen, no g terms (target >= 90 %)",

@@ -18,6 +18,7 @@ from schedsyn.design import (
     design_report,
     fastest_entry_min,
     first_entry_min,
+    fit_error_floor_dph,
     i_optimal_design,
     level_floor_dph,
     log_det_information,
@@ -25,12 +26,13 @@ from schedsyn.design import (
     predicted_fit_error,
     programme_design,
     reachable_gradients,
+    shape_floor_factor,
 )
 from schedsyn.errors import ParameterError
 from schedsyn.params import Limits, ThermalParams
 from schedsyn.programme import Programme, read_steps
 from schedsyn.simulate import simulate
-from schedsyn.terms import monomials
+from schedsyn.terms import monomials, parse_terms
 
 BASELINE = "data/baseline_exp1_steps.csv"
 W1 = DesignSpace(-50.0, -30.0, -52.0, -20.0)
@@ -381,11 +383,122 @@ def test_level_floor_is_the_variance_of_the_best_fit_of_a_long_record(walk, whit
     assert var_short > var_gls
 
 
+@pytest.mark.parametrize("walk, white, record_min", [(0.0125, 0.3, 30.0), (0.0, 0.3, 30.0)])
+def test_level_floor_of_a_short_record_is_its_gls_variance(walk, white, record_min):
+    """Independent: a record of 30 min from the entry (about the walk's time constant
+    N / K, 24 min here) knows the level at switch-on worse than a long one; the exact
+    GLS variance of its 5-s rows is the finite-record floor (coth), not the long one."""
+    h_s, entry_min = 5.0, 5.0
+    t_s = entry_min * 60.0 + h_s * np.arange(1, int(record_min * 60 / h_s) + 1)
+    k_s = walk / 60.0
+    omega = (white**2 / h_s) * np.eye(t_s.size) + k_s**2 * np.minimum.outer(t_s, t_s)
+    ones = np.ones(t_s.size)
+    var_gls = 1.0 / (ones @ np.linalg.solve(omega, ones))
+    floor = level_floor_dph(walk, white, entry_min, record_min)
+    assert floor**2 <= var_gls <= 1.02 * floor**2
+    if walk > 0:
+        assert level_floor_dph(walk, white, entry_min) ** 2 < 0.9 * var_gls
+
+
 def test_level_floor_rejects_bad_input():
-    for args in ((-0.01, 0.3, 0.0), (0.01, math.nan, 0.0), (0.01, 0.3, -1.0)):
+    for args in ((-0.01, 0.3, 0.0), (0.01, math.nan, 0.0), (0.01, 0.3, -1.0), (0.01, 0.3, 0, -1)):
         with pytest.raises(ParameterError, match="must be >= 0"):
             level_floor_dph(*args)
     assert level_floor_dph(0.01, 0.3, math.inf) == math.inf
+    assert level_floor_dph(0.01, 0.3, 0.0, 0.0) == math.inf
+
+
+# -- the fit's floor: the level's and the shape's ---------------------------------------------
+#: W3 with every gradient the chamber's rates allow (the band holds every run)
+W3_ALL = DesignSpace(0.0, 30.0, -10.0, 40.0, max_cool_c_per_min=1.0, max_heat_c_per_min=3.0)
+FULL = parse_terms("full")
+
+
+def _sdp_design(c, cov):
+    """The weights on the rows of ``c`` minimising tr(M^-1 cov), by an SDP solver."""
+    import cvxpy as cp
+
+    lam = cp.Variable(c.shape[0], nonneg=True)
+    m = c.T @ cp.diag(lam) @ c
+    vals, vecs = np.linalg.eigh(cov)
+    root = vecs[:, vals > 1e-12] * np.sqrt(vals[vals > 1e-12])
+    obj = sum(cp.matrix_frac(root[:, j], m) for j in range(root.shape[1]))
+    prob = cp.Problem(cp.Minimize(obj), [cp.sum(lam) == 1])
+    prob.solve(solver=cp.CLARABEL)
+    return prob.value, np.maximum(lam.value, 0.0)
+
+
+def test_shape_floor_is_a_lower_bound_that_a_design_nearly_attains():
+    """Independent: an SDP solver's best design on a coarse grid of the band (its edges
+    included), realised as 2400 samples of a 240-min record with white noise only, gives
+    the shape error (the level removed) that ``predicted_fit_error`` computes by GLS; the
+    floor is below it and within 6 % (the coarse grid's loss). A floor that left the
+    band's edges out of the design (2.65 for 3.49 here) or counted the record in minutes
+    fails."""
+    space = W3_ALL
+    floor = shape_floor_factor(space, FULL)
+    t_w, g_w = space.grid("working")
+    z = monomials(*space.code(t_w, g_w), FULL)
+    zc = z - z.mean(axis=0)
+    cov = zc.T @ zc / z.shape[0]
+    t, g = space.grid("approx", 2.5, 0.1)
+    t_e = np.linspace(space.approx_lo_c, space.approx_hi_c, 21)
+    g_lo, g_hi = space.gradient_band(t_e)
+    t, g = np.concatenate([t, t_e, t_e]), np.concatenate([g, g_lo, g_hi])
+    value, lam = _sdp_design(monomials(*space.code(t, g), FULL), cov)
+    assert floor <= value <= 1.06 * floor
+    n = 2400
+    counts = np.floor(lam * n + 0.5).astype(int)
+    idx = np.repeat(np.arange(lam.size), counts)
+    white, record_min = 0.3, 240.0
+    time_min = (np.arange(idx.size) + 1) * record_min / idx.size
+    pred = predicted_fit_error(time_min, t[idx], g[idx], space, white, 0.0)
+    shape_var_units = pred.shape_dph**2 * record_min * 60.0 / white**2
+    assert floor <= shape_var_units <= 1.06 * floor
+    assert shape_var_units == pytest.approx(value, rel=0.02)  # the rounding to samples
+
+
+def test_fit_error_floor_holds_for_every_programme(rng):
+    """Random programmes within the limits (1-min samples, a walk and white noise like
+    the benchmark's gyros): the exact GLS error of each run (``predicted_fit_error``,
+    total and shape) is never below the floor of its length and entry time."""
+    walk, white = 0.0125, 0.3
+    checked = 0
+    for _ in range(30):
+        durations, rates, tk = [], [], 20.0
+        for _ in range(int(rng.integers(3, 9))):
+            target = float(rng.uniform(-20.0, 50.0))
+            up = target > tk
+            rate = float(rng.uniform(0.1, 1.0) * (3.0 if up else 1.0))
+            durations += [abs(target - tk) / rate, float(rng.uniform(1.0, 60.0))]
+            rates += [rate if up else -rate, 0.0]
+            tk = target
+        prog = Programme(np.array(durations), np.array(rates))
+        traj = simulate(prog, ThermalParams(), dt_min=1.0)
+        if traj.t_c.min() < W3_ALL.limits.device_min_c or traj.t_c.max() > 62.0:
+            continue
+        try:
+            pred = predicted_fit_error(
+                traj.time_min, traj.t_c, traj.g_c_per_min, W3_ALL, white, walk
+            )
+        except ParameterError:  # too few distinct samples in the region
+            continue
+        entry = first_entry_min(prog, W3_ALL)
+        floor = fit_error_floor_dph(W3_ALL, walk, white, entry, float(traj.time_min[-1]))
+        assert pred.total_dph >= floor
+        record_s = (traj.time_min[-1] - entry) * 60.0
+        assert pred.shape_dph**2 >= white**2 / record_s * shape_floor_factor(W3_ALL, FULL)
+        checked += 1
+    assert checked >= 15
+    # the floor is the level's and the shape's together
+    level = level_floor_dph(walk, white, 0.0, 540.0)
+    both = fit_error_floor_dph(W3_ALL, walk, white, 0.0, 540.0)
+    assert both**2 == pytest.approx(
+        level**2 + white**2 / 32400.0 * shape_floor_factor(W3_ALL, FULL)
+    )
+    assert fit_error_floor_dph(W3_ALL, walk, white, 540.0, 540.0) == math.inf
+    with pytest.raises(ParameterError, match="duration_min must be >= 0"):
+        fit_error_floor_dph(W3_ALL, walk, white, 0.0, -1.0)
 
 
 # -- the fit's error predicted under the gyro's noise ----------------------------------------
