@@ -515,6 +515,13 @@ def design_report(
     n_in, p = x.shape
     t_in = t[in_region(t, g_c_per_min, space)]
     reached = (float(t_in.min()), float(t_in.max())) if t_in.size else (math.nan, math.nan)
+    if t_in.size:  # a run that is in the region and beyond an edge has crossed that edge
+        # (its last sample inside can be a degree short of it on a fast pass)
+        t_fin = t[np.isfinite(t)]
+        reached = (
+            space.approx_lo_c if t_fin.min() < space.approx_lo_c else reached[0],
+            space.approx_hi_c if t_fin.max() > space.approx_hi_c else reached[1],
+        )
     gt, gg = space.grid("working")
     gu, gv = space.code(gt, gg)
     xg = monomials(gu, gv, terms_t)

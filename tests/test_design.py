@@ -586,3 +586,15 @@ def test_the_report_says_what_the_run_misses_of_the_approximation_region():
     assert said in wide.summary()
     far = design_report(t, g, DesignSpace(60.0, 70.0, 58.0, 72.0))
     assert "never enters the approximation region 58 .. 72" in far.summary()
+    # a run crossing an edge fast: its last 1-min sample inside is 0.9 degC short of the
+    # top edge, but it went past it, so it reached it (red team: "reaches only -1.9 ..
+    # 13.6 °C" of [-10, 14] for a run from 20 degC)
+    down = 20.0 - 1.3 * np.arange(20)  # 20 .. -4.7 degC
+    t_x = np.concatenate([down, down[::-1]])
+    g_x = np.concatenate([np.full(20, -1.3), np.full(20, 1.3)])
+    crossed = design_report(t_x, g_x, DesignSpace(0.0, 4.0, -10.0, 14.0))
+    assert crossed.reached_hi_c == 14.0
+    assert crossed.unreached() == (
+        "the run reaches only -4.7 .. 14.0 °C of the approximation region -10 .. 14 °C: "
+        "fit over what it reaches (schedsyn fit --region -4 14)"
+    )
