@@ -45,6 +45,9 @@ from .errors import LogFormatError, ParameterError
 
 REQUIRED_COLUMNS = ("time_s", "t_int_c")
 OPTIONAL_COLUMNS = ("tk_set_c", "tk_air_c", "drift_dph")
+#: Time columns named in another unit, and the factor to seconds (a log without time_s
+#: that has one of these is told how to convert it).
+TIME_COLUMNS_IN_OTHER_UNITS = {"time_min": 60.0, "time_h": 3600.0, "time_ms": 0.001}
 TEMPERATURE_COLUMNS = ("t_int_c", "tk_set_c", "tk_air_c")
 
 #: Fewer finite internal-temperature readings than this cannot give a gradient estimate.
@@ -1126,10 +1129,19 @@ class _Collector:
         _check_unique_columns(cols, source)
         missing = [c for c in REQUIRED_COLUMNS if c not in cols]
         if missing:
+            hint = ""
+            if "time_s" in missing:  # a time column in another unit, by its name
+                other = [(c, f) for c, f in TIME_COLUMNS_IN_OTHER_UNITS.items() if c in cols]
+                if other:
+                    name, factor = other[0]
+                    hint = (
+                        f"; {name} looks like the time in other units than seconds: rename "
+                        f"it time_s and multiply it by {factor:g}"
+                    )
             raise LogFormatError(
                 f"{source}: missing required column(s) {', '.join(missing)}; a log needs "
                 f"{', '.join(REQUIRED_COLUMNS)} (optional: {', '.join(OPTIONAL_COLUMNS)}); "
-                f"found {', '.join(cols) or 'no columns'}"
+                f"found {', '.join(cols) or 'no columns'}{hint}"
             )
         self.source = source
         self.columns = cols

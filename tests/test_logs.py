@@ -60,6 +60,18 @@ def test_nan_and_gap_report():
     assert log_from_frame(_frame()).report.clean
 
 
+def test_a_time_column_in_minutes_is_told_how_to_convert(tmp_path):
+    """Red team: a log with time_min got only 'missing required column(s) time_s'."""
+    path = tmp_path / "minutes.csv"
+    path.write_text("time_min,t_int_c\n0,20\n1,20.1\n2,20.2\n")
+    with pytest.raises(
+        LogFormatError,
+        match=r"time_min looks like the time in other units "
+        r"than seconds: rename it time_s and multiply it by 60$",
+    ):
+        read_log(path)
+
+
 def test_missing_column_names_file_and_column(tmp_path):
     path = tmp_path / "bad.csv"
     pd.DataFrame({"time_s": [0, 1, 2], "T1": [1, 2, 3]}).to_csv(path, index=False)
