@@ -1209,6 +1209,10 @@ class ReplanResult:
                 + (f" and {len(short) - 10} more" if len(short) > 10 else "")
             )
         lines.extend(f"problem: {x}" for x in self.prediction.problems)
+        if self.choice == "new" and not self.complete and self.planned is not None:
+            # why the planner's best fell short, in its own words (red team: an incomplete
+            # continuation said only NOT COMPLETE)
+            lines.extend(f"planner: {n}" for n in self.planned.notes)
         end = self.end_line()
         if end is not None:
             lines.append(end)

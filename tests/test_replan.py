@@ -288,6 +288,30 @@ def _kept(req, whole, reason="the plan's own rest"):
     )
 
 
+def test_an_incomplete_continuation_says_why_the_planner_fell_short(plan):
+    """A continuation that does not complete prints the planner's own notes (red team: the
+    summary said only NOT COMPLETE); a kept plan or a complete continuation does not."""
+    from types import SimpleNamespace
+
+    req = prepare_replan(
+        log_from_frame(effect_log(ModelSpec(2400.0, 3.0)), "r"), plan, 60.0, find_effect=False
+    )
+    short = predict_run(req, req.prefix)  # the run stops at minute 60: far from complete
+    whole = predict_run(req, plan.programme)
+    assert not short.complete and whole.complete
+    why = "the 540-min limit leaves 3 bins 2 levels short"
+    planned = SimpleNamespace(notes=(why,))
+    new = ReplanResult(req, "new", "t", short, whole, planned=planned, new_steps_from_min=60.0)
+    lines = new.summary().splitlines()
+    assert f"planner: {why}" in lines
+    for result in (
+        ReplanResult(req, "keep", "t", short, whole, planned=planned),
+        ReplanResult(req, "new", "t", whole, whole, planned=planned, new_steps_from_min=60.0),
+        ReplanResult(req, "new", "t", short, whole, new_steps_from_min=60.0),
+    ):
+        assert not any(x.startswith("planner: ") for x in result.summary().splitlines())
+
+
 def test_the_replan_directory_is_a_plan_directory_that_can_be_replanned_again(plan, tmp_path):
     log = log_from_frame(effect_log(ModelSpec(2500.0, 2.5), seed=3), "r")
     req = prepare_replan(log, plan, 150.0, find_effect=False)
