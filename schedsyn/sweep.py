@@ -22,6 +22,13 @@ so for one ``tau`` a single :func:`~schedsyn.model.affine_response` and one prod
 ``A u`` serve every ``dT0``; each ``dT0`` then costs one elementwise free response and the
 coverage metric. The grid is chunked by ``tau`` value for the parallel backends.
 
+An augmented model (``model=``, a :class:`~schedsyn.effects.ModelSpec` from ``schedsyn
+diagnose``: a chamber lag, a second time constant, a rate limit, ...) is swept the same
+way over its base ``tau`` and ``dT0``, its effect held at its fitted strength; each point
+is then :meth:`ModelSpec.predict <schedsyn.effects.ModelSpec.predict>` (exact for linear
+effects, on a fine grid for the others), which the single-product shortcut above does not
+cover.
+
 Backends (:func:`run_map`): ``"serial"`` (in this process), ``"local"`` (a process pool on
 the local cores) or a Dask scheduler address such as ``"tcp://HOST:PORT"`` (needs the
 ``dask`` extra). Every backend returns the same results in the same order.
@@ -490,12 +497,38 @@ class _TauChunk:
     deltas_c_per_min: tuple[float, ...]
     dt_min: float
     t0_c: float
+    #: an augmented model's effect and its parameters (``"none"``: the first-order lag);
+    #: plain values, not a ModelSpec, so that the chunk pickles for the process pool
+    effect: str = "none"
+    effect_parameters: tuple[tuple[str, float], ...] = ()
+
+    def trajectory(self, dt0_c: float, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(T, g)`` of the augmented model at ``(tau_s, dt0_c)`` (the effect case)."""
+        from .effects import ModelSpec
+
+        spec = ModelSpec(self.tau_s, dt0_c, self.effect, dict(self.effect_parameters))
+        pred = spec.predict(self.programme, times, t0_c=self.t0_c)
+        return pred.t_c, pred.g_c_per_min
 
 
 def _sweep_tau(chunk: _TauChunk) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Coverage and min levels ``(n_dt0, n_delta)`` and T range ``(n_dt0,)`` for one tau."""
     prog = chunk.programme
     times = dense_times(prog.total_min, chunk.dt_min)
+    n_dt0, n_delta = len(chunk.dt0_c_values), len(chunk.deltas_c_per_min)
+    cov = np.empty((n_dt0, n_delta))
+    lev = np.empty((n_dt0, n_delta), dtype=np.int64)
+    t_lo = np.empty(n_dt0)
+    t_hi = np.empty(n_dt0)
+    if chunk.effect != "none":  # an augmented model: one prediction per point
+        for i, dt0 in enumerate(chunk.dt0_c_values):
+            temp, grad = chunk.trajectory(dt0, times)
+            t_lo[i], t_hi[i] = temp.min(), temp.max()
+            for j, delta in enumerate(chunk.deltas_c_per_min):
+                rep = coverage_report(temp, grad, chunk.grid, chunk.levels_required, delta)
+                cov[i, j] = rep.coverage
+                lev[i, j] = rep.min_levels
+        return cov, lev, t_lo, t_hi
     # A(tau) does not depend on dT0: one affine response for the whole row
     resp = affine_response(
         FirstOrderLag(ThermalParams(tau_s=chunk.tau_s, dt0_c=0.0)),
@@ -506,11 +539,6 @@ def _sweep_tau(chunk: _TauChunk) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
     )
     t_forced = resp.a_t @ prog.rates_c_per_min  # A_T u
     g_forced = resp.a_g @ prog.rates_c_per_min  # A_g u
-    n_dt0, n_delta = len(chunk.dt0_c_values), len(chunk.deltas_c_per_min)
-    cov = np.empty((n_dt0, n_delta))
-    lev = np.empty((n_dt0, n_delta), dtype=np.int64)
-    t_lo = np.empty(n_dt0)
-    t_hi = np.empty(n_dt0)
     for i, dt0 in enumerate(chunk.dt0_c_values):
         # b(tau, dT0): the free response, the only place dT0 enters
         b_t, b_g = FirstOrderLag(ThermalParams(tau_s=chunk.tau_s, dt0_c=dt0)).free(
@@ -557,6 +585,9 @@ class SweepResult:
         Range of the internal temperature over the programme, degC.
     bin_c : float
         Bin width, degC.
+    effect, effect_parameters :
+        The augmented model's effect swept with the base ``tau`` and ``dT0`` (``"none"``:
+        the first-order lag) and its parameters (units in the names), held fixed.
     """
 
     region_c: tuple[float, float]
@@ -569,6 +600,8 @@ class SweepResult:
     t_min_c: np.ndarray
     t_max_c: np.ndarray
     bin_c: float = 1.0
+    effect: str = "none"
+    effect_parameters: tuple[tuple[str, float], ...] = ()
 
     def __post_init__(self) -> None:
         for name in (
@@ -704,8 +737,12 @@ class SweepResult:
         w = self.worst()
         cov = self.coverage_grid
         lo, hi = self.region_c
+        through = ""
+        if self.effect != "none":
+            held = ", ".join(f"{k} {v:g}" for k, v in self.effect_parameters)
+            through = f" through the model's {self.effect}" + (f" ({held})" if held else "")
         return (
-            f"sweep of [{lo:g}, {hi:g}] °C over tau {self.tau_s_values[0]:g} .. "
+            f"sweep of [{lo:g}, {hi:g}] °C{through} over tau {self.tau_s_values[0]:g} .. "
             f"{self.tau_s_values[-1]:g} s x dT0 {self.dt0_c_values[0]:g} .. "
             f"{self.dt0_c_values[-1]:g} °C ({cov.size} points, >= {self.levels_required} "
             f"levels {self.deltas_c_per_min[0]:g} °C/min apart): coverage "
@@ -729,12 +766,14 @@ def sweep_fixed(
     backend: Any = "serial",
     workers: int | None = None,
     progress: bool | Progress = False,
+    model: Any = None,
 ) -> SweepResult:
     """Coverage of a fixed ``programme`` at every ``(tau_s, dt0_c)`` grid point.
 
     Each point is exactly ``coverage_report(simulate(programme, ThermalParams(tau, dt0),
     dt_min=dt_min, t0_c=t0_c))`` on ``BinGrid(*region, bin_c)``, computed with one affine
-    response per ``tau`` (see the module doc).
+    response per ``tau`` (see the module doc); with an augmented ``model``, the model
+    with its base ``tau`` and ``dT0`` replaced by the point's, predicted on the same times.
 
     Parameters
     ----------
@@ -755,6 +794,11 @@ def sweep_fixed(
     backend, workers, progress :
         See :func:`run_map`; the grid is split into one task per ``tau`` value. The result
         does not depend on the backend.
+    model : ModelSpec, optional
+        An augmented model (:class:`schedsyn.effects.ModelSpec`, e.g. from ``schedsyn
+        diagnose``): its effect is held at its parameters while the grid replaces its
+        base ``tau_s`` and ``dt0_c``. Its own ``tau_s``/``dt0_c`` are not a grid point
+        unless the axes hold them. Default: the first-order lag alone.
     """
     if not isinstance(programme, Programme):
         raise ParameterError(f"programme must be a Programme, got {type(programme).__name__}")
@@ -767,6 +811,7 @@ def sweep_fixed(
     if int(levels_required) != levels_required or levels_required < 1:
         raise ParameterError(f"levels_required must be a whole number >= 1, got {levels_required}")
     dense_times(programme.total_min, dt_min)  # validates dt_min
+    effect, effect_parameters = _effect_of(model, taus, dt0s)
     chunks = [
         _TauChunk(
             programme,
@@ -777,6 +822,8 @@ def sweep_fixed(
             deltas,
             float(dt_min),
             float(t0_c),
+            effect,
+            effect_parameters,
         )
         for tau in taus
     ]
@@ -794,7 +841,31 @@ def sweep_fixed(
         t_min_c=np.stack([r[2] for r in rows]),
         t_max_c=np.stack([r[3] for r in rows]),
         bin_c=float(bin_c),
+        effect=effect,
+        effect_parameters=effect_parameters,
     )
+
+
+def _effect_of(
+    model: Any, taus: np.ndarray, dt0s: np.ndarray
+) -> tuple[str, tuple[tuple[str, float], ...]]:
+    """``(effect, parameters)`` of an augmented model for :func:`sweep_fixed`, checked at
+    the grid's corners (a model that cannot take a grid point fails here, in one line,
+    not in a worker)."""
+    if model is None:
+        return "none", ()
+    from .effects import ModelSpec
+
+    if not isinstance(model, ModelSpec):
+        raise ParameterError(
+            f"model must be a schedsyn.effects.ModelSpec (a model file read by "
+            f"schedsyn.models_io.load_model), got {type(model).__name__}"
+        )
+    params = tuple((k, float(v)) for k, v in model.parameters.items())
+    for tau in (taus[0], taus[-1]):
+        for dt0 in (dt0s[0], dt0s[-1]):
+            ModelSpec(float(tau), float(dt0), model.effect, dict(params))
+    return model.effect, params
 
 
 def verify_box(

@@ -701,3 +701,145 @@ def test_covered_box_can_be_held_to_a_mask_and_a_point():
         "n_points": 6,
     }
     assert res.covered_box(also=also, containing=(0, 0)) is None
+
+
+# -- an augmented model ----------------------------------------------------------------
+TWO_MASS = {"tau2_s": 600.0}
+
+
+def _two_mass_direct(programme, tau_s, dt0_c, tau2_s):
+    """``tau2 dM/dt + M = Tk``, ``tau dT/dt + T = M + dT0`` by scipy's ODE solver, segment
+    by segment (M starts at the chamber's start, T at 20 degC), on the sweep's times."""
+    from scipy.integrate import solve_ivp
+
+    from schedsyn.simulate import dense_times
+
+    t_eval = dense_times(programme.total_min, 0.1)
+    a, b = tau_s / 60.0, tau2_s / 60.0
+    knots = np.concatenate([[0.0], np.cumsum(programme.durations_min)])
+    state = np.array([20.0, programme.start_c])
+    temp, grad = [], []
+    for k in range(len(knots) - 1):
+        t0, t1, rate = knots[k], knots[k + 1], programme.rates_c_per_min[k]
+        tk0 = float(programme.chamber_at(np.array([t0]))[0])
+
+        def rhs(t, y, t0=t0, tk0=tk0, rate=rate):
+            tk = tk0 + rate * (t - t0)
+            return [(y[1] + dt0_c - y[0]) / a, (tk - y[1]) / b]
+
+        last = k == len(knots) - 2
+        inside = t_eval[(t_eval >= t0) & ((t_eval < t1) | (last & (t_eval <= t1)))]
+        sol = solve_ivp(
+            rhs, (t0, t1), state, t_eval=inside, rtol=1e-11, atol=1e-11, method="DOP853"
+        )
+        temp.append(sol.y[0])
+        grad.append((sol.y[1] + dt0_c - sol.y[0]) / a)
+        state = solve_ivp(rhs, (t0, t1), state, rtol=1e-11, atol=1e-11, method="DOP853").y[:, -1]
+    return np.concatenate(temp), np.concatenate(grad)
+
+
+def test_sweep_through_an_augmented_model_equals_an_ode_solution(programme):
+    """With a second thermal mass held at tau2 600 s, every grid point is the two-mass ODE
+    at that point's tau and dT0 (scipy), not the first-order lag's; local workers (the
+    chunks are pickled) give the same table."""
+    from schedsyn.effects import ModelSpec
+
+    model = ModelSpec(2400.0, 3.0, "second_time_constant", TWO_MASS)
+    taus, dt0s = [1800.0, 2400.0, 3000.0], [0.0, 3.0, 6.0]
+    swept = sweep_fixed(programme, REGION, taus, dt0s, model=model)
+    plain = sweep_fixed(programme, REGION, taus, dt0s)
+    assert not np.array_equal(swept.coverage, plain.coverage)  # the effect is not ignored
+    frame = swept.to_frame().set_index(["tau_s", "dt0_c"])
+    for tau, dt0 in [(2400.0, 3.0), (1800.0, 0.0), (3000.0, 6.0)]:
+        temp, grad = _two_mass_direct(programme, tau, dt0, TWO_MASS["tau2_s"])
+        row = frame.loc[(tau, dt0)]
+        for delta, suffix in [(0.05, "0p05"), (0.1, "0p1")]:
+            rep = coverage_report(temp, grad, BinGrid(*REGION), 6, delta)
+            assert row[f"coverage_delta_{suffix}"] == rep.coverage
+            assert row[f"min_levels_delta_{suffix}"] == rep.min_levels
+        assert row["t_min_c"] == pytest.approx(temp.min(), abs=1e-6)
+        assert row["t_max_c"] == pytest.approx(temp.max(), abs=1e-6)
+    assert "through the model's second_time_constant (tau2_s 600)" in swept.summary()
+    local = sweep_fixed(programme, REGION, taus, dt0s, model=model, backend="local", workers=2)
+    pd.testing.assert_frame_equal(swept.to_frame(), local.to_frame(), check_exact=True)
+    with pytest.raises(ParameterError, match="ModelSpec"):
+        sweep_fixed(programme, REGION, taus, dt0s, model={"tau2_s": 600.0})
+
+
+def test_cli_sweeps_the_model_the_table_records_or_the_file_given(tmp_path, capsys, programme):
+    """A table planned with ``plan --model`` records the model: sweep holds its effect
+    (it used to sweep the first-order lag alone); ``--model`` gives one, whose base is
+    then the nominal point; a nonlinear one cannot be re-planned (one line, exit 2)."""
+    import json
+
+    from schedsyn.effects import ModelSpec
+    from schedsyn.models_io import write_model
+
+    model = ModelSpec(2600.0, 2.0, "second_time_constant", TWO_MASS)
+    steps = _table_with_meta(
+        tmp_path,
+        working_lo_c=-50.0,
+        working_hi_c=-30.0,
+        tau_s=2600.0,
+        dt0_c=2.0,
+        model=json.dumps(model.to_json_dict()),
+    )
+    grid = ["--tau-s", "2000:2800:3", "--dt0-c", "0:6:3", "--workers", "1", "--quiet"]
+    assert main(["sweep", str(steps), *grid, "--out", str(tmp_path / "t")]) == 0
+    text = capsys.readouterr().out
+    assert "model (from the step table): effect second_time_constant tau2_s 600" in text
+    want = sweep_fixed(programme, REGION, [2000.0, 2400.0, 2800.0], [0.0, 3.0, 6.0], model=model)
+    got = pd.read_csv(tmp_path / "t" / "sweep.csv")
+    np.testing.assert_array_equal(got["coverage"], want.to_frame()["coverage"])
+    np.testing.assert_array_equal(got["min_levels"], want.to_frame()["min_levels"])
+
+    path = write_model(tmp_path / "m.json", replace_model(model, tau_s=2200.0, dt0_c=4.0))
+    args = ["sweep", STEPS, "--region", "-50", "-30", *grid, "--model", str(path)]
+    assert main([*args, "--out", str(tmp_path / "f")]) == 0
+    (line,) = [x for x in capsys.readouterr().out.splitlines() if x.startswith("at the nominal")]
+    assert "(tau 2200 s, dT0 4 °C)" in line and f"from {path}" in line
+
+    limited = ModelSpec(
+        2400.0,
+        3.0,
+        "chamber_rate_limit",
+        {"max_cool_rate_c_per_min": 0.8, "max_heat_rate_c_per_min": 10.0},
+    )
+    path = write_model(tmp_path / "rl.json", limited)
+    rc = main(["sweep", "--replan", "--region", "-50", "-30", *grid, "--model", str(path)])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "\n" not in err and "not linear" in err and "leave out --replan" in err
+
+
+def replace_model(model, **changes):
+    from dataclasses import replace
+
+    return replace(model, **changes)
+
+
+def test_replan_adapter_plans_with_a_linear_augmented_model(monkeypatch):
+    from schedsyn import Limits
+    from schedsyn.cli.sweep import PlanAtPoint
+    from schedsyn.effects import ModelSpec
+
+    planner = pytest.importorskip("schedsyn.planner")
+    seen = {}
+
+    def stub(spec, params, limits, model=None):
+        seen.update(params=params, limits=limits, model=model)
+        return _FakePlan(params.tau_s, params.dt0_c)
+
+    monkeypatch.setattr(planner, "plan_experiment", stub)
+    fn = PlanAtPoint(
+        (-50.0, -30.0),
+        (-52.0, -20.0),
+        6,
+        0.05,
+        Limits(),
+        "second_time_constant",
+        (("tau2_s", 600.0),),
+    )
+    fn(ThermalParams(tau_s=2100.0, dt0_c=1.0))
+    want = ModelSpec(2100.0, 1.0, "second_time_constant", TWO_MASS).linear_model()
+    assert seen["model"] == want and seen["model"].tau2_s == 600.0
+    assert seen["params"] == ThermalParams(tau_s=2100.0, dt0_c=1.0)

@@ -108,6 +108,25 @@ def model_from_table(
     return params, source
 
 
+def augmented_model(model_path: str | None, meta, steps: str | None):
+    """``(ModelSpec or None, where it comes from)``: the ``--model`` file, else the
+    augmented model the step table records (``schedsyn plan --model`` writes it), else
+    none."""
+    from ..effects import ModelSpec
+    from ..errors import SchedsynError, StepTableError
+    from ..models_io import load_model
+
+    if model_path is not None:
+        return load_model(model_path), model_path
+    recorded = meta.model_json() if meta is not None else None
+    if recorded is None:
+        return None, None
+    try:
+        return ModelSpec.from_json_dict(recorded), "the step table"
+    except SchedsynError as exc:
+        raise StepTableError(f"{steps}: metadata model: {exc}") from None
+
+
 def add_region_option(
     p: argparse.ArgumentParser,
     name: str = "--region",

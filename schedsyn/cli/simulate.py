@@ -50,23 +50,6 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def _augmented(args, programme):
-    """The augmented model spec to simulate with (the --model file, else the table's)."""
-    from ..effects import ModelSpec
-    from ..errors import SchedsynError, StepTableError
-    from ..models_io import load_model
-
-    if args.model is not None:
-        return load_model(args.model), args.model
-    recorded = programme.meta.model_json() if programme.meta is not None else None
-    if recorded is None:
-        return None, None
-    try:
-        return ModelSpec.from_json_dict(recorded), "the step table"
-    except SchedsynError as exc:
-        raise StepTableError(f"{args.steps}: metadata model: {exc}") from None
-
-
 def run(args: argparse.Namespace) -> int:
     import dataclasses
 
@@ -81,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
     params, source = _common.model_from_table(args, programme.meta)
     dt_min = 0.1 if args.dt_min is None else args.dt_min
     out = _common.output_dir(args.out, "out/simulate", [args.steps, args.model], NAMES)
-    spec, spec_from = _augmented(args, programme)
+    spec, spec_from = _common.augmented_model(args.model, programme.meta, args.steps)
     lines = [
         f"programme: {programme.n_segments} steps, {programme.total_min:.1f} min, "
         f"chamber {programme.boundary_temps_c.min():.1f} .. "

@@ -5,7 +5,9 @@ the nominal point marked) and prints a summary. Runs in parallel on the local co
 default, or on a Dask cluster with ``--dask tcp://HOST:PORT``. The working region, the
 nominal point and the coverage requirement are the step table's (its metadata) unless
 given; a table that records no working region needs --region. The default grid is around
-the nominal point and takes in the robust box the table records.
+the nominal point and takes in the robust box the table records. An augmented model
+(--model, else the one the step table records) is swept over its base tau and dT0 with its
+effect held at its fitted strength.
 """
 
 from __future__ import annotations
@@ -107,6 +109,14 @@ def register(sub) -> None:
         help="nominal offset marked on the heatmap, °C (default: the step table's, else 3.0)",
     )
     p.add_argument(
+        "--model",
+        default=None,
+        metavar="MODEL.json",
+        help="augmented model file (from schedsyn diagnose --out DIR): its effect is held "
+        "while the grid varies its tau and dT0, and its base is the nominal point (default: "
+        "the model the step table records, else the first-order lag)",
+    )
+    p.add_argument(
         "--replan",
         action="store_true",
         help="re-plan at every grid point (needs the planner) instead of sweeping a fixed plan",
@@ -141,12 +151,23 @@ class PlanAtPoint:
     levels_required: int
     delta_c_per_min: float
     limits: Limits
+    #: a linear augmented model's effect and parameters, held at every point ("none":
+    #: the first-order lag); plain values so that the callable pickles
+    effect: str = "none"
+    effect_parameters: tuple[tuple[str, float], ...] = ()
 
     def __call__(self, params: ThermalParams):
         from ..planner import plan_experiment
 
         spec = replan_spec(self.region, self.approx, self.levels_required, self.delta_c_per_min)
-        return plan_experiment(spec, params, self.limits)
+        if self.effect == "none":
+            return plan_experiment(spec, params, self.limits)
+        from ..effects import ModelSpec
+
+        model = ModelSpec(params.tau_s, params.dt0_c, self.effect, dict(self.effect_parameters))
+        return plan_experiment(
+            spec, params, model.planner_limits(self.limits), model=model.linear_model()
+        )
 
 
 def replan_spec(
@@ -336,9 +357,17 @@ def run(args: argparse.Namespace) -> int:
     from .. import plots
 
     meta = read_step_meta(args.steps) if args.steps is not None else None
+    augmented, augmented_from = _common.augmented_model(args.model, meta, args.steps)
     nominal, nominal_src = _common.model_from_table(
         args, meta, ("nominal_tau_s", "nominal_dt0_c"), table=args.steps is not None
     )
+    if args.model is not None and augmented is not None:  # the model file's base
+        nominal = ThermalParams(
+            augmented.tau_s if args.nominal_tau_s is None else args.nominal_tau_s,
+            augmented.dt0_c if args.nominal_dt0_c is None else args.nominal_dt0_c,
+        )
+        both = args.nominal_tau_s is not None and args.nominal_dt0_c is not None
+        nominal_src = "given" if both else f"from {args.model}"
     taus, dt0s, grid_lines = sweep_grid(args, nominal, meta)
     limits = (meta.limits() if meta is not None else None) or Limits()
     for note in unit_slip_warnings(args, taus, dt0s, nominal, limits):
@@ -362,14 +391,32 @@ def run(args: argparse.Namespace) -> int:
             else default_approx((lo, hi), limits)
         )
         check_replan_request((lo, hi), approx, levels, deltas[0], limits)
+        if augmented is not None and not augmented.is_linear:
+            raise ParameterError(
+                f"model ({augmented_from}): the effect {augmented.effect!r} is not linear; "
+                "--replan needs a linear model (sweep the fixed plan through it instead: "
+                "leave out --replan)"
+            )
+    model_line = (
+        []
+        if augmented is None
+        else [
+            f"model (from {augmented_from}): effect {augmented.effect} "
+            + ", ".join(f"{k} {v:g}" for k, v in augmented.parameters.items())
+            + f", held while the grid varies its tau and dT0 (its own: tau "
+            f"{augmented.tau_s:g} s, dT0 {augmented.dt0_c:g} °C)"
+        ]
+    )
+    held = () if augmented is None else tuple(augmented.parameters.items())
+    effect = "none" if augmented is None else augmented.effect
     backend = _backend(args)
     progress = _common.progress_of(args)
-    inputs = [args.steps] if args.steps else []
+    inputs = [x for x in (args.steps, args.model) if x]
     out = _common.output_dir(args.out, "out/sweep", inputs, ("sweep.csv", "sweep.png"))
     marker = (nominal.tau_s, nominal.dt0_c)
 
     if approx is not None:
-        plan_fn = PlanAtPoint((lo, hi), approx, levels, deltas[0], limits)
+        plan_fn = PlanAtPoint((lo, hi), approx, levels, deltas[0], limits, effect, held)
         replanned = sweep_replan(
             plan_fn, taus, dt0s, backend=backend, workers=args.workers, progress=progress
         )
@@ -387,6 +434,7 @@ def run(args: argparse.Namespace) -> int:
         out.commit()
         _common.say(
             requirement,
+            *model_line,
             *grid_lines,
             replanned.summary(),
             f"wrote {out.target}/sweep.csv" + (", sweep.png" if preferred else ""),
@@ -399,6 +447,7 @@ def run(args: argparse.Namespace) -> int:
         deltas_c_per_min=deltas,
         dt_min=args.dt_min,
         t0_c=limits.t_init_c,
+        model=augmented,
     )
     result = sweep_fixed(
         programme,
@@ -435,6 +484,7 @@ def run(args: argparse.Namespace) -> int:
         f"at the nominal point (tau {nominal.tau_s:g} s, dT0 {nominal.dt0_c:g} °C): coverage "
         f"{at_nominal.coverage_grid[0, 0]:.1%}, min {at_nominal.min_levels_grid[0, 0]} "
         f"levels (nominal point: {nominal_src})",
+        *model_line,
         *grid_lines,
         result.summary(),
     ]
