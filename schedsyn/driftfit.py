@@ -119,6 +119,26 @@ OUTLIER_BLOCK = 5
 OUTLIER_IQRS = 50.0
 #: More outliers than this share of the readings: the column is suspect, not a few glitches.
 OUTLIER_MAX_SHARE = 0.01
+#: The truth columns of ``schedsyn simulate --gyro`` logs (never a measurement).
+SIMULATOR_TRUTH_COLUMNS = ("drift_true_dph", "bias_walk_dph")
+#: Unit suffixes of a rate column a log may carry instead of ``drift_dph`` (an IMU's own
+#: output is in °/s or rad/s), with the factor to °/h (:func:`drift_column_hint`).
+RATE_UNIT_TO_DPH = {
+    "dph": (1.0, "°/h"),
+    "deg_h": (1.0, "°/h"),
+    "deg_per_h": (1.0, "°/h"),
+    "deg_hr": (1.0, "°/h"),
+    "deg_per_hr": (1.0, "°/h"),
+    "dps": (3600.0, "°/s"),
+    "deg_s": (3600.0, "°/s"),
+    "deg_per_s": (3600.0, "°/s"),
+    "deg_sec": (3600.0, "°/s"),
+    "mdps": (3.6, "m°/s"),
+    "rad_s": (3600.0 * 180.0 / math.pi, "rad/s"),
+    "rad_per_s": (3600.0 * 180.0 / math.pi, "rad/s"),
+    "rad_h": (180.0 / math.pi, "rad/h"),
+    "rad_per_h": (180.0 / math.pi, "rad/h"),
+}
 #: A note says so when the regressors' errors make up more than this share of the
 #: coefficients' variance (:func:`regressor_error_covariance`).
 REGRESSOR_NOTE_SHARE = 0.25
@@ -1704,6 +1724,32 @@ def _distance_to_reading_s(time_s: np.ndarray, reading: np.ndarray) -> np.ndarra
     return np.minimum(before, after)
 
 
+def drift_column_hint(columns: list) -> str:
+    """``"; COLUMN looks like ..."``: what to do with a column that looks like the gyro's
+    rate in other units (``drift_dps``, ``gyro_z_rad_s``, ``bias_deg_per_h``; a unit
+    suffix of :data:`RATE_UNIT_TO_DPH` after a name about drift, bias, rate or gyro), or
+    ``""``. (A user with ``drift_dps`` was told only "no drift_dph column".)"""
+    words = ("drift", "bias", "rate", "gyro", "omega", "wz", "wx", "wy")
+    for col in columns:
+        name = str(col).strip().lower()
+        if name in SIMULATOR_TRUTH_COLUMNS:
+            continue  # (schedsyn simulate's truth, not a measurement)
+        for unit in sorted(RATE_UNIT_TO_DPH, key=len, reverse=True):
+            if name.endswith("_" + unit) and any(w in name[: -len(unit) - 1] for w in words):
+                factor, label = RATE_UNIT_TO_DPH[unit]
+                how = (
+                    "rename it drift_dph"
+                    if factor == 1.0
+                    else f"rename it drift_dph and multiply it by {factor:.6g}"
+                )
+                return (
+                    f"; {col} looks like the rate in {label}: {how} (and "
+                    "subtract the known reference rate, e.g. Earth's rotation component, "
+                    "if it is the raw output)"
+                )
+    return ""
+
+
 def _gap_rows(log: MeasuredLog, method: str, usable: np.ndarray) -> tuple[np.ndarray, list[str]]:
     """Rows to leave out for a blank ``t_int_c`` (:data:`FIT_MAX_GAP_S`), and the notes."""
     time = np.asarray(log.time_s, dtype=float)
@@ -1746,6 +1792,7 @@ def _samples_from_log(
         raise LogFormatError(
             f"{log.source}: no drift_dph column; fitting needs the gyro's drift in °/h next to "
             "t_int_c (output minus the known reference rate)"
+            + drift_column_hint(list(log.extra.columns))
         )
     method = choose_estimator(log, settings.estimator)
     params, model_source, model_std = _estimator_model(log, method, params)
@@ -2239,6 +2286,7 @@ def evaluate_holdout(
     if log.drift_dph is None:
         raise LogFormatError(
             f"{log.source}: the held-out log has no drift_dph column; it needs the drift in °/h"
+            + drift_column_hint(list(log.extra.columns))
         )
     method = choose_estimator(log, fit.settings.estimator)
     est = _estimate(log, method, estimator_model(log, method, params)[0])

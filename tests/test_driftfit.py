@@ -642,6 +642,26 @@ def test_bad_logs_get_clear_errors(programme):
     f = gyro_log(programme, _gyro(T_COEFS), sample_s=60.0, seed=0)
     with pytest.raises(LogFormatError, match="no drift_dph column"):
         fit_drift(log_from_frame(f.drop(columns=["drift_dph"])), REGION)
+    # the rate in an IMU's own units: the error says what to rename and by what to
+    # multiply, and doing what it says gives the log back (°/s and rad/s)
+    import re
+
+    for unit, scale in [("dps", 1 / 3600.0), ("rad_s", math.pi / 180.0 / 3600.0)]:
+        other = f.drop(columns=["drift_dph"]).assign(**{f"gyro_z_{unit}": f["drift_dph"] * scale})
+        with pytest.raises(LogFormatError) as info:
+            fit_drift(log_from_frame(other), REGION)
+        (factor,) = re.findall(
+            rf"gyro_z_{unit} looks like .* rename it drift_dph and "
+            r"multiply it by ([0-9.]+)",
+            str(info.value),
+        )
+        np.testing.assert_allclose(
+            other[f"gyro_z_{unit}"] * float(factor), f["drift_dph"], rtol=1e-5
+        )
+        assert "\n" not in str(info.value)
+    with pytest.raises(LogFormatError, match="no drift_dph column") as info:
+        fit_drift(log_from_frame(f.drop(columns=["drift_dph"]).assign(x_dps=1.0)), REGION)
+    assert "looks like" not in str(info.value)  # a name that says nothing of a rate
     with pytest.raises(ParameterError, match="never enters the region 30 .. 60"):
         fit_drift(log_from_frame(f), (30.0, 60.0))
     # red team: drift_dph blank after row 5 was told the run never entered the region
