@@ -515,37 +515,37 @@ def _sweep_tau(chunk: _TauChunk) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
     """Coverage and min levels ``(n_dt0, n_delta)`` and T range ``(n_dt0,)`` for one tau."""
     prog = chunk.programme
     times = dense_times(prog.total_min, chunk.dt_min)
+    trajectory: Callable[[float, np.ndarray], tuple[np.ndarray, np.ndarray]]
+    if chunk.effect != "none":  # an augmented model: one prediction per point
+        trajectory = chunk.trajectory
+    else:
+        # A(tau) does not depend on dT0: one affine response for the whole row
+        resp = affine_response(
+            FirstOrderLag(ThermalParams(tau_s=chunk.tau_s, dt0_c=0.0)),
+            prog.durations_min,
+            times,
+            prog.start_c,
+            chunk.t0_c,
+        )
+        t_forced = resp.a_t @ prog.rates_c_per_min  # A_T u
+        g_forced = resp.a_g @ prog.rates_c_per_min  # A_g u
+
+        def first_order(dt0: float, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            # b(tau, dT0): the free response, the only place dT0 enters
+            b_t, b_g = FirstOrderLag(ThermalParams(tau_s=chunk.tau_s, dt0_c=dt0)).free(
+                times, prog.start_c, chunk.t0_c
+            )
+            return t_forced + b_t, g_forced + b_g  # T = A_T u + b_T, g = A_g u + b_g
+
+        trajectory = first_order
+
     n_dt0, n_delta = len(chunk.dt0_c_values), len(chunk.deltas_c_per_min)
     cov = np.empty((n_dt0, n_delta))
     lev = np.empty((n_dt0, n_delta), dtype=np.int64)
     t_lo = np.empty(n_dt0)
     t_hi = np.empty(n_dt0)
-    if chunk.effect != "none":  # an augmented model: one prediction per point
-        for i, dt0 in enumerate(chunk.dt0_c_values):
-            temp, grad = chunk.trajectory(dt0, times)
-            t_lo[i], t_hi[i] = temp.min(), temp.max()
-            for j, delta in enumerate(chunk.deltas_c_per_min):
-                rep = coverage_report(temp, grad, chunk.grid, chunk.levels_required, delta)
-                cov[i, j] = rep.coverage
-                lev[i, j] = rep.min_levels
-        return cov, lev, t_lo, t_hi
-    # A(tau) does not depend on dT0: one affine response for the whole row
-    resp = affine_response(
-        FirstOrderLag(ThermalParams(tau_s=chunk.tau_s, dt0_c=0.0)),
-        prog.durations_min,
-        times,
-        prog.start_c,
-        chunk.t0_c,
-    )
-    t_forced = resp.a_t @ prog.rates_c_per_min  # A_T u
-    g_forced = resp.a_g @ prog.rates_c_per_min  # A_g u
     for i, dt0 in enumerate(chunk.dt0_c_values):
-        # b(tau, dT0): the free response, the only place dT0 enters
-        b_t, b_g = FirstOrderLag(ThermalParams(tau_s=chunk.tau_s, dt0_c=dt0)).free(
-            times, prog.start_c, chunk.t0_c
-        )
-        temp = t_forced + b_t  # T = A_T u + b_T
-        grad = g_forced + b_g  # g = A_g u + b_g
+        temp, grad = trajectory(dt0, times)
         t_lo[i], t_hi[i] = temp.min(), temp.max()
         for j, delta in enumerate(chunk.deltas_c_per_min):
             rep = coverage_report(temp, grad, chunk.grid, chunk.levels_required, delta)
