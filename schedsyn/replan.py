@@ -902,8 +902,10 @@ def _plan_from(
     progress: Callable[[str], None] | None,
     say: Callable[[str], None],
     planned_with: str = "identified",
+    stop: Callable[[], bool] | None = None,
 ) -> PlannerAttempt:
-    """Ask the planner for new steps from ``start`` and predict the whole run it returns."""
+    """Ask the planner for new steps from ``start`` and predict the whole run it returns
+    (``stop``: the planner's cancellation, :func:`~schedsyn.planner.plan_experiment`)."""
     from .errors import InfeasiblePlanError
     from .planner import plan_experiment
 
@@ -918,7 +920,13 @@ def _plan_from(
     tic = time.perf_counter()
     try:
         planned = plan_experiment(
-            spec, params, limits, model=linear, continuation=continuation, progress=progress
+            spec,
+            params,
+            limits,
+            model=linear,
+            continuation=continuation,
+            progress=progress,
+            stop=stop,
         )
     except InfeasiblePlanError as exc:
         return PlannerAttempt(start, None, None, str(exc), time.perf_counter() - tic, planned_with)
@@ -930,6 +938,11 @@ def _plan_from(
 
 
 Key = tuple[bool, bool, float, int, int]
+
+#: With ``lead_min`` > 0 the planner calls of a re-plan stop, with what they have, once
+#: this share of the lead has passed since the re-plan began: the rest of the lead is
+#: for predicting the runs, writing the folder and loading the programme.
+LEAD_PLANNER_SHARE = 0.6
 
 
 def refuse_continuation(
@@ -1059,6 +1072,9 @@ class ReplanResult:
     uncertainty: UncertaintyCheck | None = None
     rivals: tuple[RivalPrediction, ...] = ()
     lead_min: float = 0.0
+    #: the planner was stopped (or not asked again) at the lead's time budget
+    #: (:data:`LEAD_PLANNER_SHARE` of ``lead_min``)
+    planner_cut_at_lead: bool = False
 
     @property
     def programme(self) -> Programme:
@@ -1158,6 +1174,7 @@ class ReplanResult:
                 "new_steps_from_min": self.new_steps_from_min,
                 "end": self.end_state(),
                 "lead_min": self.lead_min,
+                "planner_cut_at_lead": self.planner_cut_at_lead,
                 "replan_s": self.replan_s,
                 "planner_s": self.planner_s,
                 "uncertainty_box": None if self.uncertainty is None else self.uncertainty.to_dict(),
@@ -1239,6 +1256,12 @@ class ReplanResult:
         late = self.late_line()
         if late is not None:
             lines.append(late)
+        if self.planner_cut_at_lead:
+            lines.append(
+                f"note: the planner was stopped after {self.planner_s:.0f} s, "
+                f"{LEAD_PLANNER_SHARE:.0%} of --lead-min {self.lead_min:g}, with what it had: "
+                "a longer lead may find a better rest"
+            )
         lines.extend(f"note: {n}" for n in r.notes)
         return "\n".join(lines)
 
@@ -1366,8 +1389,11 @@ def replan_run(
     lead_min : float, whole minutes >= 0
         No new step begins before ``at_min + lead_min``: the minutes the re-plan takes
         (seconds to several minutes; ``replan_s`` says) and loading the new programme,
-        while the chamber runs on with the plan. Default 0 (the chamber waits, or the
-        log ends well before the present).
+        while the chamber runs on with the plan. When > 0 it is also the re-plan's time
+        budget: the planner calls stop with what they have once
+        :data:`LEAD_PLANNER_SHARE` of it has passed (wall time: on a slower or busier
+        machine the answer can be another). Default 0 (no budget; the chamber waits, or
+        the log ends well before the present).
     progress : callable(str), optional
         Receives short progress messages (the planner's too).
 
@@ -1386,6 +1412,14 @@ def replan_run(
             "the re-plan and loading the programme take while the chamber runs on)"
         )
     tic = time.perf_counter()
+    deadline = tic + LEAD_PLANNER_SHARE * lead_min * 60.0 if lead_min > 0 else math.inf
+    cut = [False]
+
+    def past_deadline() -> bool:
+        late = time.perf_counter() > deadline
+        cut[0] = cut[0] or late
+        return late
+
     say = progress if progress is not None else (lambda _msg: None)
     say(f"{plan.name}: the log up to minute {at_min:g}: state, levels so far, model")
     request = prepare_replan(
@@ -1439,7 +1473,16 @@ def replan_run(
             # a rival's steps from M only: the sweep-end starts cost several times more
             # and, on the red team's drifting device, all ended short (45 s each)
             for start in starts if rq is request else starts[-1:]:
-                attempt = _plan_from(rq, start, progress, say, label)
+                if past_deadline():
+                    break  # (the lead's time budget is spent: a note says so)
+                attempt = _plan_from(
+                    rq,
+                    start,
+                    progress,
+                    say,
+                    label,
+                    stop=past_deadline if lead_min > 0 else None,
+                )
                 attempts.append(attempt)
                 planner_s += attempt.planner_s
                 if attempt.prediction is None:
@@ -1468,8 +1511,11 @@ def replan_run(
                 break
         if not attempts:
             error = (
-                "the device stays inside the working region until the end of the plan and "
-                "no time is left: no new sweep can begin"
+                f"the re-plan's time budget ({LEAD_PLANNER_SHARE:.0%} of --lead-min "
+                f"{lead_min:g}) was spent before the planner could be asked"
+                if cut[0]
+                else "the device stays inside the working region until the end of the plan "
+                "and no time is left: no new sweep can begin"
                 if lead_min == 0
                 else f"no time is left after minute {at_min + lead_min:g} (lead {lead_min:g} "
                 "min): no new sweep can begin"
@@ -1587,6 +1633,7 @@ def replan_run(
         uncertainty=check_uncertainty(request, chosen.programme),
         rivals=predict_rivals(request, chosen.programme),
         lead_min=float(lead_min),
+        planner_cut_at_lead=cut[0],
     )
 
 

@@ -1281,6 +1281,49 @@ def test_replan_with_a_lead_keeps_the_plan_running_until_then(plan, tmp_path):
     assert f"--lead-min {int(start - 60.0) + 5 + 2}" in slow.late_line()
 
 
+def test_a_lead_is_the_planners_time_budget(plan, monkeypatch):
+    """With ``lead_min`` the planner gets a ``stop`` that turns True once
+    LEAD_PLANNER_SHARE of the lead has passed (a fake clock here), no planner call starts
+    after it, and the result says the planner was cut; without a lead there is no stop
+    (red team: a re-plan of 11 min at minute 150 on a W1 device unlike the model)."""
+    import types
+
+    import schedsyn.replan as rp
+
+    clock = [1000.0]
+
+    def perf_counter():  # a clock that ticks a second per reading
+        clock[0] += 1.0
+        return clock[0]
+
+    monkeypatch.setattr(rp, "time", types.SimpleNamespace(perf_counter=perf_counter))
+    calls = []
+
+    def fake_plan_from(rq, start, progress, say, label="identified", stop=None):
+        calls.append((start, stop, None if stop is None else stop()))
+        clock[0] += 100.0  # each planner call takes 100 s
+        return rp.PlannerAttempt(start, None, None, "nothing fits (fake)", 100.0, label)
+
+    monkeypatch.setattr(rp, "_plan_from", fake_plan_from)
+    log = log_from_frame(effect_log(ModelSpec(3000.0, 6.0), seed=1).query("time_s <= 3600"), "r")
+    kw = dict(find_effect=False, keep_if_complete=False)
+    free = rp.replan_run(log, plan, 60.0, **kw)
+    assert len(calls) == 2 and all(stop is None for _, stop, _ in calls)
+    assert not free.planner_cut_at_lead and "planner was stopped" not in free.summary()
+    # lead 2 min: 72 s of planner time; the first call starts inside it, the second not
+    calls.clear()
+    lead = rp.replan_run(log, plan, 60.0, lead_min=2.0, **kw)
+    assert len(calls) == 1 and calls[0][2] is False and calls[0][1]() is True
+    assert lead.planner_cut_at_lead and lead.choice == "keep"
+    assert "note: the planner was stopped" in lead.summary() and "--lead-min 2" in lead.summary()
+    assert lead.to_json_dict()["planner_cut_at_lead"] is True
+    # a budget spent before the first call: no call, and the error says why
+    calls.clear()
+    monkeypatch.setattr(rp, "LEAD_PLANNER_SHARE", 0.0)
+    none = rp.replan_run(log, plan, 60.0, lead_min=2.0, **kw)
+    assert calls == [] and none.attempts == () and "time budget" in none.planner_error
+
+
 def test_replan_cli_refuses_a_lead_that_is_not_whole_minutes(tmp_path, capsys):
     from schedsyn.cli import main
 

@@ -80,7 +80,8 @@ def register(sub) -> None:
         metavar="N",
         help="no new step before minute M + N: the minutes the re-plan (seconds to several "
         "minutes; a *** line says when it took longer) and loading the programme take while "
-        "the chamber runs on with the plan (default 0)",
+        "the chamber runs on with the plan; the planner then stops with what it has after "
+        "60%% of N (default 0: no new step is held back, no time budget)",
     )
     p.add_argument(
         "--no-effect",
