@@ -1216,7 +1216,7 @@ def test_new_steps_are_planned_for_the_rival_that_disagrees_most_only(plan, monk
 
     asked: list[str] = []
 
-    def no_plan(request, start, progress, say, planned_with="identified"):
+    def no_plan(request, start, progress, say, planned_with="identified", stop=None):
         asked.append(planned_with)
         return PlannerAttempt(start, None, None, "not planned in this test", 0.0, planned_with)
 
@@ -1423,7 +1423,7 @@ def test_a_continuation_is_judged_first_by_the_device_limit(tmp_path, monkeypatc
         meta=prog.meta,
     )
 
-    def late_turn(rq, start, progress, say, label="identified"):
+    def late_turn(rq, start, progress, say, label="identified", stop=None):
         return replan_module.PlannerAttempt(start, None, predict_run(rq, late), None, 0.0, label)
 
     monkeypatch.setattr(replan_module, "_plan_from", late_turn)

@@ -104,7 +104,7 @@ def test_a_rest_taken_because_a_rival_breaks_the_limit_says_so(tmp_path, monkeyp
         np.array([10.0, 20.0, 10.0, 130.0]), np.array([1.0, 0.0, -1.0, 0.0]), meta=prog.meta
     )
 
-    def turn_home(rq, start, progress, say, label="identified"):
+    def turn_home(rq, start, progress, say, label="identified", stop=None):
         return PlannerAttempt(start, None, predict_run(rq, late), None, 0.0, label)
 
     monkeypatch.setattr(replan_module, "_plan_from", turn_home)
@@ -130,7 +130,7 @@ def _rest_with_levels(monkeypatch, levels):
     these levels per bin."""
     import schedsyn.replan as replan_module
 
-    def crafted(rq, start, progress, say, label="identified"):
+    def crafted(rq, start, progress, say, label="identified", stop=None):
         run = predict_run(rq, rq.plan.programme)
         run = replace(run, coverage=replace(run.coverage, levels=np.array(levels)))
         return PlannerAttempt(start, None, run, None, 0.0, label)
