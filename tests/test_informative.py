@@ -183,3 +183,6 @@ def test_a_graded_plan_keeps_what_its_objective_did(plans):
     assert said in graded.notes[1], (bound, graded.notes[1])
     kept = [n for n in graded.notes if n.startswith("informative: ")]
     assert kept == [n for n in informative.notes if n.startswith("informative: ")] != []
+    # ... and says the plan it ran on was complete for 3 levels, not for the request's 6
+    # (fuzz: "longer than the shortest complete plan" under a GRADED note)
+    assert "than the shortest complete plan for 3 levels per bin (" in kept[0]

@@ -1205,7 +1205,8 @@ def _make_informative(
     }
     note = (
         f"informative: {programme.total_min - plan.duration_min:.0f} min longer than the "
-        f"shortest complete plan ({plan.duration_min:.0f} min) for {info_factor:.2f}x its "
+        f"shortest complete plan for {spec.levels_required} levels per bin "
+        f"({plan.duration_min:.0f} min) for {info_factor:.2f}x its "
         f"information (D-efficiency {before.d_efficiency_pct:.1f} -> "
         f"{after.d_efficiency_pct:.1f} %, I-efficiency {before.i_efficiency_pct:.0f} -> "
         f"{after.i_efficiency_pct:.0f} %)"
