@@ -501,14 +501,40 @@ class _TauChunk:
     #: plain values, not a ModelSpec, so that the chunk pickles for the process pool
     effect: str = "none"
     effect_parameters: tuple[tuple[str, float], ...] = ()
+    #: the model's own base tau, s (what :data:`TAU_PARAMETERS` are scaled against)
+    model_tau_s: float = 0.0
 
     def trajectory(self, dt0_c: float, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(T, g)`` of the augmented model at ``(tau_s, dt0_c)`` (the effect case)."""
-        from .effects import ModelSpec
-
-        spec = ModelSpec(self.tau_s, dt0_c, self.effect, dict(self.effect_parameters))
+        spec = point_model(self.tau_s, dt0_c, self.effect, self.effect_parameters, self.model_tau_s)
         pred = spec.predict(self.programme, times, t0_c=self.t0_c)
         return pred.t_c, pred.g_c_per_min
+
+
+#: Effects whose own parameters are the device's time constants (the base ``tau_s`` is
+#: not used): a sweep scales them with the grid point's tau.
+TAU_PARAMETERS = {"asymmetric_tau": ("tau_heat_s", "tau_cool_s")}
+
+
+def point_model(
+    tau_s: float,
+    dt0_c: float,
+    effect: str,
+    parameters: Iterable[tuple[str, float]],
+    model_tau_s: float,
+):
+    """The augmented model at one grid point (a :class:`~schedsyn.effects.ModelSpec`):
+    the base ``tau_s`` and ``dt0_c`` replaced; an effect whose parameters are the time
+    constants themselves (:data:`TAU_PARAMETERS`: heating and cooling taus) gets them
+    times ``tau_s / model_tau_s`` (the model's own base tau), so that the model's own
+    point is the model and a sweep along tau changes them (the base tau is unused
+    there)."""
+    from .effects import ModelSpec
+
+    params = dict(parameters)
+    for name in TAU_PARAMETERS.get(effect, ()):
+        params[name] *= tau_s / model_tau_s
+    return ModelSpec(tau_s, dt0_c, effect, params)
 
 
 def _sweep_tau(chunk: _TauChunk) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -740,6 +766,9 @@ class SweepResult:
         through = ""
         if self.effect != "none":
             held = ", ".join(f"{k} {v:g}" for k, v in self.effect_parameters)
+            scaled = TAU_PARAMETERS.get(self.effect, ())
+            if scaled:
+                held += f"; {' and '.join(scaled)} scaled with each point's tau"
             through = f" through the model's {self.effect}" + (f" ({held})" if held else "")
         return (
             f"sweep of [{lo:g}, {hi:g}] °C{through} over tau {self.tau_s_values[0]:g} .. "
@@ -812,6 +841,7 @@ def sweep_fixed(
         raise ParameterError(f"levels_required must be a whole number >= 1, got {levels_required}")
     dense_times(programme.total_min, dt_min)  # validates dt_min
     effect, effect_parameters = _effect_of(model, taus, dt0s)
+    model_tau_s = float(model.tau_s) if model is not None else 0.0
     chunks = [
         _TauChunk(
             programme,
@@ -824,6 +854,7 @@ def sweep_fixed(
             float(t0_c),
             effect,
             effect_parameters,
+            model_tau_s,
         )
         for tau in taus
     ]
@@ -864,7 +895,7 @@ def _effect_of(
     params = tuple((k, float(v)) for k, v in model.parameters.items())
     for tau in (taus[0], taus[-1]):
         for dt0 in (dt0s[0], dt0s[-1]):
-            ModelSpec(float(tau), float(dt0), model.effect, dict(params))
+            point_model(float(tau), float(dt0), model.effect, params, model.tau_s)
     return model.effect, params
 
 

@@ -843,3 +843,40 @@ def test_replan_adapter_plans_with_a_linear_augmented_model(monkeypatch):
     want = ModelSpec(2100.0, 1.0, "second_time_constant", TWO_MASS).linear_model()
     assert seen["model"] == want and seen["model"].tau2_s == 600.0
     assert seen["params"] == ThermalParams(tau_s=2100.0, dt0_c=1.0)
+
+
+def test_an_asymmetric_tau_is_scaled_with_the_grids_tau(programme):
+    """``asymmetric_tau`` ignores the base tau: the sweep scales its heating and cooling
+    taus by tau / the model's own tau, so the model's own point is the model itself and
+    the other points are the ODE with scaled taus (scipy, switching on the sign of
+    ``Tk + dT0 - T``); along tau the coverage changes."""
+    from scipy.integrate import solve_ivp
+
+    from schedsyn.effects import ModelSpec
+    from schedsyn.simulate import dense_times
+
+    heat_s, cool_s = 2000.0, 3000.0
+    model = ModelSpec(2400.0, 3.0, "asymmetric_tau", {"tau_heat_s": heat_s, "tau_cool_s": cool_s})
+    taus = [1800.0, 2400.0, 3000.0]
+    swept = sweep_fixed(programme, REGION, taus, [3.0], model=model)
+    t_eval = dense_times(programme.total_min, 0.1)
+    for i, tau in enumerate(taus):
+        a, b = heat_s * tau / 2400.0 / 60.0, cool_s * tau / 2400.0 / 60.0
+
+        def rhs(t, y, a=a, b=b):
+            v = float(programme.chamber_at(np.array([t]))[0]) + 3.0
+            return [(v - y[0]) / (a if v > y[0] else b)]
+
+        sol = solve_ivp(rhs, (0.0, t_eval[-1]), [20.0], t_eval=t_eval, max_step=0.05, rtol=1e-9)
+        temp = sol.y[0]
+        v = programme.chamber_at(t_eval) + 3.0
+        grad = (v - temp) / np.where(v > temp, a, b)
+        rep = coverage_report(temp, grad, BinGrid(*REGION), 6, 0.05)
+        assert abs(swept.coverage[i, 0, 0] - rep.coverage) <= 0.05 + 1e-12, (tau, rep.coverage)
+        assert abs(swept.min_levels[i, 0, 0] - rep.min_levels) <= 1
+        assert swept.t_min_c[i, 0] == pytest.approx(temp.min(), abs=0.01)
+    own = model.predict(programme, t_eval)
+    rep = coverage_report(own.t_c, own.g_c_per_min, BinGrid(*REGION), 6, 0.05)
+    assert swept.coverage[1, 0, 0] == rep.coverage and swept.min_levels[1, 0, 0] == rep.min_levels
+    assert len(set(swept.t_min_c[:, 0].round(3))) == 3  # tau moves the run
+    assert "scaled with each point's tau" in swept.summary()

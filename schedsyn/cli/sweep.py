@@ -25,6 +25,7 @@ from ..programme import read_step_meta, read_steps
 from ..sweep import (
     DEFAULT_DT0_SPREAD_C,
     DEFAULT_TAU_SPREAD,
+    TAU_PARAMETERS,
     default_grid,
     parse_grid,
     sweep_fixed,
@@ -405,6 +406,12 @@ def run(args: argparse.Namespace) -> int:
             + ", ".join(f"{k} {v:g}" for k, v in augmented.parameters.items())
             + f", held while the grid varies its tau and dT0 (its own: tau "
             f"{augmented.tau_s:g} s, dT0 {augmented.dt0_c:g} °C)"
+            + "".join(
+                f"; {' and '.join(names)} are scaled with each point's tau (times tau / "
+                f"{augmented.tau_s:g} s)"
+                for names in [TAU_PARAMETERS.get(augmented.effect, ())]
+                if names
+            )
         ]
     )
     held = () if augmented is None else tuple(augmented.parameters.items())
