@@ -1257,10 +1257,11 @@ class ReplanResult:
         if late is not None:
             lines.append(late)
         if self.planner_cut_at_lead:
+            budget_s = LEAD_PLANNER_SHARE * self.lead_min * 60.0
             lines.append(
-                f"note: the planner was stopped after {self.planner_s:.0f} s, "
-                f"{LEAD_PLANNER_SHARE:.0%} of --lead-min {self.lead_min:g}, with what it had: "
-                "a longer lead may find a better rest"
+                f"note: the planner was stopped with what it had after {self.planner_s:.0f} s "
+                f"(the re-plan's budget: {budget_s:.0f} s, {LEAD_PLANNER_SHARE:.0%} of "
+                f"--lead-min {self.lead_min:g}); a longer lead may find a better rest"
             )
         lines.extend(f"note: {n}" for n in r.notes)
         return "\n".join(lines)
