@@ -445,6 +445,11 @@ class ModelSpec:
         object.__setattr__(spec, "parameters", MappingProxyType(parameters))
         return spec
 
+    def __reduce__(self):
+        # the read-only parameters (a mappingproxy) do not pickle: rebuild from a dict, so
+        # that a model crosses to process-pool workers (sweeps, re-plan sweeps)
+        return (ModelSpec.unchecked, (self.tau_s, self.dt0_c, self.effect, dict(self.parameters)))
+
     # -- kinds ---------------------------------------------------------------------------
     @property
     def is_linear(self) -> bool:

@@ -497,17 +497,15 @@ class _TauChunk:
     deltas_c_per_min: tuple[float, ...]
     dt_min: float
     t0_c: float
-    #: an augmented model's effect and its parameters (``"none"``: the first-order lag);
-    #: plain values, not a ModelSpec, so that the chunk pickles for the process pool
-    effect: str = "none"
-    effect_parameters: tuple[tuple[str, float], ...] = ()
-    #: the model's own base tau, s (what :data:`TAU_PARAMETERS` are scaled against)
-    model_tau_s: float = 0.0
+    #: an augmented model (a :class:`~schedsyn.effects.ModelSpec`), or None: the
+    #: first-order lag
+    model: Any = None
 
     def trajectory(self, dt0_c: float, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(T, g)`` of the augmented model at ``(tau_s, dt0_c)`` (the effect case)."""
-        spec = point_model(self.tau_s, dt0_c, self.effect, self.effect_parameters, self.model_tau_s)
-        pred = spec.predict(self.programme, times, t0_c=self.t0_c)
+        pred = point_model(self.model, self.tau_s, dt0_c).predict(
+            self.programme, times, t0_c=self.t0_c
+        )
         return pred.t_c, pred.g_c_per_min
 
 
@@ -516,25 +514,18 @@ class _TauChunk:
 TAU_PARAMETERS = {"asymmetric_tau": ("tau_heat_s", "tau_cool_s")}
 
 
-def point_model(
-    tau_s: float,
-    dt0_c: float,
-    effect: str,
-    parameters: Iterable[tuple[str, float]],
-    model_tau_s: float,
-):
-    """The augmented model at one grid point (a :class:`~schedsyn.effects.ModelSpec`):
-    the base ``tau_s`` and ``dt0_c`` replaced; an effect whose parameters are the time
-    constants themselves (:data:`TAU_PARAMETERS`: heating and cooling taus) gets them
-    times ``tau_s / model_tau_s`` (the model's own base tau), so that the model's own
-    point is the model and a sweep along tau changes them (the base tau is unused
-    there)."""
+def point_model(model, tau_s: float, dt0_c: float):
+    """``model`` (a :class:`~schedsyn.effects.ModelSpec`) at one grid point: its base
+    ``tau_s`` and ``dt0_c`` replaced; an effect whose parameters are the time constants
+    themselves (:data:`TAU_PARAMETERS`: heating and cooling taus) gets them times
+    ``tau_s / model.tau_s``, so that the model's own point is the model and a sweep
+    along tau changes them (the base tau is unused there)."""
     from .effects import ModelSpec
 
-    params = dict(parameters)
-    for name in TAU_PARAMETERS.get(effect, ()):
-        params[name] *= tau_s / model_tau_s
-    return ModelSpec(tau_s, dt0_c, effect, params)
+    params = dict(model.parameters)
+    for name in TAU_PARAMETERS.get(model.effect, ()):
+        params[name] *= tau_s / model.tau_s
+    return ModelSpec(tau_s, dt0_c, model.effect, params)
 
 
 def _sweep_tau(chunk: _TauChunk) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -542,7 +533,7 @@ def _sweep_tau(chunk: _TauChunk) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
     prog = chunk.programme
     times = dense_times(prog.total_min, chunk.dt_min)
     trajectory: Callable[[float, np.ndarray], tuple[np.ndarray, np.ndarray]]
-    if chunk.effect != "none":  # an augmented model: one prediction per point
+    if chunk.model is not None:  # an augmented model: one prediction per point
         trajectory = chunk.trajectory
     else:
         # A(tau) does not depend on dT0: one affine response for the whole row
@@ -611,9 +602,9 @@ class SweepResult:
         Range of the internal temperature over the programme, degC.
     bin_c : float
         Bin width, degC.
-    effect, effect_parameters :
-        The augmented model's effect swept with the base ``tau`` and ``dT0`` (``"none"``:
-        the first-order lag) and its parameters (units in the names), held fixed.
+    model : ModelSpec or None
+        The augmented model swept over its base ``tau`` and ``dT0``, its effect held
+        (None: the first-order lag).
     """
 
     region_c: tuple[float, float]
@@ -626,8 +617,7 @@ class SweepResult:
     t_min_c: np.ndarray
     t_max_c: np.ndarray
     bin_c: float = 1.0
-    effect: str = "none"
-    effect_parameters: tuple[tuple[str, float], ...] = ()
+    model: Any = None
 
     def __post_init__(self) -> None:
         for name in (
@@ -764,12 +754,12 @@ class SweepResult:
         cov = self.coverage_grid
         lo, hi = self.region_c
         through = ""
-        if self.effect != "none":
-            held = ", ".join(f"{k} {v:g}" for k, v in self.effect_parameters)
-            scaled = TAU_PARAMETERS.get(self.effect, ())
+        if self.model is not None:
+            held = ", ".join(f"{k} {v:g}" for k, v in self.model.parameters.items())
+            scaled = TAU_PARAMETERS.get(self.model.effect, ())
             if scaled:
                 held += f"; {' and '.join(scaled)} scaled with each point's tau"
-            through = f" through the model's {self.effect}" + (f" ({held})" if held else "")
+            through = f" through the model's {self.model.effect}" + (f" ({held})" if held else "")
         return (
             f"sweep of [{lo:g}, {hi:g}] °C{through} over tau {self.tau_s_values[0]:g} .. "
             f"{self.tau_s_values[-1]:g} s x dT0 {self.dt0_c_values[0]:g} .. "
@@ -840,8 +830,7 @@ def sweep_fixed(
     if int(levels_required) != levels_required or levels_required < 1:
         raise ParameterError(f"levels_required must be a whole number >= 1, got {levels_required}")
     dense_times(programme.total_min, dt_min)  # validates dt_min
-    effect, effect_parameters = _effect_of(model, taus, dt0s)
-    model_tau_s = float(model.tau_s) if model is not None else 0.0
+    model = _checked_model(model, taus, dt0s)
     chunks = [
         _TauChunk(
             programme,
@@ -852,9 +841,7 @@ def sweep_fixed(
             deltas,
             float(dt_min),
             float(t0_c),
-            effect,
-            effect_parameters,
-            model_tau_s,
+            model,
         )
         for tau in taus
     ]
@@ -872,19 +859,16 @@ def sweep_fixed(
         t_min_c=np.stack([r[2] for r in rows]),
         t_max_c=np.stack([r[3] for r in rows]),
         bin_c=float(bin_c),
-        effect=effect,
-        effect_parameters=effect_parameters,
+        model=model,
     )
 
 
-def _effect_of(
-    model: Any, taus: np.ndarray, dt0s: np.ndarray
-) -> tuple[str, tuple[tuple[str, float], ...]]:
-    """``(effect, parameters)`` of an augmented model for :func:`sweep_fixed`, checked at
-    the grid's corners (a model that cannot take a grid point fails here, in one line,
-    not in a worker)."""
+def _checked_model(model: Any, taus: np.ndarray, dt0s: np.ndarray):
+    """The augmented model for :func:`sweep_fixed`, checked at the grid's corners (a model
+    that cannot take a grid point fails here, in one line, not in a worker); None for
+    none or for effect "none" (the first-order lag's fast path)."""
     if model is None:
-        return "none", ()
+        return None
     from .effects import ModelSpec
 
     if not isinstance(model, ModelSpec):
@@ -892,11 +876,12 @@ def _effect_of(
             f"model must be a schedsyn.effects.ModelSpec (a model file read by "
             f"schedsyn.models_io.load_model), got {type(model).__name__}"
         )
-    params = tuple((k, float(v)) for k, v in model.parameters.items())
+    if model.effect == "none":
+        return None
     for tau in (taus[0], taus[-1]):
         for dt0 in (dt0s[0], dt0s[-1]):
-            point_model(float(tau), float(dt0), model.effect, params, model.tau_s)
-    return model.effect, params
+            point_model(model, float(tau), float(dt0))
+    return model
 
 
 def verify_box(

@@ -487,3 +487,15 @@ def test_a_fit_s_unchecked_model_is_the_checked_one(effect):
     a, b = fast.predict(PROG, TIMES, t0_c=19.0), checked.predict(PROG, TIMES, t0_c=19.0)
     np.testing.assert_array_equal(a.t_c, b.t_c)
     np.testing.assert_array_equal(a.tk_air_c, b.tk_air_c)
+
+
+def test_a_model_pickles_for_process_pool_workers():
+    """A model crosses to process-pool workers (sweeps through it): its read-only
+    parameters are rebuilt, equal and still read-only."""
+    import pickle
+
+    model = ModelSpec(2100.0, 1.5, "asymmetric_tau", {"tau_heat_s": 1800.0, "tau_cool_s": 2600.0})
+    back = pickle.loads(pickle.dumps(model))
+    assert back == model and dict(back.parameters) == dict(model.parameters)
+    with pytest.raises(TypeError):
+        back.parameters["tau_heat_s"] = 1.0

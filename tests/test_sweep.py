@@ -836,8 +836,7 @@ def test_replan_adapter_plans_with_a_linear_augmented_model(monkeypatch):
         6,
         0.05,
         Limits(),
-        "second_time_constant",
-        (("tau2_s", 600.0),),
+        ModelSpec(2400.0, 3.0, "second_time_constant", TWO_MASS),
     )
     fn(ThermalParams(tau_s=2100.0, dt0_c=1.0))
     want = ModelSpec(2100.0, 1.0, "second_time_constant", TWO_MASS).linear_model()

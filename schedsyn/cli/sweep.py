@@ -13,8 +13,10 @@ effect held at its fitted strength.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib.util
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -152,20 +154,17 @@ class PlanAtPoint:
     levels_required: int
     delta_c_per_min: float
     limits: Limits
-    #: a linear augmented model's effect and parameters, held at every point ("none":
-    #: the first-order lag); plain values so that the callable pickles
-    effect: str = "none"
-    effect_parameters: tuple[tuple[str, float], ...] = ()
+    #: a linear augmented model (``schedsyn.effects.ModelSpec``), its effect held at every
+    #: point; None: the first-order lag
+    model: Any = None
 
     def __call__(self, params: ThermalParams):
         from ..planner import plan_experiment
 
         spec = replan_spec(self.region, self.approx, self.levels_required, self.delta_c_per_min)
-        if self.effect == "none":
+        if self.model is None or self.model.effect == "none":
             return plan_experiment(spec, params, self.limits)
-        from ..effects import ModelSpec
-
-        model = ModelSpec(params.tau_s, params.dt0_c, self.effect, dict(self.effect_parameters))
+        model = dataclasses.replace(self.model, tau_s=params.tau_s, dt0_c=params.dt0_c)
         return plan_experiment(
             spec, params, model.planner_limits(self.limits), model=model.linear_model()
         )
@@ -398,24 +397,7 @@ def run(args: argparse.Namespace) -> int:
                 "--replan needs a linear model (sweep the fixed plan through it instead: "
                 "leave out --replan)"
             )
-    model_line = (
-        []
-        if augmented is None
-        else [
-            f"model (from {augmented_from}): effect {augmented.effect} "
-            + ", ".join(f"{k} {v:g}" for k, v in augmented.parameters.items())
-            + f", held while the grid varies its tau and dT0 (its own: tau "
-            f"{augmented.tau_s:g} s, dT0 {augmented.dt0_c:g} °C)"
-            + "".join(
-                f"; {' and '.join(names)} are scaled with each point's tau (times tau / "
-                f"{augmented.tau_s:g} s)"
-                for names in [TAU_PARAMETERS.get(augmented.effect, ())]
-                if names
-            )
-        ]
-    )
-    held = () if augmented is None else tuple(augmented.parameters.items())
-    effect = "none" if augmented is None else augmented.effect
+    model_line = [] if augmented is None else [_model_line(augmented, augmented_from)]
     backend = _backend(args)
     progress = _common.progress_of(args)
     inputs = [x for x in (args.steps, args.model) if x]
@@ -423,7 +405,7 @@ def run(args: argparse.Namespace) -> int:
     marker = (nominal.tau_s, nominal.dt0_c)
 
     if approx is not None:
-        plan_fn = PlanAtPoint((lo, hi), approx, levels, deltas[0], limits, effect, held)
+        plan_fn = PlanAtPoint((lo, hi), approx, levels, deltas[0], limits, augmented)
         replanned = sweep_replan(
             plan_fn, taus, dt0s, backend=backend, workers=args.workers, progress=progress
         )
@@ -512,6 +494,23 @@ def run(args: argparse.Namespace) -> int:
     lines.append(f"wrote {out.target}/sweep.csv, sweep.png")
     _common.say(*lines)
     return 0
+
+
+def _model_line(model, source: str) -> str:
+    """What the sweep holds of an augmented model, and what it varies."""
+    line = (
+        f"model (from {source}): effect {model.effect} "
+        + ", ".join(f"{k} {v:g}" for k, v in model.parameters.items())
+        + f", held while the grid varies its tau and dT0 (its own: tau {model.tau_s:g} s, "
+        f"dT0 {model.dt0_c:g} °C)"
+    )
+    scaled = TAU_PARAMETERS.get(model.effect, ())
+    if scaled:
+        line += (
+            f"; {' and '.join(scaled)} are scaled with each point's tau (times tau / "
+            f"{model.tau_s:g} s)"
+        )
+    return line
 
 
 #: past the device limits by more than this counts (the planner's own tolerance is
