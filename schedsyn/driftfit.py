@@ -65,7 +65,9 @@ leave-one-pass-out RMS is still reported beside the BIC.)
 
 **Compensation table.** The fitted drift on a grid of ``[LO, HI]`` (``t_step_c`` by
 ``g_step_c_per_min``), at each temperature only over the gradients the run reached within
-``t_step_c / 2`` of it (no extrapolation in g).
+``t_step_c / 2`` of it (no extrapolation in g); where that range is narrower than the grid
+and holds none of its gradients, the temperature's row is at the range's middle (a slow
+monotone ramp reaches one gradient per temperature; its rows had been dropped).
 """
 
 from __future__ import annotations
@@ -462,12 +464,15 @@ def noise_fit(
     # around the best point
     grid = np.log(10.0) * np.arange(-6.0, 4.5, 1.0)
     best = min(grid, key=lambda v: profile(float(v))[0])
-    res = minimize_scalar(
-        lambda v: profile(v)[0],
-        bounds=(float(best) - math.log(10.0), float(best) + math.log(10.0)),
-        method="bounded",
-        options={"xatol": 0.02},
-    )
+    if not math.isfinite(profile(float(best))[0]):  # singular at every walk: no estimate
+        return NoiseFit(float(np.std(z[:, 0])) * per_row, 0.0, math.nan, n, p)
+    with np.errstate(invalid="ignore"):  # inf where the weighted normal matrix is singular
+        res = minimize_scalar(
+            lambda v: profile(v)[0],
+            bounds=(float(best) - math.log(10.0), float(best) + math.log(10.0)),
+            method="bounded",
+            options={"xatol": 0.02},
+        )
     x_best = float(res.x) if profile(float(res.x))[0] <= profile(float(best))[0] else float(best)
     obj, s2 = profile(x_best)
     if not math.isfinite(s2):
@@ -1449,6 +1454,8 @@ class DriftFit:
         ):
             ks = np.arange(math.ceil(g_min / step - 1e-9), math.floor(g_max / step + 1e-9) + 1)
             g = np.round(ks * step, 10)
+            if g.size == 0:  # the reached range falls between two grid gradients
+                g = np.array([round(0.5 * (g_min + g_max), 6)])
             t_list.append(np.full(g.size, t))
             g_list.append(g)
         t_all = np.concatenate(t_list) if t_list else np.zeros(0)

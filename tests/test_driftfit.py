@@ -2,6 +2,7 @@
 computation, recovery of known polynomials from synthetic gyro logs, term selection,
 compensation table, bad input and the `schedsyn fit` command."""
 
+import dataclasses
 import json
 import math
 
@@ -368,6 +369,17 @@ def test_the_noise_model_counts_every_reading(n_rows, period_s):
     assert whole.sigma_dph == pytest.approx(0.3 / math.sqrt(period_s), rel=0.05)
 
 
+def test_noise_fit_is_quiet_where_the_walk_makes_the_terms_singular():
+    """Red team: a slow monotone ramp (the gradient constant to 1e-12) printed scipy's
+    RuntimeWarnings from the walk search (the likelihood infinite at some walks)."""
+    rng = np.random.default_rng(0)
+    t = np.arange(2000) * 10.0
+    d = 0.3 + 0.1 * rng.standard_normal(2000) + 0.001 * np.cumsum(rng.standard_normal(2000))
+    x = np.column_stack([np.ones(2000), t / 1e4, 0.5 + 1e-12 * rng.standard_normal(2000)])
+    nf = noise_fit(t, d, x)  # warnings are errors in this suite
+    assert math.isfinite(nf.sigma_dph) and nf.sigma_dph > 0
+
+
 @pytest.mark.parametrize("reml", [True, False])
 def test_noise_fit_matches_dense_likelihood(rng, reml):
     """The Kalman-whitened profile likelihood equals the dense Gaussian one, and its
@@ -621,6 +633,25 @@ def test_compensation_table_stays_inside_the_reached_gradients(grad_fit):
     assert comp["t_c"].min() >= REGION[0] and comp["t_c"].max() <= REGION[1]
     np.testing.assert_allclose(comp["drift_dph"], fit.predict(comp["t_c"], comp["g_c_per_min"]))
     assert comp["t_c"].nunique() >= 25  # every degree of the region that the run crossed
+
+
+def test_every_reached_temperature_keeps_a_compensation_row(grad_fit):
+    """Red team: a slow monotone ramp reaches one gradient per degree, a range narrower than
+    the 0.05 degC/min grid; those temperatures were dropped (a table with 0 rows, exit 0)."""
+
+    _, _, fit = grad_fit
+    domain = pd.DataFrame(
+        {
+            "t_c": [10.0, 11.0, 12.0],
+            "g_min_c_per_min": [0.012, 0.04, -0.033],
+            "g_max_c_per_min": [0.031, 0.06, -0.032],
+            "n": [5, 5, 5],
+        }
+    )
+    comp = dataclasses.replace(fit, domain=domain).compensation_frame()
+    assert list(comp["t_c"]) == [10.0, 11.0, 12.0]
+    np.testing.assert_allclose(comp["g_c_per_min"], [0.0215, 0.05, -0.0325])
+    np.testing.assert_allclose(comp["drift_dph"], fit.predict(comp["t_c"], comp["g_c_per_min"]))
 
 
 def test_pass_blocks_follow_the_gradient_sign_and_gaps():
