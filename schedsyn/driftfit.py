@@ -181,6 +181,10 @@ class FitSettings:
         ``drop`` (default): drift readings far from their neighbours (glitches, see
         :func:`drift_outliers`) are left out of the fit and listed; more than
         :data:`OUTLIER_MAX_SHARE` of them is an error. ``keep`` fits every reading.
+    check_drift_units : bool
+        Refuse a drift that is both too small and too quiet to be any gyro's in deg/h
+        (:func:`check_drift_units`); ``False`` when it really is (a noiseless simulation
+        of a near-perfect gyro).
     """
 
     terms: str = "auto"
@@ -194,6 +198,7 @@ class FitSettings:
     g_step_c_per_min: float = 0.05
     seed: int = 0
     outliers: str = "drop"
+    check_drift_units: bool = True
 
     def __post_init__(self) -> None:
         if self.outliers not in OUTLIER_POLICIES:
@@ -1667,6 +1672,7 @@ def _bins_check(
     min_points: int,
     source: str,
     step_s: float = math.nan,
+    span_c: tuple[float, float] | None = None,
 ):
     lo, hi = region
     n_bins = max(int(math.ceil(hi - lo - 1e-9)), 1)
@@ -1696,7 +1702,12 @@ def _bins_check(
         raise ParameterError(
             f"{source}: too few samples in the region {lo:g} .. {hi:g} °C: the 1 °C bins "
             f"{', '.join(spans[:5])} °C have fewer than {min_points} samples each"
-            + (sparse or "; narrow --region to where the run went (or lower --min-points-per-bin)")
+            + (
+                sparse
+                or "; narrow --region to where the run went"
+                + ("" if span_c is None else f", {span_c[0]:.1f} .. {span_c[1]:.1f} °C")
+                + " (or lower --min-points-per-bin)"
+            )
         )
 
 
@@ -1706,6 +1717,37 @@ SPARSE_STEP_S = 20.0
 #: The white noise of the drift below this (angle random walk, deg/sqrt(h)) is no gyro's
 #: (the best navigation gyros: ~1e-4): a note asks whether drift_dph is in deg/s.
 MIN_PLAUSIBLE_ARW_DEG_PER_RT_H = 2e-5
+#: ... and a drift that also stays within this of 0 everywhere in the region (deg/h; a
+#: gyro's bias of up to 360 deg/h written in deg/s) is refused as deg/s.
+DEG_PER_S_SUSPECT_MAX_ABS_DPH = 0.1
+
+
+def check_drift_units(source: str, time_s: np.ndarray, drift_dph: np.ndarray) -> None:
+    """Refuse a drift that reads like deg/s (or rad/s) in the deg/h column.
+
+    Both tells at once: the white noise, from successive differences (1.4826 MAD / sqrt 2
+    per reading), is an angle random walk below :data:`MIN_PLAUSIBLE_ARW_DEG_PER_RT_H`,
+    and every reading is within :data:`DEG_PER_S_SUSPECT_MAX_ABS_DPH` of 0. Red team
+    2026-12-05: a log in deg/s was fitted with exit 0 and a note (its coefficients
+    3600x too small); a noiseless simulation (drift of tenths of a deg/h) passes.
+    """
+    d = np.asarray(drift_dph, dtype=float)
+    t = np.asarray(time_s, dtype=float)
+    if d.size < 3:
+        return
+    diff = np.diff(d)
+    sigma = 1.4826 * float(np.median(np.abs(diff - np.median(diff)))) / math.sqrt(2.0)
+    arw = sigma * math.sqrt(float(np.median(np.diff(t))) / 3600.0)
+    biggest = float(np.max(np.abs(d)))
+    if arw < MIN_PLAUSIBLE_ARW_DEG_PER_RT_H and biggest < DEG_PER_S_SUSPECT_MAX_ABS_DPH:
+        raise LogFormatError(
+            f"{source}: drift_dph stays within {biggest:.3g} °/h of 0 with an angle random "
+            f"walk of {arw:.2g} °/√h, below any gyro's (the best navigation gyros: ~1e-4 "
+            "°/√h): it reads like °/s (multiply by 3600) or rad/s (by 206265); if it really "
+            "is °/h, pass --trust-drift-units"
+        )
+
+
 #: A held-out log fitted this much worse (RMS about its mean) than the fitted run's own
 #: residuals gets a note.
 HOLDOUT_WORSE = 2.0
@@ -1864,17 +1906,25 @@ def _samples_from_log(
             f"never enters the region {lo:g} .. {hi:g} °C; choose --region inside what the "
             "run covered"
         )
-    if np.ptp(d[inside]) == 0.0:  # nothing to fit: a stuck or unconnected channel
+    in_region = np.isfinite(t) & np.isfinite(g) & (t >= lo) & (t <= hi)
+    without_drift = (int((no_drift & in_region).sum()), int(no_drift.sum()))
+    steps = np.diff(np.asarray(log.time_s, dtype=float))
+    step_s = float(np.median(steps)) if steps.size else math.nan
+    _bins_check(t[inside], region, settings.min_points_per_bin, log.source, step_s, (t_min, t_max))
+    t_lo, t_hi = float(np.min(t[inside])), float(np.max(t[inside]))
+    if t_hi - t_lo < 0.5 * (hi - lo):  # a hold: the T terms are not determined
+        raise ParameterError(
+            f"{log.source}: in the region {lo:g} .. {hi:g} °C the internal temperature stays "
+            f"within {t_lo:.2f} .. {t_hi:.2f} °C, less than half the region: a polynomial in T "
+            "needs the run to move through it; fit a run that crosses the region (or narrow "
+            "--region to what it crossed)"
+        )
+    if inside.sum() >= 2 and np.ptp(d[inside]) == 0.0:  # a stuck or unconnected channel
         raise LogFormatError(
             f"{log.source}: drift_dph reads {d[inside][0]:g} °/h on every one of the "
             f"{int(inside.sum())} rows in the region: a stuck or unconnected drift channel? "
             "Check the gyro's output column"
         )
-    in_region = np.isfinite(t) & np.isfinite(g) & (t >= lo) & (t <= hi)
-    without_drift = (int((no_drift & in_region).sum()), int(no_drift.sum()))
-    steps = np.diff(np.asarray(log.time_s, dtype=float))
-    step_s = float(np.median(steps)) if steps.size else math.nan
-    _bins_check(t[inside], region, settings.min_points_per_bin, log.source, step_s)
     idx = np.flatnonzero(inside)
     time_all = np.asarray(log.time_s, dtype=float)
     known = np.isfinite(t)
@@ -2005,7 +2055,8 @@ def fit_drift(
     Raises
     ------
     LogFormatError
-        No ``drift_dph`` column, or no finite drift.
+        No ``drift_dph`` column, no finite drift, or a drift in deg/s
+        (:func:`check_drift_units`).
     ParameterError
         A region the log never enters, bins with fewer than ``min_points_per_bin``
         samples, or samples that cannot determine the terms.
@@ -2021,6 +2072,8 @@ def fit_drift(
     s, _est, method, without_drift, model_params, model_source, outliers, gap_notes = (
         _samples_from_log(log, region, settings, params)
     )
+    if settings.check_drift_units:
+        check_drift_units(log.source, s.time_s, s.drift_dph)
     eiv = settings.eiv == "als"
     g_half = max(float(np.max(np.abs(s.g_c_per_min))), 0.05)
     coding = Coding(0.5 * (lo + hi), 0.5 * (hi - lo), g_half)
@@ -2029,6 +2082,15 @@ def fit_drift(
     misfit = _lack_of_fit_note(found)
     if misfit is not None:
         notes.append(misfit)
+    n_passes = int(np.unique(pass_blocks(s)).size)
+    if n_passes < 2:
+        span_min = float(s.time_s[-1] - s.time_s[0]) / 60.0
+        notes.append(
+            f"the region's samples come from one pass ({span_min:.0f} min, one sign of the "
+            "gradient): gradient terms need passes at distinct gradients, and the T terms "
+            "carry this stretch's bias walk; a planned run (schedsyn plan) passes every "
+            "1 °C bin of the region at least 6 times"
+        )
     if settings.estimator == "auto" and method == "kinematic" and log.tk_set_c is not None:
         blank = int(np.isnan(np.asarray(log.tk_set_c, dtype=float)).sum())
         notes.append(

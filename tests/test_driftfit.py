@@ -700,14 +700,42 @@ def test_bad_logs_get_clear_errors(programme):
     blank.loc[5:, "drift_dph"] = np.nan
     with pytest.raises(LogFormatError, match=r"enters the region .* none of its drift_dph"):
         fit_drift(log_from_frame(blank), REGION)
-    with pytest.raises(ParameterError, match=r"bins -54 .. -52 °C have fewer than 5"):
+    # the refusal says where the run went (red team: a region partly outside the log was
+    # refused without the span it covers)
+    span = rf"narrow --region to where the run went, {f['t_int_c'].min():.1f} \.\. "
+    with pytest.raises(ParameterError, match=r"bins -54 .. -52 °C have fewer than 5.*" + span):
         fit_drift(log_from_frame(f), (-54.0, -21.0))
+    # one row in the region is too few samples, not a stuck channel
+    with pytest.raises(ParameterError, match="too few samples"):
+        fit_drift(log_from_frame(f), (-54.0, -21.0), FitSettings(min_points_per_bin=1))
     with pytest.raises(ParameterError, match="lo < hi"):
         fit_drift(log_from_frame(f), (-20.0, -30.0))
     with pytest.raises(ParameterError, match="unknown drift term"):
         FitSettings(terms="1,t,tt")
     with pytest.raises(ParameterError, match="n_error_draws"):
         FitSettings(n_error_draws=1)
+
+
+def test_a_hold_and_a_single_pass_are_told_what_they_cannot_fit(programme):
+    """Red team: a log holding one temperature got "normal matrix singular"; a 10-minute log
+    through the region was fitted without a word."""
+    rng = np.random.default_rng(0)
+    t = np.arange(0.0, 3 * 3600.0, 10.0)
+    noise = rng.standard_normal((2, t.size))
+    hold = pd.DataFrame({"time_s": t, "t_int_c": np.round(-37.0 + 0.02 * noise[0], 2),
+                         "tk_set_c": -40.0, "drift_dph": 0.5 + 0.01 * noise[1]})  # fmt: skip
+    with pytest.raises(ParameterError, match=r"stays within -37\.\d\d \.\. -3[67]\.\d\d °C, less"):
+        fit_drift(log_from_frame(hold, "hold"), (-38.0, -36.0))
+    frame = gyro_log(programme, _gyro(T_COEFS), sample_s=10.0, seed=4)
+    g_true = frame["g_true_c_per_min"].to_numpy()
+    cooling = int(np.flatnonzero(g_true < -0.01)[0])
+    down = frame.iloc[: cooling + int(np.flatnonzero(g_true[cooling:] > 0)[0])]  # 20 -> -48
+    fit = fit_drift(log_from_frame(down, "down"), (-45.0, -25.0))
+    note = next(n for n in fit.notes if "come from one pass" in n)
+    minutes = (fit.samples.time_s[-1] - fit.samples.time_s[0]) / 60.0
+    assert f"({minutes:.0f} min, one sign" in note
+    whole = fit_drift(log_from_frame(frame, "whole"), (-45.0, -25.0))
+    assert not any("one pass" in n for n in whole.notes)
 
 
 # -- the command line ----------------------------------------------------------------------
@@ -1174,11 +1202,38 @@ def _w3_log(gyro, seed, sample_s=10.0, scale=1.0):
     return log_from_frame(frame, f"w3-{seed}")
 
 
-def test_a_drift_in_degrees_per_second_is_questioned():
-    """Red team: drift_dph logged in deg/s (3600x too small) was fitted without a word."""
+@pytest.mark.parametrize(
+    ("drift_offset_dph", "white_dph", "scale", "refused"),
+    [
+        (0.5, 0.01, 1.0, False),  # a navigation gyro in deg/h
+        (0.5, 0.0, 1.0, False),  # a noiseless simulation: tenths of a deg/h, no noise
+        (0.02, 0.001, 1.0, False),  # small drift, plausible noise (ARW 3.7e-5)
+        (0.5, 0.01, 1.0 / 3600.0, True),  # the same gyro in deg/s
+        (30.0, 1.0, math.pi / 180.0 / 3600.0, True),  # a MEMS gyro in rad/s
+        (400.0, 1.0, 1.0 / 3600.0, False),  # 0.11 in deg/s: beyond the magnitude tell
+    ],
+)
+def test_the_drift_unit_check_needs_both_tells(drift_offset_dph, white_dph, scale, refused):
+    rng = np.random.default_rng(7)
+    t = np.arange(3000) * 5.0
+    d = drift_offset_dph + 1e-3 * np.sin(t / 4000.0) + white_dph * rng.standard_normal(t.size)
+    if refused:
+        with pytest.raises(LogFormatError, match="--trust-drift-units"):
+            driftfit.check_drift_units("log", t, d * scale)
+    else:
+        driftfit.check_drift_units("log", t, d * scale)
+
+
+def test_a_drift_in_degrees_per_second_is_refused_or_questioned():
+    """Red team: drift_dph logged in deg/s (3600x too small) was fitted without a word, then
+    with exit 0 and a note. Small and quiet at once is refused; told it is deg/h, the fit
+    runs and still says why it doubts it."""
     gyro = _w3_gyro(4)
     assert not any("°/s" in n for n in fit_drift(_w3_log(gyro, 4), (-2.0, 33.0)).notes)
-    fit = fit_drift(_w3_log(gyro, 4, scale=1.0 / 3600.0), (-2.0, 33.0))
+    in_dps = _w3_log(gyro, 4, scale=1.0 / 3600.0)
+    with pytest.raises(LogFormatError, match=r"reads like °/s \(multiply by 3600\)"):
+        fit_drift(in_dps, (-2.0, 33.0))
+    fit = fit_drift(in_dps, (-2.0, 33.0), FitSettings(check_drift_units=False))
     note = next(n for n in fit.notes if "°/s" in n)
     arw = fit.model.white_sigma_dph * math.sqrt(10.0 / 3600.0)
     assert arw < driftfit.MIN_PLAUSIBLE_ARW_DEG_PER_RT_H and f"{arw:.2g} °/√h" in note

@@ -80,6 +80,12 @@ def register(sub) -> None:
         default=5,
         help="samples every 1 °C bin of the region needs (default 5)",
     )
+    p.add_argument(
+        "--trust-drift-units",
+        action="store_true",
+        help="drift_dph really is in °/h: skip the check that refuses a drift too small and "
+        "too quiet to be any gyro's (it reads like °/s)",
+    )
     p.add_argument("--out", default=None, help="output directory (default out/fit)")
     _common.add_model_options(p, "identified from each log for the model-based smoother")
     _common.add_quiet_option(p)
@@ -107,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
         estimator=args.estimator,
         min_points_per_bin=args.min_points_per_bin,
         outliers=args.outliers,
+        check_drift_units=not args.trust_drift_units,
     )
     inputs = [args.log] + ([args.holdout] if args.holdout else [])
     # every output is checked against the inputs before any work and written into a
