@@ -931,3 +931,89 @@ def test_correlated_sensor_noise_is_said_to_make_the_sigmas_too_small(tmp_path, 
     assert main(["estimate", str(path), "--out", str(tmp_path / "out")]) == 0
     err = capsys.readouterr().err
     assert "warning:" in err and "innovations are not white" in err
+
+
+@pytest.mark.parametrize("h", [1 / 600, 1 / 6, 1.0, 37.0])
+def test_gradient_walk_at_steps_matches_van_loan(h):
+    """The order-3 model with the gradient's extra random walk (setpoint steps): the
+    step's process noise is Van Loan's for white jerk plus white noise on dg/dt."""
+    import schedsyn.estimate as est_mod
+
+    q, s = 2.5e-5, 0.3
+    a_cont = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]])
+    _, q_jerk = _van_loan(a_cont, np.array([0.0, 0.0, 1.0]), q, h)
+    _, q_walk = _van_loan(a_cont, np.array([0.0, 1.0, 0.0]), s, h)
+    setup = est_mod._Setup(
+        60.0 * np.array([0.0, h]), np.zeros(2), None, order=3, g_extra=np.array([0.0, s])
+    )
+    q11, q12, q13, q22, q23, q33 = setup.rows(0, 2, q).q_at(1)
+    qm = np.array([[q11, q12, q13], [q12, q22, q23], [q13, q23, q33]])
+    np.testing.assert_allclose(qm, q_jerk + q_walk, rtol=1e-7, atol=1e-300)
+
+
+def test_setpoint_steps_are_found_and_ramps_are_not():
+    from schedsyn.estimate import setpoint_steps
+
+    t60 = np.arange(12) * 60.0
+    step60 = np.array([14.9, 14.75, 14.58, 14.41, 14.24, 18.73, 18.73, 18.73, 18.73, 18.73,
+                       18.73, 18.73])  # fmt: skip
+    assert setpoint_steps(t60, step60) == [(5, pytest.approx(4.49))]  # 4.5 degC/min, alone
+    ramp60 = np.concatenate((np.full(4, 20.0), 20.0 + 3.0 * np.arange(1, 9)))
+    assert setpoint_steps(t60, ramp60) == []  # a 3 degC/min ramp logged every minute
+    fast60 = np.concatenate((np.full(4, 20.0), 20.0 + 10.0 * np.arange(1, 9)))
+    assert len(setpoint_steps(t60, fast60)) == 8  # 10 degC a row: steps (an allowance)
+    t1 = np.arange(600.0)
+    step1 = np.where(t1 >= 300.0, -30.0, -20.0) + 0.05 * (t1 / 60.0)
+    assert setpoint_steps(t1, step1) == [(300, pytest.approx(-10.0, abs=1e-3))]
+    small = np.where(t1 >= 300.0, 20.3, 20.0)  # 0.3 degC: below SETPOINT_STEP_MIN_C
+    assert setpoint_steps(t1, small) == []
+    with_nan = step1.copy()
+    with_nan[300] = np.nan  # the step is seen across the blank row
+    assert setpoint_steps(t1, with_nan) == [(301, pytest.approx(-10.0, abs=3e-3))]
+
+
+def _step_log(step_times_min, levels_c, tau_min, dt0_c, sample_s, seed):
+    """An ideal chamber that steps between holds (at ``step_times_min``, between samples)
+    and the device's exact response; readings with 0.01 degC noise."""
+    t_min = np.arange(0.0, step_times_min[-1] + 90.0, sample_s / 60.0)
+    temp, grad, tk = np.empty(t_min.size), np.empty(t_min.size), np.empty(t_min.size)
+    edges = np.concatenate(([0.0], step_times_min, [np.inf]))
+    start_c = levels_c[0] + dt0_c
+    for i, level in enumerate(levels_c):
+        sel = (t_min >= edges[i]) & (t_min < edges[i + 1])
+        decay = np.exp(-(t_min[sel] - edges[i]) / tau_min)
+        temp[sel] = level + dt0_c + (start_c - level - dt0_c) * decay
+        grad[sel] = -(start_c - level - dt0_c) * decay / tau_min
+        tk[sel] = level
+        if np.isfinite(edges[i + 1]):
+            start_c = (
+                level
+                + dt0_c
+                + (start_c - level - dt0_c) * math.exp(-(edges[i + 1] - edges[i]) / tau_min)
+            )
+    rng = np.random.default_rng(seed)
+    frame = pd.DataFrame(
+        {"time_s": t_min * 60.0, "t_int_c": temp + 0.01 * rng.standard_normal(t_min.size),
+         "tk_set_c": tk}
+    )  # fmt: skip
+    return log_from_frame(frame, source="setpoint steps"), t_min, grad
+
+
+@pytest.mark.parametrize("sample_s", [10.0, 60.0])
+def test_the_gradient_sigma_holds_at_setpoint_steps(sample_s):
+    """Red team 2026-12-05: at a setpoint step the device's gradient jumps by dS/tau; the
+    kinematic smoother rounded the jump with sigmas 20-50x too small (|z| 30-53, 61-83 %
+    within 2 sigma around the steps). With the gradient free to jump at the logged steps:
+    at least 90 % within 2 sigma in the 12 min around them, |z| under 5, and the error no
+    larger than before. Truth: the closed-form response to the steps."""
+    steps_min = np.array([57.7, 110.8, 161.0, 212.5, 248.7, 298.7])
+    levels_c = np.array([20.0, 28.0, 31.3, 38.3, 33.7, 27.5, 12.8])
+    log, t_min, g_true = _step_log(steps_min, levels_c, 40.0, 3.0, sample_s, seed=1)
+    est = estimate_gradient(log)
+    err = est.g_est_c_per_min - g_true
+    z = err / est.g_std_c_per_min
+    near = np.any((t_min[:, None] >= steps_min - 2.0) & (t_min[:, None] <= steps_min + 10.0), 1)
+    assert np.mean(np.abs(z[near]) <= 2.0) >= 0.9, np.mean(np.abs(z[near]) <= 2.0)
+    assert np.max(np.abs(z)) < 5.0, np.max(np.abs(z))
+    assert np.mean(np.abs(z[~near]) <= 2.0) >= 0.9  # and the rest is not made loose
+    assert np.sqrt(np.mean(err[near] ** 2)) < 0.02
