@@ -1985,6 +1985,12 @@ def estimate_gradient(
         isinstance(sensor_tau_s, int | float) and math.isfinite(sensor_tau_s) and sensor_tau_s >= 0
     ):
         raise ParameterError(f"sensor_tau_s must be a number of seconds >= 0, got {sensor_tau_s!r}")
+    if sensor_tau_s > SENSOR_TAU_MAX_S:
+        raise ParameterError(
+            f"sensor_tau_s {sensor_tau_s:g} s is beyond any temperature sensor's own lag (at most "
+            f"{SENSOR_TAU_MAX_S:g} s here); a lag that long is the device's own (tau_s): check "
+            "the unit (seconds)"
+        )
     if sensor_tau_s and order != 3:
         raise ParameterError(
             "sensor_tau_s needs the order-3 smoother (the device's gradient is the reading's "
@@ -2054,6 +2060,10 @@ def staircase_followed(full: GradientEstimate, stepped: GradientEstimate) -> boo
         return False
     return bool(np.mean(d[ok] > STAIRCASE_DISAGREE_STD * s[ok]) > STAIRCASE_DISAGREE_SHARE)
 
+
+#: The longest sensor time constant :func:`estimate_gradient` takes, s: a sensor lag is
+#: seconds to minutes (a thermistor in a housing); an hour is the device's own.
+SENSOR_TAU_MAX_S = 3600.0
 
 #: Setpoint steps (:func:`setpoint_steps`, :func:`step_g_extra`): a row's setpoint moved
 #: at least this far from the row before, degC...

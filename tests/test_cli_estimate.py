@@ -404,3 +404,26 @@ def test_a_run_that_starts_away_from_the_plans_start_is_noted_and_can_be_simulat
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--t0-c must be a temperature in °C or 'log'" in err[0], err
     assert not (tmp_path / "late").exists() and not (tmp_path / "bad").exists()
+
+
+@pytest.mark.parametrize(
+    ("options", "named"),
+    [
+        (["--tau-s", "1200"], "--tau-s is for the model-based estimator"),
+        (["--dt0-c", "2", "--tau-s", "900"], "--tau-s and --dt0-c are for the model-based"),
+        (["--chamber", "tk_air_c"], "--chamber tk_air_c is for the model-based"),
+        (["--method", "model", "--order", "2"], "--order 2 is the kinematic"),
+        (["--method", "model", "--sensor-tau-s", "60"], "--sensor-tau-s is for the kinematic"),
+        (["--sensor-tau-s", "1e6"], "a temperature sensor's own lag is 0 .. 3600 s"),
+    ],
+)
+def test_estimate_refuses_options_its_estimator_would_ignore(
+    tmp_path, capsys, clean_log_path, options, named
+):
+    """Red team: --tau-s and --dt0-c with the kinematic default, --order with --method
+    model, and a sensor lag of 1e6 s were accepted and dropped without a word."""
+    out = tmp_path / "o"
+    assert main(["estimate", str(clean_log_path), "--out", str(out), *options]) == 2
+    err = capsys.readouterr().err
+    assert named in err and err.count("\n") == 1, err
+    assert not out.exists()

@@ -143,3 +143,5 @@ def test_a_sensor_lag_is_undone_when_given():
         estimate_gradient(log, sensor_tau_s=tau_s, order=2)
     with pytest.raises(ParameterError, match="sensor_tau_s must be"):
         estimate_gradient(log, sensor_tau_s=-1.0)
+    with pytest.raises(ParameterError, match="beyond any temperature sensor's own lag"):
+        estimate_gradient(log, sensor_tau_s=3601.0)

@@ -13,7 +13,12 @@ from pathlib import Path
 
 from ..compare import resample_run
 from ..errors import ParameterError
-from ..estimate import GradientEstimate, estimate_gradient, estimate_gradient_model
+from ..estimate import (
+    SENSOR_TAU_MAX_S,
+    GradientEstimate,
+    estimate_gradient,
+    estimate_gradient_model,
+)
 from ..io import write_atomic
 from ..logs import read_log
 from . import _common
@@ -88,7 +93,7 @@ def register(sub) -> None:
         "--order",
         type=int,
         choices=(2, 3),
-        default=3,
+        default=None,
         help="kinematic model: 3 = the gradient's rate a random walk (default; smooth "
         "gradients that bend where the chamber changes rate), 2 = the gradient a random walk",
     )
@@ -119,6 +124,39 @@ def write_gradient_csv(path: Path, est: GradientEstimate, inputs, progress=None)
     write_atomic(path, writer, inputs)
 
 
+def _check_options(args: argparse.Namespace) -> None:
+    """Refuse options the chosen estimator would ignore (red team: --tau-s and --dt0-c
+    with the kinematic default, --order with --method model, were dropped without a word)."""
+    if not 0.0 <= args.sensor_tau_s <= SENSOR_TAU_MAX_S:
+        raise ParameterError(
+            f"--sensor-tau-s {args.sensor_tau_s:g}: a temperature sensor's own lag is 0 .. "
+            f"{SENSOR_TAU_MAX_S:g} s (seconds to minutes); a lag that long is the device's own "
+            "(--tau-s with --method model): check the unit (seconds)"
+        )
+    if args.method == "model":
+        if args.sensor_tau_s:
+            raise ParameterError(
+                "--sensor-tau-s is for the kinematic estimator; the model-based one would need "
+                "the sensor in its thermal model (drop --method model)"
+            )
+        if args.order is not None:
+            raise ParameterError(
+                f"--order {args.order} is the kinematic estimator's model; the model-based one "
+                "uses the thermal model (drop --order, or --method model)"
+            )
+        return
+    given = [f"--{n.replace('_', '-')}" for n in ("tau_s", "dt0_c") if getattr(args, n) is not None]
+    if args.chamber != "tk_set_c":
+        given.append(f"--chamber {args.chamber}")
+    if given:
+        raise ParameterError(
+            f"{' and '.join(given)} {'is' if len(given) == 1 else 'are'} for the model-based "
+            "estimator; the kinematic one (the default) uses no thermal model and would ignore "
+            f"{'it' if len(given) == 1 else 'them'}: add --method model, or drop "
+            f"{'it' if len(given) == 1 else 'them'}"
+        )
+
+
 def run(args: argparse.Namespace) -> int:
     from .. import plots
 
@@ -127,16 +165,12 @@ def run(args: argparse.Namespace) -> int:
             f"--region {args.region[0]:g} {args.region[1]:g}: LO must be below HI (°C); "
             f"give the working region as --region {min(args.region):g} {max(args.region):g}"
         )
+    _check_options(args)
     names = ("gradient.csv", "phase.png", "gradient.png")
     out = _common.output_dir(args.out, "out/estimate", [args.log], names)
     progress = None if args.quiet else StderrProgress("estimate")
     log = read_log(args.log, keep_extra=False, progress=progress)
     print_log_report(log)
-    if args.sensor_tau_s and args.method == "model":
-        raise ParameterError(
-            "--sensor-tau-s is for the kinematic estimator; the model-based one would need the "
-            "sensor in its thermal model (drop --method model)"
-        )
     if args.method == "model":
         params = _common.thermal_params(args)
         est = estimate_gradient_model(
@@ -155,7 +189,7 @@ def run(args: argparse.Namespace) -> int:
             r=args.r,
             every_s=args.every,
             progress=progress,
-            order=args.order,
+            order=3 if args.order is None else args.order,
             sensor_tau_s=args.sensor_tau_s,
         )
     write_gradient_csv(out.path("gradient.csv"), est, [args.log], progress)
