@@ -231,3 +231,37 @@ def test_when_no_count_is_complete_the_part_of_the_region_that_fits_is_planned(t
         <= rates.max()
         <= limits.rate_max_c_per_min + 1e-3
     )
+
+
+@pytest.mark.parametrize("complete_at", [3, None])
+def test_the_walk_down_searches_sub_regions_for_the_first_guess_and_the_fewest_only(
+    monkeypatch, complete_at
+):
+    """Red team: planning 6 levels in [5, 35] degC for a tau-600 s device, the graded
+    search walked from 5 levels down to 3 and searched sub-regions at every count (90 of
+    its 245 s), although a lower count's complete plan replaces those partial plans. The
+    first guess and the fewest levels (the partial that covers most, when no count
+    completes) still get them."""
+    import types
+
+    seen: dict[int, bool] = {}
+
+    def fake_plan(spec_, params, limits, progress, effort, **kwargs):
+        seen[spec_.levels_required] = effort.partials
+        if complete_at is not None and spec_.levels_required <= complete_at:
+            return types.SimpleNamespace(complete=True)
+        raise InfeasiblePlanError("none", best_coverage=0.5)
+
+    monkeypatch.setattr(core, "_plan_nominal", fake_plan)
+    monkeypatch.setattr(
+        core, "duration_lower_bound", lambda *a, **k: types.SimpleNamespace(lower_bound_min=1.0)
+    )
+    spec = dataclasses.replace(SPEC, levels_required=7)
+    effort = core._Effort(lp_nonzeros_solved(), None, None)
+    found = core._fewer_levels(spec, ThermalParams(), LIMITS, None, effort, partials=[])
+    if complete_at is None:
+        assert found is None and seen == {6: True, 5: False, 4: False, 3: False, 2: True}
+    else:
+        assert found is not None and found.levels == 3
+        assert seen == {6: True, 5: False, 4: False, 3: False}
+    assert effort.partials  # restored for the searches after the walk

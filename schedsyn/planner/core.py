@@ -86,6 +86,10 @@ class _Effort:
     hit: bool = False
     hit_limit: bool = False
     answered: bool = False
+    #: whether a search that finds no complete plan looks for sub-regions that fit (its
+    #: partial plan, a last resort); the graded search's later counts do not
+    #: (:func:`_fewer_levels`)
+    partials: bool = True
     #: what the optional searches that the limit stops are
     what: str = "some fewer-level counts or sub-regions were not searched"
     #: the call's tables will end with a soak (plan_experiment's ``end_soak``): carried
@@ -205,7 +209,7 @@ def _fallback(
         models,
         progress,
         stats,
-        stop=lambda: full_coverage_found() or effort.spent(),
+        stop=lambda: full_coverage_found() or effort.spent() or not effort.partials,
         deep=lambda: not options,  # nothing else covers any part of the region
     ):
         assert sub_search.best is not None  # subregions yields only what fits
@@ -1266,7 +1270,10 @@ def _fewer_levels(
     Completeness is taken as monotone in the count (fewer levels, more time to spare):
     the search stops at the first count where it changes. The first guess is always
     searched; the others only while ``effort`` is not spent (a count whose search was
-    stopped counts as not found).
+    stopped counts as not found). Sub-regions (for ``partials``) are searched for the
+    first guess and the fewest levels only: on the way down they cost as much as the
+    count's own search again and are dropped as soon as a lower count completes (a
+    red-team request spent 90 s of its 245 s walk from 5 down to 3 levels on them).
     """
     fits = [
         k
@@ -1290,6 +1297,8 @@ def _fewer_levels(
                 f"no complete plan found with {spec.levels_required} levels per bin: "
                 f"planning {levels} instead"
             )
+        # partial plans (sub-regions) from the first guess and the fewest levels only
+        effort.partials = first or levels == fits[0]
         try:
             alt = _plan_nominal(  # complete or nothing (a partial plan kept: a last resort)
                 dataclasses.replace(spec, levels_required=levels),
@@ -1306,6 +1315,8 @@ def _fewer_levels(
                 partials.append(err.best_plan)
         except SolverFailedError:
             alt = None  # (numerical failures prove nothing; that count is skipped)
+        finally:
+            effort.partials = True
         tried[levels] = alt if alt is not None and alt.complete else None
         effort.answered = effort.answered or tried[levels] is not None
         return tried[levels]
