@@ -167,8 +167,8 @@ def test_the_same_request_gets_the_same_answer_on_a_slower_machine(monkeypatch):
     """The effort limit cuts the graded search at the same place whatever the clocks say:
     a machine (or a load) that makes every CPU second count ten times gives the same
     plan, with the same levels and the same steps. Planned without the timetable stage:
-    the effort limit is the band search's (the stage, after it, has no effort limit and
-    counts its work in LP solves; here it found nothing in half a minute of LPs per run,
+    the effort limit is the band search's (the stage, after it, counts its work in LP
+    solves, a budget the limit only scales; here it found nothing in half a minute per run,
     and the plan was the band search's either way). The limit must bite in both runs:
     the first run's note is asserted, the slow run's must be the same."""
     spec = dataclasses.replace(SPEC, levels_required=5)
@@ -265,3 +265,27 @@ def test_the_walk_down_searches_sub_regions_for_the_first_guess_and_the_fewest_o
         assert found is not None and found.levels == 3
         assert seen == {6: True, 5: False, 4: False, 3: False}
     assert effort.partials  # restored for the searches after the walk
+
+
+def test_a_small_effort_limit_shrinks_the_timetable_stage_once_a_plan_is_in_hand(monkeypatch):
+    """Red team: with --effort-s 15 the timetable stage still spent its full 500 LPs
+    (110 s) after the graded answer. With a plan in hand its budget scales with the limit;
+    with nothing in hand, or no limit, it keeps the whole budget."""
+    import types
+
+    from schedsyn.planner import timetable
+
+    budgets: list[int] = []
+
+    def fake_search(*args, max_lps, **kwargs):
+        budgets.append(max_lps)
+        return None
+
+    monkeypatch.setattr(timetable, "timetable_search", fake_search)
+    band = types.SimpleNamespace(duration_min=300.0)
+    for plan, effort_s in [(band, 15.0), (band, None), (None, 15.0), (band, 1e-6), (band, 90.0)]:
+        core._timetable_plan(SPEC, ThermalParams(), LIMITS, None, None, plan, 0.0,
+                             effort_s=effort_s)  # fmt: skip
+    full = timetable.MAX_LPS
+    assert budgets == [round(full * 15.0 / core.EFFORT_S), full, full, core.MIN_TIMETABLE_LPS,
+                       full]  # fmt: skip

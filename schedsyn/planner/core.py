@@ -49,6 +49,9 @@ COARSER_FACTORS = (2, 3, 5, 10)
 #: the graded search for fewer levels; see :func:`plan_experiment`), in reference seconds
 #: (:data:`LP_NONZEROS_PER_EFFORT_S`).
 EFFORT_S = 45.0
+#: The fewest LP solves the timetable stage gets under a small effort limit (its first
+#: candidate's SLP takes 10-60).
+MIN_TIMETABLE_LPS = 50
 #: Effort is counted in LP work, not time: one reference second is this many
 #: constraint-matrix nonzeros solved (:func:`.lp.lp_nonzeros_solved`). Measured on the
 #: 2-core machine of 2026-11-25, one core: 345 000 per CPU second planning W1 for 8
@@ -335,7 +338,9 @@ def plan_experiment(
         sooner or later. The search for the requested plan itself runs to its end,
         unless its proven bound times ``GUESS_BOUND_RATIO`` exceeds the budget (no
         complete plan known was that close to its bound) and a graded plan for fewer
-        levels is already in hand. None: no limit.
+        levels is already in hand. With a plan in hand, a limit below :data:`EFFORT_S`
+        also scales the timetable stage's LP budget down (at least
+        :data:`MIN_TIMETABLE_LPS`). None: no limit.
     stop : callable() -> bool, optional
         Asked before each candidate structure of every search, the requested plan's too:
         True stops the search with what it has (cancellation by the caller).
@@ -423,13 +428,16 @@ def plan_experiment(
     if plan.complete:
         if not shorten:
             return plan
-        shorter = _timetable_plan(spec, params, limits, model, progress, plan, tic, shorten=True)
+        shorter = _timetable_plan(
+            spec, params, limits, model, progress, plan, tic, shorten=True, effort_s=effort_s
+        )
         if shorter is None or shorter.duration_min >= plan.duration_min:
             return _timed(plan, tic)
         return shorter
     # (the stage's own time counts: a red team's incomplete plan said "solved in 49 s"
     # after 315 s, most of it in the stage)
-    return _timetable_plan(spec, params, limits, model, progress, plan, tic) or _timed(plan, tic)
+    found = _timetable_plan(spec, params, limits, model, progress, plan, tic, effort_s=effort_s)
+    return found or _timed(plan, tic)
 
 
 def _timed(plan: Plan, tic: float) -> Plan:
@@ -446,14 +454,22 @@ def _timetable_plan(
     band_plan: Plan | None,
     tic: float,
     shorten: bool = False,
+    effort_s: float | None = None,
 ) -> Plan | None:
     """The timetable stage's plan for a request the band search did not complete, checked
     like every plan (dense re-simulation of the rounded table, limits, step limits), or
     None. ``band_plan``: the band search's best (its notes about the search are replaced
     by what the timetable did). ``shorten``: ``band_plan`` is complete and the stage looks
     for a shorter one (the shortest of its candidates within its LP budget, not the
-    first)."""
-    from .timetable import SAFETY_C_PER_MIN, timetable_search
+    first). ``effort_s``: with a plan in hand, an effort limit below :data:`EFFORT_S`
+    scales the stage's LP budget down with it (red team: ``--effort-s 15`` left the stage
+    its full 500 LPs, 110 s after the graded answer); None, or nothing in hand, the whole
+    budget."""
+    from .timetable import MAX_LPS, SAFETY_C_PER_MIN, timetable_search
+
+    max_lps = MAX_LPS
+    if band_plan is not None and effort_s is not None:
+        max_lps = max(MIN_TIMETABLE_LPS, round(MAX_LPS * min(1.0, effort_s / EFFORT_S)))
 
     if progress:
         why = (
@@ -464,7 +480,13 @@ def _timetable_plan(
         )
         progress(f"{spec.name}: {why}")
     found = timetable_search(
-        spec, params, limits, model=model, first_found=not shorten, progress=progress
+        spec,
+        params,
+        limits,
+        model=model,
+        max_lps=max_lps,
+        first_found=not shorten,
+        progress=progress,
     )
     if found is None:
         if progress:
