@@ -1675,7 +1675,9 @@ class GradientEstimate:
             return [
                 f"the filter's innovations are not white (lag-1 autocorrelation {a1:.2f}; "
                 "about 0 for white sensor noise): the sensor noise is correlated over "
-                "several readings (a slowly wandering reading) or the model misses "
+                "several readings (a slowly wandering reading), the temperature cycles "
+                "within a few readings (a chamber's control cycling sampled too slowly: "
+                "log faster; schedsyn diagnose names cycling) or the model misses "
                 "something; g_std_c_per_min and t_std_c are then too small (2-3x on "
                 "simulated noise correlated over 30-600 s): treat them as lower bounds"
             ]
