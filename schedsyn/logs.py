@@ -492,6 +492,12 @@ SWAP_MIN_RESIDUAL_SHARE = 0.05
 SWAP_RATIO = 10.0
 ROOM_F_MIN_SPAN_S = 3600.0
 ROOM_F_END_MIN = 5.0  # the minutes at either end whose median is taken
+#: A t_int_c column on another scale (tenths of a degree, a /10 or x10 conversion): the
+#: best fit with the slope free (``unit_fits``'s ``"free"``) outside these slopes, at
+#: FAHRENHEIT_MIN_R2 or better and leaving at most FAHRENHEIT_SSR_RATIO of the 1:1 fit's
+#: squared residual, is refused (red team 2026-12-05: t_int_c divided by 10 was estimated
+#: without a word). Fahrenheit (1.8, 1/1.8) lies inside and keeps its own message.
+SCALE_SLOPE_RANGE = (0.4, 2.5)
 
 
 def unit_fits(
@@ -503,7 +509,8 @@ def unit_fits(
 
     ``lag`` is the first-order lag of the chamber temperature (linear between readings,
     exact discretisation on a uniform grid) started where the chamber starts; ``c1`` is
-    fixed by the first readings (a device that starts elsewhere), ``c0`` is free. None
+    fixed by the first readings (a device that starts elsewhere), ``c0`` is free. Under
+    ``"free"``: ``(r2, slope)`` of the best fit with the slope free too. None
     where fewer than 20 rows have both readings, the chamber moved less than
     ``FAHRENHEIT_MIN_CHAMBER_SPAN_C`` or the log spans less than ``FAHRENHEIT_MIN_SPAN_S``.
     """
@@ -526,7 +533,7 @@ def unit_fits(
     xg = np.interp(grid, t, x) - x[0]
     sst = float(np.sum((y - y.mean()) ** 2))
     y0 = float(np.median(y[:5]))  # the start, robust to one noisy reading
-    best = {name: (-math.inf, math.nan) for name in UNIT_SLOPES}
+    best = {name: (-math.inf, math.nan) for name in (*UNIT_SLOPES, "free")}
 
     def lag(v: np.ndarray, tau: float) -> np.ndarray:
         return lag_foh(v, float(v[0]), tau, h)
@@ -547,6 +554,13 @@ def unit_fits(
             r2 = 1.0 - float(np.sum((rest - c0 * (1.0 - decay)) ** 2)) / sst
             if r2 > best[name][0]:
                 best[name] = (r2, tau)
+        # the slope free: y - y0 decay = slope lagged + c0 (1 - decay)
+        basis = np.column_stack([lagged, 1.0 - decay])
+        target = y - y0 * decay
+        coef, *_ = np.linalg.lstsq(basis, target, rcond=None)
+        r2 = 1.0 - float(np.sum((target - basis @ coef) ** 2)) / sst
+        if r2 > best["free"][0]:
+            best["free"] = (r2, float(coef[0]))
     return best
 
 
@@ -564,6 +578,19 @@ def _check_fahrenheit(values: dict[str, np.ndarray], source: str) -> tuple[str, 
             continue
         r2_c = fits["celsius"][0]
         _check_swapped(values, col, 1.0 - r2_c, source)
+        r2_free, slope = fits["free"]
+        lo, hi = SCALE_SLOPE_RANGE
+        if (
+            r2_free >= FAHRENHEIT_MIN_R2
+            and not lo <= slope <= hi
+            and (1.0 - r2_free) <= FAHRENHEIT_SSR_RATIO * max(1.0 - r2_c, 1e-300)
+        ):
+            raise LogFormatError(
+                f"{source}: t_int_c moves {slope:.3g}x as far as {col} (fitted lag: "
+                f"{100 * r2_free:.1f} % of its variance; 1:1, as a device in °C follows its "
+                f"chamber in °C: {max(100 * r2_c, 0.0):.1f} %): is one of them on another scale "
+                "(tenths of a degree, a factor of 10)? Write both in °C"
+            )
         for name, what in (
             ("t_int_c_fahrenheit", "t_int_c"),
             ("chamber_fahrenheit", col),

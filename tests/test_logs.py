@@ -1,5 +1,6 @@
 """The measured-log reader: contracts, clear errors, NaN/gap reports, synthetic logs."""
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -458,3 +459,19 @@ def test_collector_grows_past_a_low_row_estimate():
     np.testing.assert_array_equal(log.time_s, f["time_s"].to_numpy())
     np.testing.assert_array_equal(log.t_int_c, f["t_int_c"].to_numpy())
     assert log.report == log_from_frame(f).report
+
+
+@pytest.mark.parametrize("scale", [0.1, 0.3, 2.7])
+def test_a_device_column_on_another_scale_is_refused(scale):
+    """Red team: t_int_c divided by 10 (tenths of a degree read as degrees, or the
+    reverse) was estimated without a word: it stays plausible in degC, but the device
+    would move a tenth as far as its chamber drives it. The free-slope fit names the
+    factor; the log as it is reads."""
+    f = pd.read_csv(DATA / "sample_run_exp1.csv")
+    log_from_frame(f)
+    centre = float(f["t_int_c"].mean())  # scaled about the run's middle: stays plausible
+    scaled = f.assign(t_int_c=centre + scale * (f["t_int_c"] - centre))
+    with pytest.raises(LogFormatError, match=r"t_int_c moves [\d.]+x as far as tk_set_c") as e:
+        log_from_frame(scaled)
+    moved = float(re.search(r"moves ([\d.]+)x", str(e.value)).group(1))
+    assert moved == pytest.approx(scale, rel=0.1)
