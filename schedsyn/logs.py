@@ -497,7 +497,11 @@ ROOM_F_END_MIN = 5.0  # the minutes at either end whose median is taken
 #: FAHRENHEIT_MIN_R2 or better and leaving at most FAHRENHEIT_SSR_RATIO of the 1:1 fit's
 #: squared residual, is refused (red team 2026-12-05: t_int_c divided by 10 was estimated
 #: without a word). Fahrenheit (1.8, 1/1.8) lies inside and keeps its own message.
+#: Outside SCALE_SLOPE_RANGE a warning, outside SCALE_SLOPE_REFUSE an error: a device
+#: that leaks heat to the room through its fixture follows its chamber at a slope below
+#: 1 (0.8 is seen; a warning, not a refusal it could not get past, down to 0.2).
 SCALE_SLOPE_RANGE = (0.4, 2.5)
+SCALE_SLOPE_REFUSE = (0.2, 5.0)
 
 
 def unit_fits(
@@ -585,12 +589,19 @@ def _check_fahrenheit(values: dict[str, np.ndarray], source: str) -> tuple[str, 
             and not lo <= slope <= hi
             and (1.0 - r2_free) <= FAHRENHEIT_SSR_RATIO * max(1.0 - r2_c, 1e-300)
         ):
-            raise LogFormatError(
-                f"{source}: t_int_c moves {slope:.3g}x as far as {col} (fitted lag: "
+            text = (
+                f"t_int_c moves {slope:.3g}x as far as {col} (fitted lag: "
                 f"{100 * r2_free:.1f} % of its variance; 1:1, as a device in °C follows its "
                 f"chamber in °C: {max(100 * r2_c, 0.0):.1f} %): is one of them on another scale "
-                "(tenths of a degree, a factor of 10)? Write both in °C"
+                "(tenths of a degree, a factor of 10)?"
             )
+            if not SCALE_SLOPE_REFUSE[0] <= slope <= SCALE_SLOPE_REFUSE[1]:
+                raise LogFormatError(f"{source}: {text} Write both in °C")
+            if not warned:
+                warned.append(
+                    f"{text} If so, write both in °C; if not, the device follows its chamber "
+                    "only partly (heat through its fixture) and a model fitted to it is doubtful"
+                )
         for name, what in (
             ("t_int_c_fahrenheit", "t_int_c"),
             ("chamber_fahrenheit", col),
