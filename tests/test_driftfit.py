@@ -1282,3 +1282,17 @@ def test_a_sparse_log_is_told_its_sampling_leaves_bins_short():
         ParameterError, match=r"passes through \d+ of them, but the log samples every 60 s"
     ):
         fit_drift(log, (-2.0, 33.0), FitSettings(min_points_per_bin=40))
+
+
+def test_cli_fit_refuses_a_drift_in_degrees_per_second_unless_told(logs_dir, tmp_path, capsys):
+    frame = pd.read_csv(logs_dir / "run1.csv")
+    frame["drift_dph"] /= 3600.0
+    path = tmp_path / "dps.csv"
+    frame.to_csv(path, index=False)
+    args = ["fit", str(path), "--region", "-50", "-21", "--quiet"]
+    assert main([*args, "--out", str(tmp_path / "a")]) == 2
+    err = capsys.readouterr().err
+    assert "reads like °/s (multiply by 3600)" in err and err.count("\n") == 1, err
+    assert not (tmp_path / "a").exists()
+    assert main([*args, "--out", str(tmp_path / "b"), "--trust-drift-units"]) == 0
+    assert (tmp_path / "b" / "compensation.csv").exists()
