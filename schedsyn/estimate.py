@@ -1031,11 +1031,11 @@ class _Setup:
         assert self.model is None and self.order == 3
         cols = [h_rows]
         for arr in (self.q_extra, self.g_extra):
-            extra = np.zeros(hi - lo) if arr is None else arr[lo:hi]
             if arr is None:
-                prev = extra
-            else:
-                prev = arr[lo - 1 : hi - 1] if lo > 0 else np.concatenate(([0.0], extra[:-1]))
+                cols.append(np.zeros(hi - lo))
+                continue
+            extra = arr[lo:hi]
+            prev = arr[lo - 1 : hi - 1] if lo > 0 else np.concatenate(([0.0], extra[:-1]))
             same = same & (extra == prev)
             cols.append(extra)
         trip, idx = np.unique(np.vstack(cols), axis=1, return_inverse=True)
