@@ -960,6 +960,10 @@ class _Setup:
     #: step adds ``var S(h)^2`` to T's process noise (a reading enters the two steps it
     #: bounds with weights summing to ``S``, so over many steps that is its share)
     input_var_c2: float = 0.0
+    #: model-based: per row, extra variance of T over the step into it, degC^2 (None:
+    #: none): the unknown instant of a setpoint step between two readings
+    #: (:func:`step_instant_var_c2`)
+    t_extra: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -1010,12 +1014,20 @@ class _Setup:
         h_rows, same, u = self.steps(lo, hi)
         if self.q_extra is not None or self.g_extra is not None:
             return self._extra_rows(lo, hi, q, h_rows, same, u)
-        h, idx = np.unique(h_rows, return_inverse=True)  # the distinct steps
         if self.model is not None:
-            a, b, q11, q12, q22 = lag_transition(h, self.model, q)
-            q11 = q11 + self.input_var_c2 * (1.0 - a) ** 2
+            # the distinct (step, extra T variance) pairs; a row whose extra differs from
+            # the row before is not `same`
+            extra = np.zeros(hi - lo) if self.t_extra is None else self.t_extra[lo:hi]
+            if self.t_extra is not None:
+                prev = self.t_extra[lo - 1 : hi - 1] if lo > 0 else np.append(0.0, extra[:-1])
+                same = same & (extra == prev)
+            pairs, idx = np.unique(np.vstack((h_rows, extra)), axis=1, return_inverse=True)
+            a, b, q11, q12, q22 = lag_transition(pairs[0], self.model, q)
+            q11 = q11 + self.input_var_c2 * (1.0 - a) ** 2 + pairs[1]
             f, _, qq = _embed(a, b, 0.0, q11, q12, q22)
-        elif self.order == 2:
+            return _Rows(self.y[lo:hi], same, u, f, qq, idx.reshape(-1), self.dim)
+        h, idx = np.unique(h_rows, return_inverse=True)  # the distinct steps
+        if self.order == 2:
             a, b, q11, q12, q22 = kinematic_transition(h, q)
             f, _, qq = _embed(a, b, 0.0, q11, q12, q22)
         else:
@@ -1083,6 +1095,14 @@ class _Setup:
             den = np.diff(self.time_s[idx], prepend=self.time_s[0]) / 60.0  # coarse steps
             return np.divide(num, den, out=np.zeros(idx.size), where=den > 0)
 
+        t_extra = None
+        if self.t_extra is not None:
+            # variances over the fine steps add (each decays by e <= 1 to the coarse row:
+            # a little more than the exact allowance)
+            fine = np.arange(1, int(idx[-1]) + 1)
+            t_extra = np.bincount(
+                (fine + step - 1) // step, weights=self.t_extra[fine], minlength=idx.size
+            )[: idx.size]
         # the merged input averages ``step`` readings' noise: its variance ~ 1/step
         return _Setup(
             self.time_s[idx],
@@ -1094,6 +1114,7 @@ class _Setup:
             per_coarse_step(self.q_extra),
             per_coarse_step(self.g_extra),
             input_var_c2=self.input_var_c2 / step,
+            t_extra=t_extra,
         )
 
 
@@ -1364,6 +1385,34 @@ def step_g_extra(time_s: np.ndarray, steps: list[tuple[int, float]]) -> np.ndarr
         settle = STEP_SETTLE_BASE_MIN + abs(jump) / STEP_SETTLE_RATE_C_PER_MIN
         after = slice(row + 1, int(np.searchsorted(t_min, t_min[row] + settle, side="right")) + 1)
         extra[after] += STEP_SETTLE_SHARE * dg2 / settle
+    return extra
+
+
+def step_instant_var_c2(
+    time_s: np.ndarray, steps: list[tuple[int, float]], model: FirstOrderLag
+) -> np.ndarray:
+    """Per row, the variance of ``T`` that a setpoint step's unknown instant adds over the
+    step into the row, degC^2 (model-based smoother, :func:`setpoint_steps`).
+
+    The log shows a step ``dS`` only as a jump between two readings ``h`` apart; the
+    smoother's input takes it as a ramp over ``h``, which is the mean over an instant
+    ``theta`` spread evenly over the step. The device's ``T`` at the next reading moves by
+    ``dS (1 - exp(-(h - theta)/tau))``, of variance ``dS^2 var(exp(-x))`` for ``x``
+    uniform on ``[0, c]``, ``c = h/tau``: ``(1 - e^(-2c))/(2c) - ((1 - e^(-c))/c)^2``
+    (``c^2/12 - c^3/12 + ...``; the series below ``c = 1e-3``, where the difference
+    cancels). Red team 2026-12-05: steps of 3-15 degC in a 10-s log gave gradient errors
+    of 6e-4 degC/min against a sigma of 7e-5 (|z| up to 8, 56 % within 2 sigma)."""
+    t_min = np.asarray(time_s, dtype=float) / 60.0
+    extra = np.zeros(t_min.size)
+    for row, jump in steps:
+        if row <= 0:
+            continue
+        c = (t_min[row] - t_min[row - 1]) / model.tau_min
+        if c < 1e-3:
+            var = c * c / 12.0 - c**3 / 12.0 + 17.0 * c**4 / 360.0
+        else:
+            var = -math.expm1(-2.0 * c) / (2.0 * c) - (-math.expm1(-c) / c) ** 2
+        extra[row] += jump * jump * max(var, 0.0)
     return extra
 
 
@@ -2195,6 +2244,10 @@ def estimate_gradient_model(
     if chamber == "tk_set_c":  # the programme: piecewise linear, corners between samples
         corners = setpoint_corners_between_samples(log.time_s, tk)
         corner_u = corner_inputs(log.time_s, tk, corners, model) if corners[0].size else None
+        steps = setpoint_steps(log.time_s, tk)
+        t_extra = step_instant_var_c2(log.time_s, steps, model) if steps else None
+    else:
+        t_extra = None
     tau = params.tau_min
     # a measured chamber (the air) carries its own noise into g = (Tk + ...)/tau directly,
     # and into T through the model's input; the programme's setpoint carries none
@@ -2206,6 +2259,7 @@ def estimate_gradient_model(
         tk,
         corner_u=corner_u,
         input_var_c2=var_tk,
+        t_extra=t_extra,
     )
 
     def grad(rows, x1, x2, p11, p12, p22):

@@ -1017,3 +1017,61 @@ def test_the_gradient_sigma_holds_at_setpoint_steps(sample_s):
     assert np.max(np.abs(z)) < 5.0, np.max(np.abs(z))
     assert np.mean(np.abs(z[~near]) <= 2.0) >= 0.9  # and the rest is not made loose
     assert np.sqrt(np.mean(err[near] ** 2)) < 0.02
+
+
+@pytest.mark.parametrize("c", [1e-5, 4e-4, 2e-3, 0.05, 0.7])
+def test_step_instant_variance_matches_quadrature(c):
+    """The variance a step's unknown instant adds to T: ``dS^2 var(exp(-x))`` for ``x``
+    uniform on ``[0, c]``, against scipy's quadrature (both branches: series, closed)."""
+    from scipy.integrate import quad
+
+    from schedsyn.estimate import step_instant_var_c2
+    from schedsyn.model import FirstOrderLag
+
+    tau_min = 40.0
+    h_min = c * tau_min
+    mean = quad(lambda x: math.exp(-x) / c, 0.0, c, epsrel=1e-13)[0]
+    var = quad(lambda x: (math.exp(-x) - mean) ** 2 / c, 0.0, c, epsabs=0.0, epsrel=1e-12)[0]
+    t_s = 60.0 * np.array([0.0, 3.0, 3.0 + h_min, 10.0])
+    got = step_instant_var_c2(t_s, [(2, -7.0)], FirstOrderLag(ThermalParams(tau_s=2400.0)))
+    np.testing.assert_allclose(got, [0.0, 0.0, 49.0 * var, 0.0], rtol=1e-6, atol=0.0)
+
+
+@pytest.mark.parametrize("sample_s", [2.0, 10.0, 60.0])
+def test_the_model_based_sigma_holds_at_setpoint_steps(sample_s):
+    """Red team 2026-12-05: the model-based smoother takes a step between two readings as
+    a ramp over the step (its mean over the unknown instant), but not the spread of T
+    that the instant leaves (``dS h / (tau sqrt 12)``, ~0.02 degC for 15 degC in 10 s):
+    56 % within 2 sigma, |z| 8, and the correction ``d`` fitted to chase it. With that
+    variance on the step: at least 95 % within 2 sigma and the error smaller than 2e-4
+    degC/min (before: 1.8e-4 and 6.6e-4 at 10 s and 60 s). Truth: the closed-form response
+    to the steps."""
+    steps_min = np.array([57.7, 110.8, 161.0, 212.5, 248.7, 298.7]) + sample_s / 150.0
+    levels_c = np.array([20.0, 28.0, 31.3, 38.3, 33.7, 27.5, 12.8])
+    log, _, g_true = _step_log(steps_min, levels_c, 40.0, 3.0, sample_s, seed=2)
+    est = estimate_gradient_model(log, ThermalParams(tau_s=2400.0, dt0_c=3.0))
+    err = est.g_est_c_per_min - g_true
+    z = err / est.g_std_c_per_min
+    assert np.mean(np.abs(z) <= 2.0) >= 0.95, np.mean(np.abs(z) <= 2.0)
+    assert np.max(np.abs(z)) < 4.0, np.max(np.abs(z))
+    assert np.sqrt(np.mean(err**2)) < 2e-4, np.sqrt(np.mean(err**2))
+
+
+def test_a_strided_copy_keeps_the_step_instant_variance():
+    """The noise search's strided copy (long logs) carries each coarse step's share of
+    the step-instant variance: the sum over the fine steps it merges."""
+    import schedsyn.estimate as est_mod
+    from schedsyn.model import FirstOrderLag
+
+    n = 20
+    extra = np.zeros(n)
+    extra[[1, 5, 6, 13]] = [1e-4, 2e-4, 3e-4, 4e-4]
+    t_s = 10.0 * np.arange(n)
+    setup = est_mod._Setup(
+        t_s, np.zeros(n), FirstOrderLag(ThermalParams()), np.full(n, 20.0), t_extra=extra
+    )
+    coarse = setup.stride(3)  # rows 0, 3, 6, ...: coarse step j merges fine rows 3j-2..3j
+    want = [sum(extra[r] for r in range(max(3 * j - 2, 1), 3 * j + 1)) for j in range(7)]
+    assert coarse.t_extra is not None
+    np.testing.assert_allclose(coarse.t_extra, want, rtol=1e-12, atol=0.0)
+    assert coarse.rows(0, coarse.n, 1.0).q_at(2)[0] > coarse.rows(0, coarse.n, 1.0).q_at(3)[0]
