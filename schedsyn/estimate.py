@@ -58,7 +58,7 @@ import pandas as pd
 from scipy.optimize import minimize
 from scipy.signal import lfilter
 
-from .discrepancy import setpoint_corners
+from .discrepancy import setpoint_corners, setpoint_quantum_c, setpoint_tolerance_c
 from .errors import LogFormatError, ParameterError
 from .logs import MeasuredLog
 from .model import FirstOrderLag
@@ -139,6 +139,11 @@ RATE_SAMPLES_PER_SCALE = 200.0
 #: degC, a ~1e-2 degC offset of T after a 3 degC/min change in a 60 s step that only the
 #: readings can undo (~tau later).
 SETPOINT_CORNER_TOL_C = 0.05
+#: The least a setpoint read as its programme (:func:`setpoint_at_samples`) is taken to
+#: be off it, as a share of its readings' own variance (rounding or jitter): the
+#: programme's lines through ~100 rounded readings per segment (red team 2026-12-05:
+#: 0.005-0.007 degC RMS off a 0.1 degC-rounded setpoint's programme).
+SETPOINT_LINE_SHARE = 0.04
 #: A corner closer than this to a sample is on it (the linear input is exact), s.
 SETPOINT_CORNER_ON_SAMPLE_S = 1e-6
 
@@ -233,6 +238,38 @@ def setpoint_corners_between_samples(
     tol = SETPOINT_CORNER_ON_SAMPLE_S
     inside = (tc_s > t[row - 1] + tol) & (tc_s < t[row] - tol)
     return row[inside], tc_s[inside], vc_c[inside]
+
+
+def setpoint_at_samples(time_s: np.ndarray, tk_set_c: np.ndarray) -> tuple[np.ndarray, float]:
+    """The logged setpoint at the log's times as the piecewise-linear programme it logs.
+
+    A setpoint logged to a coarse resolution (0.1 or 1 degC) or with jitter strays from
+    its programme by up to the resolution: the model-based smoother took each reading as
+    the chamber's input and ``g = (Tk + dT0 - T)/tau`` directly, with an error of
+    ``q/sqrt(12)/tau`` its sigma left out (red team 2026-12-05: rounded to 0.1 degC,
+    RMS error 6e-4 degC/min at 32 % within 2 sigma; to 1 degC, 6e-3 at 31 %). There the
+    programme's corners (:func:`schedsyn.discrepancy.setpoint_corners`, whose tolerance
+    widens to the resolution and the jitter: least-squares lines per segment) give the
+    setpoint at every row; a setpoint logged finely (the tolerance not widened) is
+    returned as it is.
+
+    Returns ``(setpoint_c, var_c2)``: ``var_c2`` is what the readings' spread around the
+    programme leaves beyond their own rounding (``q^2/12``; a jittering setpoint's: its
+    noise), the programme's error where its corners are placed loosely (0 when returned
+    as it is); the smoother takes it as the chamber input's noise."""
+    y = np.asarray(tk_set_c, dtype=float)
+    t = np.asarray(time_s, dtype=float)
+    tol = setpoint_tolerance_c(y, SETPOINT_CORNER_TOL_C) if t.size >= 3 else 0.0
+    if tol <= SETPOINT_CORNER_TOL_C:
+        return y, 0.0
+    tb_min, yb_c = setpoint_corners(t, y, SETPOINT_CORNER_TOL_C)
+    prog = np.interp((t - t[0]) / 60.0, tb_min, yb_c)
+    quantum = setpoint_quantum_c(y)
+    own = quantum**2 / 12.0 if quantum is not None else (tol / 6.0) ** 2
+    # at least a least-squares line's own error through the median segment's readings
+    per_segment = np.diff(np.searchsorted((t - t[0]) / 60.0, tb_min))
+    floor = own * max(SETPOINT_LINE_SHARE, 2.0 / max(float(np.median(per_segment)), 1.0))
+    return prog, max(float(np.mean((y - prog) ** 2)) - own, floor)
 
 
 def corner_inputs(
@@ -1341,7 +1378,16 @@ def setpoint_steps(time_s: np.ndarray, tk_set_c: np.ndarray | None) -> list[tupl
     :data:`SETPOINT_STEP_MIN_RATE_C_PER_MIN` (faster than a programmed ramp), or of at
     least :data:`SETPOINT_STEP_ALONE_RATE_C_PER_MIN` and :data:`SETPOINT_STEP_ALONE_RATIO`
     times the rates of the steps on either side (a 4.5 degC step in a 60-s log between
-    rows moving 0.17 and 0 degC/min); empty without a setpoint (NaN rows skipped over)."""
+    rows moving 0.17 and 0 degC/min); empty without a setpoint (NaN rows skipped over).
+
+    Consecutive such rows are one event. An event is not a step but a ramp when it lasts
+    longer than :data:`SETPOINT_STEP_MAX_MIN` (or two rows; a chamber ramping faster
+    than 5 degC/min), or when another event at least half its size lies within
+    :data:`SETPOINT_STEP_APART_MIN` of it: a setpoint logged to a coarse resolution
+    (a ramp logged to 1 degC jumps a whole degree every so often) or a staircase of
+    small steps, which a device of a time constant of tens of minutes follows as a ramp.
+    Red team 2026-12-05: a setpoint rounded to 1 degC made every jump a step and the
+    gradient's RMS error 5x larger (0.0015 -> 0.0081 degC/min)."""
     if tk_set_c is None:
         return []
     sp = np.asarray(tk_set_c, dtype=float)
@@ -1357,8 +1403,29 @@ def setpoint_steps(time_s: np.ndarray, tk_set_c: np.ndarray | None) -> list[tupl
     alone = (rate >= SETPOINT_STEP_ALONE_RATE_C_PER_MIN) & (
         rate >= SETPOINT_STEP_ALONE_RATIO * beside
     )
-    big = (np.abs(jump) >= SETPOINT_STEP_MIN_C) & (fast | alone)
-    return [(int(ok[j + 1]), float(jump[j])) for j in np.flatnonzero(big)]
+    big = np.flatnonzero((np.abs(jump) >= SETPOINT_STEP_MIN_C) & (fast | alone))
+    if big.size == 0:
+        return []
+    # events: runs of consecutive candidate rows; (first, last) candidate index of each
+    cut = np.flatnonzero(np.diff(big) > 1) + 1
+    firsts, lasts = big[np.r_[0, cut]], big[np.r_[cut - 1, big.size - 1]]
+    t_min = t[ok] / 60.0
+    start, end = t_min[firsts], t_min[lasts + 1]
+    cum = np.concatenate(([0.0], np.cumsum(jump)))
+    size = np.abs(cum[lasts + 1] - cum[firsts])  # each event's net change
+    longest = max(SETPOINT_STEP_MAX_MIN, 2.0 * float(np.median(h_min)))
+    out: list[tuple[int, float]] = []
+    for i in range(firsts.size):
+        if end[i] - start[i] > longest:
+            continue
+        near = (start <= end[i] + SETPOINT_STEP_APART_MIN) & (
+            end >= start[i] - SETPOINT_STEP_APART_MIN
+        )
+        near[i] = False
+        if np.any(near & (size >= 0.5 * size[i])):
+            continue
+        out.extend((int(ok[j + 1]), float(jump[j])) for j in range(firsts[i], lasts[i] + 1))
+    return out
 
 
 def step_g_extra(time_s: np.ndarray, steps: list[tuple[int, float]]) -> np.ndarray | None:
@@ -2126,6 +2193,11 @@ SETPOINT_STEP_MIN_RATE_C_PER_MIN = 5.0
 SETPOINT_STEP_ALONE_RATE_C_PER_MIN = 2.0
 #: ... and this many times the rates of the rows on either side.
 SETPOINT_STEP_ALONE_RATIO = 5.0
+#: A run of such rows lasting longer than this (or two rows) is a fast ramp, min...
+SETPOINT_STEP_MAX_MIN = 1.0
+#: ... and one with another at least half its size this close is a ramp logged to a
+#: coarse resolution or a staircase of small steps, min.
+SETPOINT_STEP_APART_MIN = 10.0
 #: The device time constant that sizes a step's jump of ``g``, min: the shortest of the
 #: devices benchmarked (1500-3600 s), as for the end kinks (``END_KINK_TAU_MIN``). At
 #: 600 s the allowance (16x the variance at tau 2400 s) let the gradient follow the
@@ -2242,6 +2314,7 @@ def estimate_gradient_model(
     model = FirstOrderLag(params)
     corner_u = None
     if chamber == "tk_set_c":  # the programme: piecewise linear, corners between samples
+        tk, var_programme = setpoint_at_samples(log.time_s, tk)
         corners = setpoint_corners_between_samples(log.time_s, tk)
         corner_u = corner_inputs(log.time_s, tk, corners, model) if corners[0].size else None
         steps = setpoint_steps(log.time_s, tk)
@@ -2252,6 +2325,8 @@ def estimate_gradient_model(
     # a measured chamber (the air) carries its own noise into g = (Tk + ...)/tau directly,
     # and into T through the model's input; the programme's setpoint carries none
     var_tk = chamber_reading_noise_c(log.time_s, tk) ** 2 if chamber == "tk_air_c" else 0.0
+    if chamber == "tk_set_c":
+        var_tk = var_programme
     setup = _Setup(
         log.time_s,
         np.asarray(log.t_int_c, dtype=float),
