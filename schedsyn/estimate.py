@@ -2319,14 +2319,13 @@ def estimate_gradient_model(
         corner_u = corner_inputs(log.time_s, tk, corners, model) if corners[0].size else None
         steps = setpoint_steps(log.time_s, tk)
         t_extra = step_instant_var_c2(log.time_s, steps, model) if steps else None
+        var_tk = var_programme  # 0 for a finely logged setpoint
     else:
         t_extra = None
+        var_tk = chamber_reading_noise_c(log.time_s, tk) ** 2
     tau = params.tau_min
-    # a measured chamber (the air) carries its own noise into g = (Tk + ...)/tau directly,
-    # and into T through the model's input; the programme's setpoint carries none
-    var_tk = chamber_reading_noise_c(log.time_s, tk) ** 2 if chamber == "tk_air_c" else 0.0
-    if chamber == "tk_set_c":
-        var_tk = var_programme
+    # a measured chamber (the air), or a coarse setpoint's programme, carries its own
+    # noise into g = (Tk + ...)/tau directly, and into T through the model's input
     setup = _Setup(
         log.time_s,
         np.asarray(log.t_int_c, dtype=float),
